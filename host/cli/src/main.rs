@@ -1,0 +1,94 @@
+//! `skinbrdf`: measure the BRDF of living human skin.
+//!
+//! Thin by design (ripgrep's shape): `main` maps the result of [`run`] to an exit code; each
+//! subcommand lives in `cmd/`, validates its raw flags into a library config and calls into the
+//! library crates, which do the work and return typed errors.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+mod cmd;
+
+/// Measure how living human skin reflects light: capture, synthesize, derender, fit, report.
+#[derive(Debug, Parser)]
+#[command(name = "skinbrdf", version, about)]
+struct Cli {
+    /// More log output (-v: info, -vv: debug, -vvv: trace).
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the whole system on the built-in default scene and write a report.
+    Demo(cmd::demo::Args),
+    /// Write a synthetic measurement session with ground truth.
+    Synth(cmd::synth::Args),
+    /// Start the firmware simulator on a pseudo-terminal and print its port.
+    Sim(cmd::sim::Args),
+    /// List serial ports, marking skinbrdf trigger controllers.
+    Ports(cmd::ports::Args),
+    /// Run a timed capture plan on a trigger controller.
+    Capture(cmd::capture::Args),
+    /// Write printable target sheets and their layout files.
+    Targets(cmd::targets::Args),
+    /// Recover camera, head, flash and standard poses from a session's images.
+    Poses(cmd::poses::Args),
+    /// Turn a session's images into calibrated BRDF samples.
+    Derender(cmd::derender::Args),
+    /// Smooth and fit BRDF models to samples; write parameters, report and figures.
+    Fit(cmd::fit::Args),
+    /// Overlay several sessions' BRDFs and test whether they differ.
+    Compare(cmd::compare::Args),
+    /// Run the planned pipeline (poses, derender, smooth, fit) on a session.
+    Process(cmd::process::Args),
+    /// Sweep accuracy/run-time settings and write the error-against-run-time table.
+    Bench(cmd::bench::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_logging(cli.verbose);
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn init_logging(verbose: u8) {
+    let level = match verbose {
+        0 => "warn",
+        1 => "info",
+        2 => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Demo(a) => cmd::demo::run(a),
+        Command::Synth(a) => cmd::synth::run(a),
+        Command::Sim(a) => cmd::sim::run(a),
+        Command::Ports(a) => cmd::ports::run(a),
+        Command::Capture(a) => cmd::capture::run(a),
+        Command::Targets(a) => cmd::targets::run(a),
+        Command::Poses(a) => cmd::poses::run(a),
+        Command::Derender(a) => cmd::derender::run(a),
+        Command::Fit(a) => cmd::fit::run(a),
+        Command::Compare(a) => cmd::compare::run(a),
+        Command::Process(a) => cmd::process::run(a),
+        Command::Bench(a) => cmd::bench::run(a),
+    }
+}

@@ -1,0 +1,1 @@
+//! Photogrammetry: camera calibration, PnP with RANSAC, Levenberg-Marquardt pose refinement, flash triangulation.

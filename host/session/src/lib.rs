@@ -1,0 +1,1 @@
+//! The session directory: format, loading, validation, images and their linearization, ground truth.

@@ -1,0 +1,1 @@
+//! Coded targets: AprilTag tag36h11 detection with sub-pixel corners, and printable target sheets.
