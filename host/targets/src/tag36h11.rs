@@ -666,6 +666,7 @@ pub fn cell_is_white(id: usize, row: usize, col: usize) -> Option<bool> {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)]
 mod tests {
     use super::*;
 
