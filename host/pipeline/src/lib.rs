@@ -1,1 +1,15 @@
-//! The planned processing pipeline: poses, derendering, smoothing and fitting, with per-stage accuracy and run time.
+//! The planned processing pipeline.
+//!
+//! `skinbrdf process SESSION_DIR` runs photogrammetry, derendering, smoothing and fitting. What
+//! it runs is derived from the scene (see [`plan`]): a stage whose result the session already
+//! has, or whose effect cannot occur in this scene, is skipped, and the plan says why. Stages
+//! whose inputs have not changed since the last run are reused (see [`ledger`]). Every stage
+//! that runs reports its accuracy and its cost (see [`report`]).
+
+pub mod ledger;
+pub mod plan;
+pub mod report;
+
+pub use ledger::{Fingerprint, Ledger, LedgerError};
+pub use plan::{Action, Geometry, Plan, PlanOptions, PlannedStage, SceneFacts, Stage};
+pub use report::{Metric, RunReport, StageReport};

@@ -1,0 +1,294 @@
+//! Error against run time: every stage reports how accurate it was and what it cost.
+
+use serde::{Deserialize, Serialize};
+
+use crate::plan::{Action, Plan, Stage};
+
+/// What a metric measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MetricKind {
+    /// An error against ground truth (smaller is better).
+    Error,
+    /// An internal quality figure (residual, spread) available without ground truth.
+    Quality,
+    /// A count (samples kept, targets found).
+    Count,
+    /// A cost (time, memory, rays).
+    Cost,
+}
+
+/// One named figure.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Metric {
+    /// Name, e.g. `camera_position_error_median`.
+    pub name: String,
+    /// Value.
+    pub value: f64,
+    /// Unit, e.g. `mm`, `deg`, `%`, `px`, `s`.
+    pub unit: String,
+    /// What it measures.
+    pub kind: MetricKind,
+    /// The target it must stay within, if one is stated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bound: Option<f64>,
+}
+
+impl Metric {
+    /// A metric without a bound.
+    pub fn new(name: &str, value: f64, unit: &str, kind: MetricKind) -> Self {
+        Self {
+            name: name.to_string(),
+            value,
+            unit: unit.to_string(),
+            kind,
+            bound: None,
+        }
+    }
+
+    /// Sets the bound.
+    pub fn with_bound(mut self, bound: f64) -> Self {
+        self.bound = Some(bound);
+        self
+    }
+
+    /// False when the value is not finite or exceeds its bound.
+    pub fn within_bound(&self) -> bool {
+        self.value.is_finite() && self.bound.is_none_or(|b| self.value <= b)
+    }
+}
+
+/// How a stage ended up in this run.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "status", rename_all = "kebab-case")]
+pub enum StageStatus {
+    /// Ran now.
+    Ran,
+    /// Inputs unchanged: the previous result was reused.
+    Reused,
+    /// Not needed.
+    Skipped {
+        /// Why.
+        reason: String,
+    },
+}
+
+/// One stage's report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageReport {
+    /// The stage.
+    pub stage: Stage,
+    /// Ran, reused or skipped.
+    #[serde(flatten)]
+    pub status: StageStatus,
+    /// Wall-clock time of the stage, seconds (0 when skipped or reused).
+    pub run_time_s: f64,
+    /// Accuracy, quality, count and cost figures.
+    pub metrics: Vec<Metric>,
+    /// Free-form notes (warnings, diagnostics).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+}
+
+impl StageReport {
+    /// A stage that ran, with no metrics yet.
+    pub fn ran(stage: Stage, run_time_s: f64) -> Self {
+        Self {
+            stage,
+            status: StageStatus::Ran,
+            run_time_s,
+            metrics: Vec::new(),
+            notes: Vec::new(),
+        }
+    }
+
+    /// A skipped stage.
+    pub fn skipped(stage: Stage, reason: &str) -> Self {
+        Self {
+            stage,
+            status: StageStatus::Skipped {
+                reason: reason.to_string(),
+            },
+            run_time_s: 0.0,
+            metrics: Vec::new(),
+            notes: Vec::new(),
+        }
+    }
+
+    /// Adds a metric.
+    pub fn metric(mut self, m: Metric) -> Self {
+        self.metrics.push(m);
+        self
+    }
+}
+
+/// The whole run's report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunReport {
+    /// Session directory.
+    pub session: String,
+    /// The plan that was followed.
+    pub plan: Plan,
+    /// Stage reports in execution order.
+    pub stages: Vec<StageReport>,
+    /// Total wall-clock time, seconds.
+    pub total_time_s: f64,
+}
+
+impl RunReport {
+    /// Skipped-stage reports for every stage the plan skips.
+    pub fn skipped_from_plan(plan: &Plan) -> Vec<StageReport> {
+        plan.stages
+            .iter()
+            .filter_map(|s| match &s.action {
+                Action::Skip { reason } => Some(StageReport::skipped(s.stage, reason)),
+                Action::Run => None,
+            })
+            .collect()
+    }
+
+    /// Every metric that is out of its bound or not finite.
+    pub fn violations(&self) -> Vec<(&StageReport, &Metric)> {
+        self.stages
+            .iter()
+            .flat_map(|s| s.metrics.iter().map(move |m| (s, m)))
+            .filter(|(_, m)| !m.within_bound())
+            .collect()
+    }
+
+    /// A terminal summary: one block per stage with its time and figures.
+    pub fn to_text(&self) -> String {
+        let mut out = String::new();
+        for s in &self.stages {
+            let status = match &s.status {
+                StageStatus::Ran => format!("{:>8.3} s", s.run_time_s),
+                StageStatus::Reused => "  reused  ".to_string(),
+                StageStatus::Skipped { reason } => format!("  skipped ({reason})"),
+            };
+            out.push_str(&format!("{:<30} {status}\n", s.stage.name()));
+            for m in &s.metrics {
+                out.push_str(&format!("    {:<40} {}\n", m.name, fmt_metric(m)));
+            }
+            for n in &s.notes {
+                out.push_str(&format!("    note: {n}\n"));
+            }
+        }
+        out.push_str(&format!("{:<30} {:>8.3} s\n", "total", self.total_time_s));
+        out
+    }
+
+    /// A Markdown table of every stage's figures.
+    pub fn to_markdown(&self) -> String {
+        let mut out = String::from("| stage | status | time (s) | figure | value | bound |\n|---|---|---:|---|---:|---:|\n");
+        for s in &self.stages {
+            let status = match &s.status {
+                StageStatus::Ran => "ran".to_string(),
+                StageStatus::Reused => "reused".to_string(),
+                StageStatus::Skipped { reason } => format!("skipped: {reason}"),
+            };
+            if s.metrics.is_empty() {
+                out.push_str(&format!(
+                    "| {} | {status} | {:.3} | | | |\n",
+                    s.stage.name(),
+                    s.run_time_s
+                ));
+            }
+            for (i, m) in s.metrics.iter().enumerate() {
+                let (name, st, t) = if i == 0 {
+                    (
+                        s.stage.name().to_string(),
+                        status.clone(),
+                        format!("{:.3}", s.run_time_s),
+                    )
+                } else {
+                    (String::new(), String::new(), String::new())
+                };
+                let bound = m
+                    .bound
+                    .map(|b| format!("≤ {} {}", sig(b), m.unit))
+                    .unwrap_or_default();
+                out.push_str(&format!(
+                    "| {name} | {st} | {t} | {} | {} {} | {bound} |\n",
+                    m.name,
+                    sig(m.value),
+                    m.unit
+                ));
+            }
+        }
+        out.push_str(&format!(
+            "| **total** | | {:.3} | | | |\n",
+            self.total_time_s
+        ));
+        out
+    }
+}
+
+fn sig(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor() as i32;
+    let decimals = (3 - mag).clamp(0, 9) as usize;
+    format!("{v:.decimals$}")
+}
+
+fn fmt_metric(m: &Metric) -> String {
+    let mut s = format!("{} {}", sig(m.value), m.unit);
+    if let Some(b) = m.bound {
+        s.push_str(&format!(
+            "  (bound {} {}: {})",
+            sig(b),
+            m.unit,
+            if m.within_bound() { "ok" } else { "EXCEEDED" }
+        ));
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::plan::{Geometry, PlanOptions, SceneFacts};
+
+    #[test]
+    fn violations_catch_exceeded_and_non_finite_figures() {
+        let facts = SceneFacts {
+            intrinsics_known: true,
+            camera_poses_known: true,
+            head_poses_known: true,
+            stationary_sample: false,
+            light_position_known: true,
+            calibration_known: true,
+            geometry: Geometry::Sphere,
+            region_convex: true,
+        };
+        let plan = Plan::derive(&facts, &PlanOptions::default());
+        let mut stages = RunReport::skipped_from_plan(&plan);
+        stages.push(
+            StageReport::ran(Stage::Derender, 1.0)
+                .metric(
+                    Metric::new("median_rel_error", 2.0, "%", MetricKind::Error).with_bound(3.0),
+                )
+                .metric(Metric::new("bad", f64::NAN, "%", MetricKind::Error))
+                .metric(Metric::new("too_big", 5.0, "mm", MetricKind::Error).with_bound(1.0)),
+        );
+        let report = RunReport {
+            session: "s".into(),
+            plan,
+            stages,
+            total_time_s: 1.0,
+        };
+        let names: Vec<_> = report
+            .violations()
+            .iter()
+            .map(|(_, m)| m.name.clone())
+            .collect();
+        assert_eq!(names, ["bad", "too_big"]);
+        let md = report.to_markdown();
+        assert!(
+            md.contains("skipped: an ideal sphere needs no scan"),
+            "{md}"
+        );
+        assert!(report.to_text().contains("EXCEEDED"));
+    }
+}
