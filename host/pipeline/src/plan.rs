@@ -256,7 +256,8 @@ mod tests {
 
     #[test]
     fn each_known_quantity_skips_exactly_its_stage() {
-        let cases: [(fn(&mut SceneFacts), Stage); 7] = [
+        type Case = (fn(&mut SceneFacts), Stage);
+        let cases: [Case; 7] = [
             (|f| f.intrinsics_known = true, Stage::CameraCalibration),
             (|f| f.camera_poses_known = true, Stage::CameraPoses),
             (|f| f.head_poses_known = true, Stage::HeadTracking),
