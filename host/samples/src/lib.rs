@@ -1,1 +1,53 @@
-//! BRDF sample files: the compact binary format, CSV export, Cornell .brdf import/export.
+//! BRDF sample files: the compact binary format, CSV export, Cornell `.brdf` import/export.
+//!
+//! * [`binary`]: the project's own sample file (`.skbs`): a small fixed header, a JSON
+//!   provenance header and little-endian records of [`skinbrdf_core::BrdfSample`]. Written
+//!   atomically by a streaming [`SampleWriter`]; read by a streaming [`SampleReader`] or at once
+//!   by [`read_samples`].
+//! * [`csv`]: a plain CSV export of the same records.
+//! * [`cornell`]: the Cornell gonioreflectometer text format (spectral, 31 bands 400..700 nm),
+//!   kept spectral on import ([`CornellBrdf`]) and converted to linear sRGB for RGB fitting with
+//!   [`SpectrumToRgb`] (CIE 1931 2° observer; see [`color`]).
+//!
+//! Every error names the file and, for text formats, the line.
+
+pub mod binary;
+pub mod color;
+pub mod cornell;
+pub mod csv;
+mod error;
+
+pub use binary::{
+    read_samples, write_samples, SampleHeader, SampleReader, SampleWriter, FORMAT_VERSION, MAGIC,
+    RECORD_SIZE,
+};
+pub use color::{Illuminant, SpectrumToRgb};
+pub use cornell::{CornellBrdf, SpectralSample};
+pub use csv::write_csv;
+pub use error::SamplesError;
+
+use std::io::Write;
+use std::path::Path;
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory, flushed and
+/// synced, then renamed over `path`. Readers never see a half-written file.
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), SamplesError> {
+    let io_err = |source| SamplesError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let tmp = tempfile::NamedTempFile::new_in(&dir).map_err(io_err)?;
+    let mut buf = std::io::BufWriter::new(tmp);
+    write(&mut buf).map_err(io_err)?;
+    let tmp = buf.into_inner().map_err(|e| io_err(e.into_error()))?;
+    tmp.as_file().sync_all().map_err(io_err)?;
+    tmp.persist(path).map_err(|e| io_err(e.error))?;
+    Ok(())
+}

@@ -1,0 +1,493 @@
+//! The binary sample file (`.skbs`), version 1.
+//!
+//! Layout (all integers and floats little-endian):
+//!
+//! | offset | size | field |
+//! |-------:|-----:|-------|
+//! | 0  | 8  | magic `b"SKBRDFS\0"` |
+//! | 8  | 4  | `u32` format version (= [`FORMAT_VERSION`]) |
+//! | 12 | 4  | `u32` record size in bytes (= [`RECORD_SIZE`] = 46) |
+//! | 16 | 8  | `u64` record count |
+//! | 24 | 4  | `u32` provenance header length `H` in bytes |
+//! | 28 | H  | provenance header: UTF-8 JSON of [`SampleHeader`] |
+//! | 28+H | count x 46 | records |
+//!
+//! One record (46 bytes): `theta_i_rad, theta_e_rad, phi_d_rad, theta_h_rad, theta_diff_rad,
+//! phi_diff_rad` (6 x `f32`), `rho_r, rho_g, rho_b` (3 x `f32`, 1/sr), `weight` (`f32`),
+//! `image_index` (`u16`, `u16::MAX` = not from an image), `pixel_x, pixel_y` (2 x `u16`).
+//! Angles follow [`skinbrdf_core::angles`].
+//!
+//! A reader rejects a wrong magic, an unknown version, a record size other than 46 and a file
+//! shorter than its count, each with an error naming the file. The writer streams records through
+//! a temporary file in the target directory, patches the count at the end and renames the file
+//! into place, so a reader never sees a partial file.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use skinbrdf_core::BrdfSample;
+
+use crate::SamplesError;
+
+/// First eight bytes of every sample file.
+pub const MAGIC: [u8; 8] = *b"SKBRDFS\0";
+/// The format version this build writes and reads.
+pub const FORMAT_VERSION: u32 = 1;
+/// Bytes per record.
+pub const RECORD_SIZE: usize = 46;
+/// Bytes before the provenance header.
+const FIXED_HEADER: usize = 28;
+/// Upper bound on the provenance header (a sanity check against corrupt length fields).
+const MAX_HEADER_BYTES: u32 = 16 << 20;
+
+/// Provenance of a sample file. Every field is optional on read so that later writers can add
+/// fields without breaking older readers.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SampleHeader {
+    /// Where the samples come from: `derender`, `cornell`, `synth`, ...
+    pub source: String,
+    /// Free text (material, subject, treatment).
+    pub description: String,
+    /// The session directory or input file the samples were made from.
+    pub origin: Option<String>,
+    /// Program and version that wrote the file.
+    pub created_by: String,
+    /// Colour space of `rho` (e.g. `linear sRGB (D65)`).
+    pub color_space: String,
+    /// Number of source images, if any.
+    pub image_count: Option<u32>,
+    /// Calibration constant C per channel (method eq. 3), if derendered.
+    pub calibration_c: Option<[f64; 3]>,
+    /// Anything else a stage wants to record.
+    pub extra: serde_json::Value,
+}
+
+impl SampleHeader {
+    /// A header with a source and description; `created_by` names this crate.
+    pub fn new(source: &str, description: &str) -> Self {
+        Self {
+            source: source.to_owned(),
+            description: description.to_owned(),
+            created_by: format!("skinbrdf-samples {}", env!("CARGO_PKG_VERSION")),
+            color_space: "linear sRGB".to_owned(),
+            ..Self::default()
+        }
+    }
+}
+
+fn encode(s: &BrdfSample, out: &mut [u8; RECORD_SIZE]) {
+    let floats = [
+        s.theta_i_rad,
+        s.theta_e_rad,
+        s.phi_d_rad,
+        s.theta_h_rad,
+        s.theta_diff_rad,
+        s.phi_diff_rad,
+        s.rho[0],
+        s.rho[1],
+        s.rho[2],
+        s.weight,
+    ];
+    for (i, f) in floats.iter().enumerate() {
+        out[4 * i..4 * i + 4].copy_from_slice(&f.to_le_bytes());
+    }
+    out[40..42].copy_from_slice(&s.image_index.to_le_bytes());
+    out[42..44].copy_from_slice(&s.pixel[0].to_le_bytes());
+    out[44..46].copy_from_slice(&s.pixel[1].to_le_bytes());
+}
+
+fn decode(b: &[u8]) -> BrdfSample {
+    let f = |i: usize| f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]]);
+    let u = |o: usize| u16::from_le_bytes([b[o], b[o + 1]]);
+    BrdfSample {
+        theta_i_rad: f(0),
+        theta_e_rad: f(1),
+        phi_d_rad: f(2),
+        theta_h_rad: f(3),
+        theta_diff_rad: f(4),
+        phi_diff_rad: f(5),
+        rho: [f(6), f(7), f(8)],
+        weight: f(9),
+        image_index: u(40),
+        pixel: [u(42), u(44)],
+    }
+}
+
+/// Streaming writer. Records go to a temporary file next to the target; [`SampleWriter::finish`]
+/// writes the count and renames the file into place. Dropping without `finish` leaves no file.
+#[derive(Debug)]
+pub struct SampleWriter {
+    path: PathBuf,
+    out: BufWriter<tempfile::NamedTempFile>,
+    count: u64,
+    count_offset: u64,
+}
+
+impl SampleWriter {
+    /// Starts a sample file at `path` (created atomically on [`finish`](Self::finish)).
+    pub fn create(path: impl AsRef<Path>, header: &SampleHeader) -> Result<Self, SamplesError> {
+        let path = path.as_ref().to_path_buf();
+        let io_err = |source| SamplesError::Io {
+            path: path.clone(),
+            source,
+        };
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let tmp = tempfile::NamedTempFile::new_in(dir).map_err(io_err)?;
+        let mut out = BufWriter::with_capacity(1 << 20, tmp);
+        let json = serde_json::to_vec(header).map_err(|e| SamplesError::BadHeader {
+            path: path.clone(),
+            problem: format!("cannot serialise the provenance header: {e}"),
+        })?;
+        let header_len = u32::try_from(json.len())
+            .ok()
+            .filter(|&n| n <= MAX_HEADER_BYTES)
+            .ok_or_else(|| SamplesError::BadHeader {
+                path: path.clone(),
+                problem: format!("provenance header of {} bytes is too large", json.len()),
+            })?;
+        let mut fixed = Vec::with_capacity(FIXED_HEADER);
+        fixed.extend_from_slice(&MAGIC);
+        fixed.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        fixed.extend_from_slice(&(RECORD_SIZE as u32).to_le_bytes());
+        fixed.extend_from_slice(&0u64.to_le_bytes());
+        fixed.extend_from_slice(&header_len.to_le_bytes());
+        out.write_all(&fixed).map_err(io_err)?;
+        out.write_all(&json).map_err(io_err)?;
+        Ok(Self {
+            path,
+            out,
+            count: 0,
+            count_offset: 16,
+        })
+    }
+
+    /// Appends one record.
+    pub fn write(&mut self, sample: &BrdfSample) -> Result<(), SamplesError> {
+        let mut rec = [0u8; RECORD_SIZE];
+        encode(sample, &mut rec);
+        self.out
+            .write_all(&rec)
+            .map_err(|source| SamplesError::Io {
+                path: self.path.clone(),
+                source,
+            })?;
+        self.count += 1;
+        Ok(())
+    }
+
+    /// Appends many records.
+    pub fn write_all(&mut self, samples: &[BrdfSample]) -> Result<(), SamplesError> {
+        samples.iter().try_for_each(|s| self.write(s))
+    }
+
+    /// Records written so far.
+    pub fn count(&self) -> u64 {
+        self.count
+    }
+
+    /// Writes the record count, syncs and renames the file into place. Returns the count.
+    pub fn finish(self) -> Result<u64, SamplesError> {
+        let path = self.path;
+        let io_err = |source| SamplesError::Io {
+            path: path.clone(),
+            source,
+        };
+        let mut tmp = self.out.into_inner().map_err(|e| io_err(e.into_error()))?;
+        tmp.seek(SeekFrom::Start(self.count_offset))
+            .map_err(io_err)?;
+        tmp.write_all(&self.count.to_le_bytes()).map_err(io_err)?;
+        tmp.as_file().sync_all().map_err(io_err)?;
+        tmp.persist(&path).map_err(|e| io_err(e.error))?;
+        Ok(self.count)
+    }
+}
+
+/// Writes a whole sample file atomically.
+pub fn write_samples(
+    path: impl AsRef<Path>,
+    header: &SampleHeader,
+    samples: &[BrdfSample],
+) -> Result<(), SamplesError> {
+    let mut w = SampleWriter::create(path, header)?;
+    w.write_all(samples)?;
+    w.finish()?;
+    Ok(())
+}
+
+/// Streaming reader: an iterator over records after a validated header.
+#[derive(Debug)]
+pub struct SampleReader {
+    path: PathBuf,
+    input: BufReader<File>,
+    header: SampleHeader,
+    count: u64,
+    read: u64,
+}
+
+impl SampleReader {
+    /// Opens and validates a sample file (magic, version, record size, length).
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, SamplesError> {
+        let path = path.as_ref().to_path_buf();
+        let io_err = |source| SamplesError::Io {
+            path: path.clone(),
+            source,
+        };
+        let file = File::open(&path).map_err(io_err)?;
+        let file_len = file.metadata().map_err(io_err)?.len();
+        let mut input = BufReader::with_capacity(1 << 20, file);
+        let mut fixed = [0u8; FIXED_HEADER];
+        if file_len < FIXED_HEADER as u64 {
+            let mut found = [0u8; 8];
+            let n = (file_len as usize).min(8);
+            input.read_exact(&mut found[..n]).map_err(io_err)?;
+            if found != MAGIC {
+                return Err(SamplesError::BadMagic {
+                    path,
+                    found,
+                    expected: MAGIC,
+                });
+            }
+            return Err(SamplesError::BadHeader {
+                path,
+                problem: format!(
+                    "file is {file_len} bytes, shorter than the {FIXED_HEADER}-byte header"
+                ),
+            });
+        }
+        input.read_exact(&mut fixed).map_err(io_err)?;
+        let mut magic = [0u8; 8];
+        magic.copy_from_slice(&fixed[0..8]);
+        if magic != MAGIC {
+            return Err(SamplesError::BadMagic {
+                path,
+                found: magic,
+                expected: MAGIC,
+            });
+        }
+        let u32_at =
+            |o: usize| u32::from_le_bytes([fixed[o], fixed[o + 1], fixed[o + 2], fixed[o + 3]]);
+        let version = u32_at(8);
+        if version != FORMAT_VERSION {
+            return Err(SamplesError::UnsupportedVersion {
+                path,
+                found: version,
+                supported: FORMAT_VERSION,
+            });
+        }
+        let record_size = u32_at(12);
+        if record_size as usize != RECORD_SIZE {
+            return Err(SamplesError::BadHeader {
+                path,
+                problem: format!("record size {record_size} bytes, expected {RECORD_SIZE}"),
+            });
+        }
+        let mut count_bytes = [0u8; 8];
+        count_bytes.copy_from_slice(&fixed[16..24]);
+        let count = u64::from_le_bytes(count_bytes);
+        let header_len = u32_at(24);
+        if header_len > MAX_HEADER_BYTES || u64::from(header_len) + FIXED_HEADER as u64 > file_len {
+            return Err(SamplesError::BadHeader {
+                path,
+                problem: format!(
+                    "provenance header length {header_len} exceeds the file ({file_len} bytes)"
+                ),
+            });
+        }
+        let mut json = vec![0u8; header_len as usize];
+        input.read_exact(&mut json).map_err(io_err)?;
+        let header: SampleHeader =
+            serde_json::from_slice(&json).map_err(|e| SamplesError::BadHeader {
+                path: path.clone(),
+                problem: format!("provenance header is not valid JSON: {e}"),
+            })?;
+        let body = file_len - FIXED_HEADER as u64 - u64::from(header_len);
+        let found = body / RECORD_SIZE as u64;
+        if found < count {
+            return Err(SamplesError::Truncated {
+                path,
+                expected: count,
+                found,
+            });
+        }
+        Ok(Self {
+            path,
+            input,
+            header,
+            count,
+            read: 0,
+        })
+    }
+
+    /// The provenance header.
+    pub fn header(&self) -> &SampleHeader {
+        &self.header
+    }
+
+    /// Records announced by the header.
+    pub fn record_count(&self) -> u64 {
+        self.count
+    }
+
+    /// Reads up to `max` records into `out` (cleared first); returns how many were read.
+    pub fn read_chunk(
+        &mut self,
+        out: &mut Vec<BrdfSample>,
+        max: usize,
+    ) -> Result<usize, SamplesError> {
+        out.clear();
+        let n = ((self.count - self.read) as usize).min(max);
+        let mut buf = vec![0u8; n * RECORD_SIZE];
+        self.input
+            .read_exact(&mut buf)
+            .map_err(|source| SamplesError::Io {
+                path: self.path.clone(),
+                source,
+            })?;
+        out.extend(buf.chunks_exact(RECORD_SIZE).map(decode));
+        self.read += n as u64;
+        Ok(n)
+    }
+}
+
+impl Iterator for SampleReader {
+    type Item = Result<BrdfSample, SamplesError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.read >= self.count {
+            return None;
+        }
+        let mut rec = [0u8; RECORD_SIZE];
+        if let Err(source) = self.input.read_exact(&mut rec) {
+            self.read = self.count;
+            return Some(Err(SamplesError::Io {
+                path: self.path.clone(),
+                source,
+            }));
+        }
+        self.read += 1;
+        Some(Ok(decode(&rec)))
+    }
+}
+
+/// Reads a whole sample file.
+pub fn read_samples(
+    path: impl AsRef<Path>,
+) -> Result<(SampleHeader, Vec<BrdfSample>), SamplesError> {
+    let mut r = SampleReader::open(path)?;
+    let mut all = Vec::new();
+    let n = usize::try_from(r.record_count()).unwrap_or(usize::MAX);
+    r.read_chunk(&mut all, n)?;
+    Ok((r.header, all))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn sample(i: u32) -> BrdfSample {
+        let a = skinbrdf_core::BrdfAngles::from_local(
+            skinbrdf_core::BrdfAngles::canonical_directions(0.1 + 0.001 * i as f64, 0.7, 2.0).0,
+            skinbrdf_core::BrdfAngles::canonical_directions(0.1, 0.7, 2.0).1,
+        );
+        let mut s = BrdfSample::from_angles(&a, [0.1 * i as f32, 0.2, 0.3]);
+        s.image_index = (i % 7) as u16;
+        s.pixel = [i as u16, (i * 3) as u16];
+        s.weight = 0.5;
+        s
+    }
+
+    #[test]
+    fn round_trip_streaming_and_whole() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("s.skbs");
+        let mut h = SampleHeader::new("test", "round trip");
+        h.calibration_c = Some([1.0, 2.0, 3.0]);
+        let samples: Vec<_> = (0..1000).map(sample).collect();
+        write_samples(&path, &h, &samples).expect("write");
+        let (h2, back) = read_samples(&path).expect("read");
+        assert_eq!(h, h2);
+        assert_eq!(samples, back);
+        let streamed: Vec<_> = SampleReader::open(&path)
+            .expect("open")
+            .collect::<Result<_, _>>()
+            .expect("stream");
+        assert_eq!(samples, streamed);
+        let len = std::fs::metadata(&path).expect("meta").len();
+        let hl = serde_json::to_vec(&h).expect("json").len() as u64;
+        assert_eq!(len, 28 + hl + 1000 * RECORD_SIZE as u64);
+    }
+
+    #[test]
+    fn dropped_writer_leaves_no_file() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("s.skbs");
+        let mut w = SampleWriter::create(&path, &SampleHeader::default()).expect("create");
+        w.write(&sample(1)).expect("write");
+        drop(w);
+        assert!(!path.exists());
+        assert_eq!(std::fs::read_dir(dir.path()).expect("dir").count(), 0);
+    }
+
+    #[test]
+    fn bad_files_give_named_errors() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("bad.skbs");
+        std::fs::write(&path, b"PNG\x89not a sample file at all, really not").expect("write");
+        let e = SampleReader::open(&path).expect_err("bad magic");
+        assert!(matches!(e, SamplesError::BadMagic { .. }));
+        assert!(e.to_string().contains("bad.skbs"));
+
+        let good = dir.path().join("good.skbs");
+        write_samples(&good, &SampleHeader::default(), &[sample(1), sample(2)]).expect("write");
+        let mut bytes = std::fs::read(&good).expect("read");
+        bytes.truncate(bytes.len() - 10);
+        std::fs::write(&path, &bytes).expect("write");
+        let e = SampleReader::open(&path).expect_err("truncated");
+        assert!(
+            matches!(
+                e,
+                SamplesError::Truncated {
+                    expected: 2,
+                    found: 1,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+
+        let mut bytes = std::fs::read(&good).expect("read");
+        bytes[8] = 9;
+        std::fs::write(&path, &bytes).expect("write");
+        let e = SampleReader::open(&path).expect_err("version");
+        assert!(matches!(
+            e,
+            SamplesError::UnsupportedVersion { found: 9, .. }
+        ));
+    }
+
+    proptest! {
+        #[test]
+        fn records_round_trip_bit_exactly(vals in proptest::collection::vec(any::<(f32, f32, u16, u16, u16)>(), 0..50)) {
+            let samples: Vec<BrdfSample> = vals.iter().map(|&(a, b, i, x, y)| BrdfSample {
+                theta_i_rad: a, theta_e_rad: b, phi_d_rad: a, theta_h_rad: b, theta_diff_rad: a,
+                phi_diff_rad: b, rho: [a, b, a], image_index: i, pixel: [x, y], weight: b,
+            }).collect();
+            let mut rec = [0u8; RECORD_SIZE];
+            for s in &samples {
+                encode(s, &mut rec);
+                let d = decode(&rec);
+                prop_assert_eq!(d.theta_i_rad.to_bits(), s.theta_i_rad.to_bits());
+                prop_assert_eq!(d.weight.to_bits(), s.weight.to_bits());
+                prop_assert_eq!(d.pixel, s.pixel);
+                prop_assert_eq!(d.image_index, s.image_index);
+            }
+        }
+    }
+}

@@ -1,0 +1,70 @@
+use std::path::PathBuf;
+
+/// Errors reading or writing sample files. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum SamplesError {
+    /// An I/O error on the file.
+    #[error("{path}: {source}", path = path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file does not start with the sample-file magic.
+    #[error("{path}: not a skinbrdf sample file (first bytes {found:02x?}, expected {expected:02x?})", path = path.display())]
+    BadMagic {
+        /// The file.
+        path: PathBuf,
+        /// The first eight bytes found.
+        found: [u8; 8],
+        /// The magic expected.
+        expected: [u8; 8],
+    },
+    /// A format version this build does not read.
+    #[error("{path}: sample file version {found} is not supported (this build reads version {supported})", path = path.display())]
+    UnsupportedVersion {
+        /// The file.
+        path: PathBuf,
+        /// Version in the file.
+        found: u32,
+        /// Version this build reads.
+        supported: u32,
+    },
+    /// The fixed header is inconsistent (record size, header length, record count).
+    #[error("{path}: corrupt header: {problem}", path = path.display())]
+    BadHeader {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The file is shorter than its header says.
+    #[error("{path}: truncated: the header announces {expected} records but the file holds {found}", path = path.display())]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Records announced.
+        expected: u64,
+        /// Complete records present.
+        found: u64,
+    },
+    /// A text file has a malformed line.
+    #[error("{path}:{line}: {problem}", path = path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A spectral conversion was asked for wavelengths outside the colour tables.
+    #[error("{path}: wavelength {wavelength_nm} nm is outside the CIE table range 400..700 nm", path = path.display())]
+    WavelengthOutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// The offending wavelength.
+        wavelength_nm: f64,
+    },
+}
