@@ -108,7 +108,13 @@ pub async fn run(mut hw: Hardware) -> ! {
             }
             Either3::Second(edge) => {
                 if let Some(asserted) = take_edge(&mut levels, edge) {
-                    defmt::info!("edge {} asserted={} at {} us", edge.input, asserted, edge.at_us);
+                    defmt::debug!("edge {} asserted={} at {} us", edge.input, asserted, edge.at_us);
+                    let mut line: heapless::String<64> = heapless::String::new();
+                    let _ = core::fmt::write(
+                        &mut line,
+                        format_args!("EDGE {} {} {}\n", edge.input as u8, asserted, edge.at_us),
+                    );
+                    let _ = usb::TX.try_write(line.as_bytes());
                 }
             }
             Either3::Third(()) => {
