@@ -1,11 +1,25 @@
 //! Head-scan meshes: loading with validation, normals by local planar fit, and an obvhs BVH for
 //! ray casting.
 //!
+//! * [`load`]: [`load_mesh`] reads PLY (ASCII, binary LE/BE) or OBJ, converts scanner units to
+//!   metres and validates/repairs ([`validate`]: NaN vertices, degenerate and duplicate
+//!   triangles, inconsistent winding — counted with examples).
+//! * [`ply`]: the PLY reader and the atomic binary writer [`write_ply_binary`].
+//! * [`normals`]: shading normals by a local planar fit over a radius (given or estimated from
+//!   the scan's noise) or vertex normals; interpolated at ray hits.
 //! * [`bvh`]: [`MeshBvh`], build once and trace many (closest hit, occlusion, batched rays).
 
 pub mod bvh;
+pub mod load;
+pub mod normals;
+pub mod ply;
+pub mod validate;
 
 pub use bvh::{BuildQuality, Hit, MeshBvh, MeshRay};
+pub use load::{load_mesh, LengthUnit, LoadOptions, LoadedMesh};
+pub use normals::{estimate_noise, NoiseEstimate, NormalMethod, SurfaceNormals};
+pub use ply::{read_ply, write_ply_binary};
+pub use validate::{inspect, repair, MeshReport, RepairPolicy};
 
 use std::path::PathBuf;
 
@@ -25,6 +39,22 @@ pub enum MeshError {
         path: PathBuf,
         /// The I/O error.
         source: std::io::Error,
+    },
+    /// The mesh has defects and the policy was strict.
+    #[error("{source_name}: mesh defects: {}", report.summary())]
+    Defects {
+        /// File or mesh name.
+        source_name: String,
+        /// What was found.
+        report: Box<crate::validate::MeshReport>,
+    },
+    /// A parameter is out of range.
+    #[error("{field}: {reason}")]
+    InvalidParameter {
+        /// Which parameter.
+        field: &'static str,
+        /// What is wrong.
+        reason: String,
     },
     /// A file is malformed.
     #[error("{path}: {reason}")]

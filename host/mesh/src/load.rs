@@ -1,0 +1,241 @@
+//! Loading a head scan: PLY or OBJ by extension, scanner units to metres, validation and repair.
+//!
+//! Units: scanners write millimetres (most structured-light and laser scanners), centimetres,
+//! inches or metres, and rarely say which. [`LengthUnit::Auto`] decides from the bounding box:
+//! a head (or a forehead patch) is 0.05 to 0.5 m across, so the largest extent `E` in file units
+//! picks metres for `E < 2`, centimetres for `2 <= E < 50` (a head is 5-50 cm), millimetres
+//! above. The chosen unit is reported; pass the unit explicitly when the scan is not a head.
+
+use std::path::Path;
+
+use glam::Vec3;
+use skinbrdf_core::TriMesh;
+
+use crate::validate::{repair, MeshReport, RepairPolicy};
+use crate::MeshError;
+
+/// Length unit of the coordinates in a scan file.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub enum LengthUnit {
+    /// Metres.
+    Metres,
+    /// Centimetres.
+    Centimetres,
+    /// Millimetres.
+    Millimetres,
+    /// Inches.
+    Inches,
+    /// Any unit, by its size in metres.
+    Custom(f64),
+    /// Guess from the bounding box (see the module documentation).
+    Auto,
+}
+
+impl LengthUnit {
+    /// Metres per file unit (`None` for `Auto`).
+    pub fn metres_per_unit(self) -> Option<f64> {
+        Some(match self {
+            Self::Metres => 1.0,
+            Self::Centimetres => 0.01,
+            Self::Millimetres => 0.001,
+            Self::Inches => 0.0254,
+            Self::Custom(m) => m,
+            Self::Auto => return None,
+        })
+    }
+
+    /// Parses `m`, `cm`, `mm`, `in`, `auto` or a number of metres per unit.
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "m" => Self::Metres,
+            "cm" => Self::Centimetres,
+            "mm" => Self::Millimetres,
+            "in" | "inch" => Self::Inches,
+            "auto" => Self::Auto,
+            other => {
+                let v: f64 = other.parse().ok()?;
+                if !(v.is_finite() && v > 0.0) {
+                    return None;
+                }
+                Self::Custom(v)
+            }
+        })
+    }
+}
+
+/// Options for [`load_mesh`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadOptions {
+    /// Unit of the file's coordinates.
+    pub unit: LengthUnit,
+    /// What to do about defects.
+    pub policy: RepairPolicy,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        Self {
+            unit: LengthUnit::Auto,
+            policy: RepairPolicy::repair(),
+        }
+    }
+}
+
+/// A loaded, validated mesh in metres with what was done to it.
+#[derive(Debug, Clone)]
+pub struct LoadedMesh {
+    /// The mesh, metres.
+    pub mesh: TriMesh,
+    /// The unit the file was read in (resolved when `Auto`).
+    pub unit: LengthUnit,
+    /// Validation and repair.
+    pub report: MeshReport,
+}
+
+/// Guesses the unit from the largest bounding-box extent (see the module docs).
+pub fn guess_unit(mesh: &TriMesh) -> LengthUnit {
+    let finite = mesh.positions.iter().filter(|p| p.is_finite());
+    let (lo, hi) = finite.fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let extent = (hi - lo).max_element();
+    if !(extent.is_finite()) || extent < 2.0 {
+        LengthUnit::Metres
+    } else if extent < 50.0 {
+        LengthUnit::Centimetres
+    } else {
+        LengthUnit::Millimetres
+    }
+}
+
+/// Loads `.ply` or `.obj`, converts to metres and validates/repairs per `opts`.
+pub fn load_mesh(path: &Path, opts: &LoadOptions) -> Result<LoadedMesh, MeshError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let mut mesh = match ext.as_deref() {
+        Some("ply") => crate::ply::read_ply(path)?.0,
+        Some("obj") => read_obj(path)?,
+        _ => {
+            return Err(MeshError::Parse {
+                path: path.to_path_buf(),
+                reason: "unknown mesh format (expected .ply or .obj)".into(),
+            })
+        }
+    };
+    let unit = match opts.unit {
+        LengthUnit::Auto => guess_unit(&mesh),
+        u => u,
+    };
+    let scale = unit.metres_per_unit().unwrap_or(1.0) as f32;
+    if scale != 1.0 {
+        for p in &mut mesh.positions {
+            *p *= scale;
+        }
+    }
+    let (mesh, report) = repair(&mesh, opts.policy, &path.display().to_string())?;
+    Ok(LoadedMesh { mesh, unit, report })
+}
+
+/// Reads an OBJ file (all objects merged, polygons triangulated, normals dropped: OBJ normals
+/// are indexed separately from positions and the scan's normals are refitted anyway).
+pub fn read_obj(path: &Path) -> Result<TriMesh, MeshError> {
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| MeshError::Parse {
+        path: path.to_path_buf(),
+        reason: format!("OBJ: {e}"),
+    })?;
+    let mut out = TriMesh::default();
+    for m in models {
+        let base = out.positions.len() as u32;
+        let p = &m.mesh.positions;
+        out.positions
+            .extend(p.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])));
+        out.indices.extend(
+            m.mesh
+                .indices
+                .chunks_exact(3)
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
+    }
+    if out.indices.is_empty() {
+        return Err(MeshError::Parse {
+            path: path.to_path_buf(),
+            reason: "OBJ has no faces".into(),
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn millimetre_ply_becomes_metres() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("scan.ply");
+        let m = TriMesh {
+            positions: vec![
+                Vec3::ZERO,
+                Vec3::new(150.0, 0.0, 0.0),
+                Vec3::new(0.0, 200.0, 0.0),
+            ],
+            indices: vec![[0, 1, 2]],
+            normals: None,
+        };
+        crate::ply::write_ply_binary(&p, &m).unwrap();
+        let l = load_mesh(&p, &LoadOptions::default()).unwrap();
+        assert_eq!(l.unit, LengthUnit::Millimetres);
+        assert!((l.mesh.positions[2].y - 0.2).abs() < 1e-7);
+        let l = load_mesh(
+            &p,
+            &LoadOptions {
+                unit: LengthUnit::Custom(1e-4),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!((l.mesh.positions[1].x - 0.015).abs() < 1e-7);
+    }
+
+    #[test]
+    fn obj_quads_are_triangulated() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("scan.obj");
+        std::fs::write(
+            &p,
+            "# quad in cm\nv 0 0 0\nv 10 0 0\nv 10 10 0\nv 0 10 0\nf 1 2 3 4\n",
+        )
+        .unwrap();
+        let l = load_mesh(&p, &LoadOptions::default()).unwrap();
+        assert_eq!(l.unit, LengthUnit::Centimetres);
+        assert_eq!(l.mesh.indices.len(), 2);
+        assert!((l.mesh.positions[2].x - 0.1).abs() < 1e-7);
+    }
+
+    #[test]
+    fn bad_files_give_precise_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("scan.stl");
+        std::fs::write(&p, "solid").unwrap();
+        let e = load_mesh(&p, &LoadOptions::default()).unwrap_err();
+        assert!(
+            e.to_string().contains("scan.stl: unknown mesh format"),
+            "{e}"
+        );
+        let p = dir.path().join("empty.obj");
+        std::fs::write(&p, "v 0 0 0\n").unwrap();
+        let e = load_mesh(&p, &LoadOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("empty.obj: OBJ has no faces"), "{e}");
+        assert_eq!(LengthUnit::parse("mm"), Some(LengthUnit::Millimetres));
+        assert_eq!(LengthUnit::parse("-1"), None);
+    }
+}

@@ -1,0 +1,486 @@
+//! Mesh validation and safe repair of what scanners produce.
+//!
+//! [`inspect`] counts problems without changing anything; [`repair`] fixes those that have a
+//! safe fix and reports every change with counts and examples (input triangle indices):
+//!
+//! * **non-finite vertices** (NaN/∞): every triangle using one is dropped, then the vertex;
+//! * **out-of-range indices**: the triangle is dropped;
+//! * **coincident vertices** (bit-identical positions, as scanners emit at patch seams): welded,
+//!   so adjacency (and winding repair) sees through the seam;
+//! * **degenerate triangles**: repeated corners, or height below [`DEGENERATE_REL_HEIGHT`] of the
+//!   longest edge (no usable normal, and a ray cannot hit them reliably): dropped;
+//! * **duplicate triangles** (same three vertices in any order): all but the first dropped;
+//! * **inconsistent winding**: two triangles traversing their shared edge in the same direction.
+//!   Each connected component (across manifold edges) is re-oriented by a breadth-first walk,
+//!   and the component keeps the orientation of the larger part (by area) of its input
+//!   triangles, so a scan that is mostly right stays right. Edges shared by more than two
+//!   triangles (non-manifold) are reported and not walked across; a component that cannot be
+//!   oriented (Möbius-like) is reported.
+//!
+//! [`RepairPolicy::strict`] turns any of these into an error instead of a fix.
+
+use std::collections::{HashMap, VecDeque};
+
+use glam::Vec3;
+use skinbrdf_core::TriMesh;
+
+use crate::MeshError;
+
+/// A triangle is degenerate when its height is below this fraction of its longest edge
+/// (needles and caps): f32 cross products are accurate to ~1e-7 relative, so below 1e-5 the
+/// normal's direction is noise.
+pub const DEGENERATE_REL_HEIGHT: f32 = 1e-5;
+
+/// How many example indices a report keeps per problem.
+pub const MAX_EXAMPLES: usize = 8;
+
+/// One kind of problem: how many, and the first few indices (triangles unless stated).
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Problem {
+    /// Number of occurrences.
+    pub count: usize,
+    /// The first few indices (input numbering).
+    pub examples: Vec<usize>,
+}
+
+impl Problem {
+    fn add(&mut self, index: usize) {
+        self.count += 1;
+        if self.examples.len() < MAX_EXAMPLES {
+            self.examples.push(index);
+        }
+    }
+}
+
+/// What [`inspect`] found or [`repair`] did.
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
+pub struct MeshReport {
+    /// Triangles in the input.
+    pub triangles_in: usize,
+    /// Triangles in the output (equal to the input for [`inspect`]).
+    pub triangles_out: usize,
+    /// Vertices with NaN or infinite coordinates (examples are vertex indices).
+    pub non_finite_vertices: Problem,
+    /// Triangles dropped because a corner is not finite.
+    pub triangles_on_non_finite: Problem,
+    /// Triangles with an index out of range.
+    pub index_out_of_range: Problem,
+    /// Vertices merged into an identical earlier vertex (examples are vertex indices).
+    pub welded_vertices: Problem,
+    /// Degenerate triangles.
+    pub degenerate: Problem,
+    /// Duplicate triangles (examples are the later copies).
+    pub duplicates: Problem,
+    /// Manifold edges whose two triangles disagree on winding, as found in the input
+    /// (examples are triangle indices of one side).
+    pub inconsistent_edges: Problem,
+    /// Triangles whose winding was reversed.
+    pub flipped: Problem,
+    /// Edges shared by more than two triangles (examples are triangle indices).
+    pub non_manifold_edges: Problem,
+    /// Components that cannot be consistently oriented.
+    pub non_orientable_components: usize,
+    /// Connected components (over manifold edges).
+    pub components: usize,
+}
+
+impl MeshReport {
+    /// One line naming every problem found, with its count and first examples.
+    pub fn summary(&self) -> String {
+        let mut parts = Vec::new();
+        let mut add = |p: &Problem, what: &str| {
+            if p.count > 0 {
+                parts.push(format!("{} {what} (e.g. {:?})", p.count, p.examples));
+            }
+        };
+        add(&self.non_finite_vertices, "non-finite vertices");
+        add(
+            &self.triangles_on_non_finite,
+            "triangles on non-finite vertices",
+        );
+        add(
+            &self.index_out_of_range,
+            "triangles with an index out of range",
+        );
+        add(&self.degenerate, "degenerate triangles");
+        add(&self.duplicates, "duplicate triangles");
+        add(&self.inconsistent_edges, "edges with inconsistent winding");
+        add(&self.flipped, "triangles re-wound");
+        add(&self.non_manifold_edges, "non-manifold edges");
+        add(&self.welded_vertices, "coincident vertices welded");
+        if self.non_orientable_components > 0 {
+            parts.push(format!(
+                "{} non-orientable components",
+                self.non_orientable_components
+            ));
+        }
+        if parts.is_empty() {
+            "no problems".to_string()
+        } else {
+            parts.join(", ")
+        }
+    }
+
+    /// True when nothing was found that changes the mesh.
+    pub fn is_clean(&self) -> bool {
+        self.non_finite_vertices.count == 0
+            && self.index_out_of_range.count == 0
+            && self.degenerate.count == 0
+            && self.duplicates.count == 0
+            && self.inconsistent_edges.count == 0
+    }
+}
+
+/// What to do about each problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RepairPolicy {
+    /// Fix problems (true) or fail with [`MeshError::Defects`] on the first kind found (false).
+    pub repair: bool,
+    /// Weld bit-identical vertices before looking at adjacency.
+    pub weld: bool,
+}
+
+impl RepairPolicy {
+    /// Repair everything that has a safe fix (the default).
+    pub const fn repair() -> Self {
+        Self {
+            repair: true,
+            weld: true,
+        }
+    }
+    /// Refuse any defect.
+    pub const fn strict() -> Self {
+        Self {
+            repair: false,
+            weld: true,
+        }
+    }
+}
+
+impl Default for RepairPolicy {
+    fn default() -> Self {
+        Self::repair()
+    }
+}
+
+fn is_degenerate(a: Vec3, b: Vec3, c: Vec3) -> bool {
+    let area2 = (b - a).cross(c - a).length();
+    let longest = (b - a)
+        .length_squared()
+        .max((c - b).length_squared())
+        .max((a - c).length_squared());
+    // height = area2 / longest_edge; degenerate when height < rel * longest_edge.
+    area2.is_nan() || area2 <= DEGENERATE_REL_HEIGHT * longest || longest == 0.0
+}
+
+/// Counts the problems of a mesh without changing it.
+pub fn inspect(mesh: &TriMesh) -> MeshReport {
+    let (_, mut report) = repair_impl(mesh, true);
+    report.triangles_out = mesh.indices.len();
+    report.flipped = Problem::default();
+    report
+}
+
+/// Repairs a mesh according to `policy`; `source` names it in errors.
+pub fn repair(
+    mesh: &TriMesh,
+    policy: RepairPolicy,
+    source: &str,
+) -> Result<(TriMesh, MeshReport), MeshError> {
+    let (out, report) = repair_impl(mesh, policy.weld);
+    if !policy.repair && !report.is_clean() {
+        return Err(MeshError::Defects {
+            source_name: source.to_string(),
+            report: Box::new(report),
+        });
+    }
+    if out.indices.is_empty() {
+        return Err(MeshError::Invalid {
+            problems: vec![skinbrdf_core::MeshError::Empty],
+        });
+    }
+    Ok((out, report))
+}
+
+fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport) {
+    let mut r = MeshReport {
+        triangles_in: mesh.indices.len(),
+        ..Default::default()
+    };
+    let nv = mesh.positions.len();
+    let finite: Vec<bool> = mesh.positions.iter().map(|p| p.is_finite()).collect();
+    for (i, f) in finite.iter().enumerate() {
+        if !f {
+            r.non_finite_vertices.add(i);
+        }
+    }
+    // Welding map: vertex -> representative.
+    let mut rep: Vec<u32> = (0..nv as u32).collect();
+    if weld {
+        let mut seen: HashMap<[u32; 3], u32> = HashMap::with_capacity(nv);
+        for (i, p) in mesh.positions.iter().enumerate() {
+            if !finite[i] {
+                continue;
+            }
+            // +0.0 so that -0.0 and 0.0 weld.
+            let key = [
+                (p.x + 0.0).to_bits(),
+                (p.y + 0.0).to_bits(),
+                (p.z + 0.0).to_bits(),
+            ];
+            let first = *seen.entry(key).or_insert(i as u32);
+            if first != i as u32 {
+                rep[i] = first;
+                r.welded_vertices.add(i);
+            }
+        }
+    }
+    // Triangle filtering.
+    let mut kept: Vec<(usize, [u32; 3])> = Vec::with_capacity(mesh.indices.len());
+    let mut dup: HashMap<[u32; 3], usize> = HashMap::with_capacity(mesh.indices.len());
+    for (t, tri) in mesh.indices.iter().enumerate() {
+        if tri.iter().any(|&v| v as usize >= nv) {
+            r.index_out_of_range.add(t);
+            continue;
+        }
+        if tri.iter().any(|&v| !finite[v as usize]) {
+            r.triangles_on_non_finite.add(t);
+            continue;
+        }
+        let w = tri.map(|v| rep[v as usize]);
+        let [a, b, c] = w.map(|v| mesh.positions[v as usize]);
+        if w[0] == w[1] || w[1] == w[2] || w[0] == w[2] || is_degenerate(a, b, c) {
+            r.degenerate.add(t);
+            continue;
+        }
+        let mut key = w;
+        key.sort_unstable();
+        if dup.insert(key, t).is_some() {
+            r.duplicates.add(t);
+            continue;
+        }
+        kept.push((t, w));
+    }
+    // Adjacency over undirected edges.
+    let mut edges: HashMap<(u32, u32), Vec<(usize, bool)>> = HashMap::with_capacity(kept.len() * 2);
+    for (k, (_, w)) in kept.iter().enumerate() {
+        for e in 0..3 {
+            let (a, b) = (w[e], w[(e + 1) % 3]);
+            let forward = a < b;
+            edges
+                .entry((a.min(b), a.max(b)))
+                .or_default()
+                .push((k, forward));
+        }
+    }
+    let mut adj: Vec<Vec<(usize, bool)>> = vec![Vec::new(); kept.len()];
+    for list in edges.values() {
+        match list.as_slice() {
+            [(k1, f1), (k2, f2)] => {
+                // Consistent when they traverse the edge in opposite directions.
+                let same_dir = f1 == f2;
+                if same_dir {
+                    r.inconsistent_edges.add(kept[*k1].0);
+                }
+                adj[*k1].push((*k2, same_dir));
+                adj[*k2].push((*k1, same_dir));
+            }
+            [_] => {}
+            many => r.non_manifold_edges.add(kept[many[0].0].0),
+        }
+    }
+    // Orient components by BFS: flip[k2] = flip[k1] XOR same_dir.
+    let mut flip: Vec<Option<bool>> = vec![None; kept.len()];
+    let area = |k: usize| {
+        let [a, b, c] = kept[k].1.map(|v| mesh.positions[v as usize]);
+        (b - a).cross(c - a).length() as f64
+    };
+    let mut queue = VecDeque::new();
+    for start in 0..kept.len() {
+        if flip[start].is_some() {
+            continue;
+        }
+        r.components += 1;
+        flip[start] = Some(false);
+        queue.push_back(start);
+        let mut members = vec![start];
+        let mut orientable = true;
+        while let Some(k) = queue.pop_front() {
+            let fk = flip[k].unwrap_or(false);
+            for &(n, same_dir) in &adj[k] {
+                let want = fk ^ same_dir;
+                match flip[n] {
+                    None => {
+                        flip[n] = Some(want);
+                        members.push(n);
+                        queue.push_back(n);
+                    }
+                    Some(f) if f != want => orientable = false,
+                    Some(_) => {}
+                }
+            }
+        }
+        if !orientable {
+            r.non_orientable_components += 1;
+        }
+        let flipped_area: f64 = members
+            .iter()
+            .filter(|&&k| flip[k] == Some(true))
+            .map(|&k| area(k))
+            .sum();
+        let total: f64 = members.iter().map(|&k| area(k)).sum();
+        if flipped_area > 0.5 * total {
+            for &k in &members {
+                flip[k] = flip[k].map(|f| !f);
+            }
+        }
+    }
+    // Assemble, compacting unreferenced vertices (keeping their order).
+    let mut used = vec![false; nv];
+    for (_, w) in &kept {
+        for &v in w {
+            used[v as usize] = true;
+        }
+    }
+    let mut remap: Vec<u32> = vec![u32::MAX; nv];
+    let mut out = TriMesh::default();
+    let mut normals_out = Vec::new();
+    let normals = mesh.normals.as_ref().filter(|n| n.len() == nv);
+    for v in (0..nv).filter(|&v| used[v]) {
+        remap[v] = out.positions.len() as u32;
+        out.positions.push(mesh.positions[v]);
+        if let Some(n) = normals {
+            normals_out.push(n[v]);
+        }
+    }
+    for (k, (t, w)) in kept.iter().enumerate() {
+        let mut w = *w;
+        if flip[k] == Some(true) {
+            w.swap(1, 2);
+            r.flipped.add(*t);
+        }
+        out.indices.push(w.map(|v| remap[v as usize]));
+    }
+    if normals.is_some() {
+        out.normals = Some(normals_out);
+    }
+    r.triangles_out = out.indices.len();
+    (out, r)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 3x3-vertex grid of 8 triangles, consistently wound (+z).
+    fn grid() -> TriMesh {
+        let mut positions = Vec::new();
+        for y in 0..3 {
+            for x in 0..3 {
+                positions.push(Vec3::new(x as f32 * 0.01, y as f32 * 0.01, 0.0));
+            }
+        }
+        let mut indices = Vec::new();
+        for y in 0..2u32 {
+            for x in 0..2u32 {
+                let i = y * 3 + x;
+                indices.push([i, i + 1, i + 4]);
+                indices.push([i, i + 4, i + 3]);
+            }
+        }
+        TriMesh {
+            positions,
+            indices,
+            normals: None,
+        }
+    }
+
+    #[test]
+    fn clean_mesh_is_untouched() {
+        let m = grid();
+        let (out, r) = repair(&m, RepairPolicy::repair(), "grid").unwrap();
+        assert!(r.is_clean(), "{r:?}");
+        assert_eq!(out, m);
+        assert_eq!(r.components, 1);
+    }
+
+    #[test]
+    fn nan_vertex_drops_its_triangles() {
+        let mut m = grid();
+        m.positions[4] = Vec3::new(f32::NAN, 0.0, 0.0);
+        let (out, r) = repair(&m, RepairPolicy::repair(), "grid").unwrap();
+        assert_eq!(r.non_finite_vertices.count, 1);
+        assert_eq!(r.non_finite_vertices.examples, vec![4]);
+        // Vertex 4 is the centre: every triangle of the grid uses it but two? count them.
+        let using = m.indices.iter().filter(|t| t.contains(&4)).count();
+        assert_eq!(r.triangles_on_non_finite.count, using);
+        assert_eq!(out.indices.len(), 8 - using);
+        assert!(out.positions.iter().all(|p| p.is_finite()));
+        assert!(out.validate().is_empty());
+        let e = repair(&m, RepairPolicy::strict(), "scan.ply").unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("scan.ply") && msg.contains("1 non-finite vertices"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn degenerate_and_duplicates_are_dropped_with_examples() {
+        let mut m = grid();
+        m.indices.push([0, 0, 1]); // repeated corner: 8
+        m.indices.push([0, 1, 2]); // collinear: 9
+        m.indices.push([4, 1, 0]); // duplicate of triangle 0 ([0,1,4]) reordered: 10
+        let (out, r) = repair(&m, RepairPolicy::repair(), "grid").unwrap();
+        assert_eq!(r.degenerate.examples, vec![8, 9]);
+        assert_eq!(r.duplicates.examples, vec![10]);
+        assert_eq!(out.indices.len(), 8);
+        let e = repair(&m, RepairPolicy::strict(), "g")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("2 degenerate") && e.contains("1 duplicate"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn inconsistent_winding_is_fixed_towards_the_majority() {
+        let mut m = grid();
+        m.indices[3].swap(1, 2);
+        m.indices[6].swap(1, 2);
+        let r0 = inspect(&m);
+        assert!(r0.inconsistent_edges.count >= 2, "{r0:?}");
+        let (out, r) = repair(&m, RepairPolicy::repair(), "grid").unwrap();
+        let mut flipped = r.flipped.examples.clone();
+        flipped.sort();
+        assert_eq!(flipped, vec![3, 6]);
+        for t in 0..out.indices.len() {
+            assert!(
+                out.face_normal_area2(t).z > 0.0,
+                "triangle {t} still flipped"
+            );
+        }
+        assert_eq!(inspect(&out).inconsistent_edges.count, 0);
+    }
+
+    #[test]
+    fn welding_joins_seams_and_out_of_range_is_dropped() {
+        let mut m = grid();
+        // Duplicate vertex 4 at the end and use it in two triangles: a seam.
+        m.positions.push(m.positions[4]);
+        for t in m.indices.iter_mut().take(2) {
+            for v in t.iter_mut() {
+                if *v == 4 {
+                    *v = 9;
+                }
+            }
+        }
+        m.indices.push([0, 1, 77]);
+        let (out, r) = repair(&m, RepairPolicy::repair(), "grid").unwrap();
+        assert_eq!(r.welded_vertices.examples, vec![9]);
+        assert_eq!(r.index_out_of_range.examples, vec![8]);
+        assert_eq!(out.positions.len(), 9);
+        assert_eq!(r.components, 1);
+    }
+}
