@@ -1,17 +1,24 @@
 //! The one orchestrating task.
 //!
-//! It waits for whichever comes first: bytes from the host, a captured edge, or the next
-//! deadline, and turns each into an input of the sequencer; the sequencer's outputs become pin
-//! levels and frames for the host. It also feeds the hardware watchdog and drives the status LED.
+//! It waits for whichever comes first: bytes from the host, a captured edge, the sequencer's
+//! next deadline, or a USB connect/disconnect, and turns each into an input of the sequencer
+//! (`skinbrdf-sequencer`, which makes every decision); after each input it drives the pins to
+//! the sequencer's output levels and queues its messages as frames for the host. It also feeds
+//! the hardware watchdog and drives the status LED (lit while a session runs, a short flash
+//! once a second otherwise).
 
-use embassy_futures::select::{select3, Either3};
+use embassy_futures::select::{select4, Either4};
 use embassy_rp::peripherals::FLASH;
 use embassy_rp::watchdog::Watchdog;
 use embassy_rp::Peri;
 use embassy_time::{Duration, Instant, Timer};
 
+use portable_atomic::Ordering;
+use skinbrdf_protocol::{DeviceKind, FrameDecoder, Request, MAX_FRAME_LEN};
+use skinbrdf_sequencer::{Config, Input as SeqInput, Sequencer};
+
 use crate::capture::{self, Capture, Edge, Input};
-use crate::outputs::Outputs;
+use crate::outputs::{Line, Outputs};
 use crate::pins;
 use crate::usb;
 
@@ -70,79 +77,195 @@ const fn hex(nibble: u8) -> char {
 pub struct Hardware {
     /// Shutter, focus, flash trigger and LED.
     pub outputs: Outputs,
-    /// Keeps the edge capture running.
-    pub capture: Capture,
+    /// Keeps the edge capture running (never read: owning it is the point).
+    pub _capture: Capture,
     /// Hardware watchdog (started by the controller).
     pub watchdog: Watchdog,
     /// Serial and emulator flag.
     pub identity: Identity,
 }
 
-/// The orchestrating task.
+/// The orchestrating task: feeds the sequencer, applies its outputs, sends its messages.
 #[embassy_executor::task]
 pub async fn run(mut hw: Hardware) -> ! {
     hw.watchdog.start(WATCHDOG_TIMEOUT);
-    let mut levels = capture::levels();
-    defmt::info!(
-        "controller: serial {}, emulated {}, inputs xsync={} photodiode={} flash_ready={}",
-        hw.identity.serial.as_str(),
-        hw.identity.emulated,
-        levels[0],
-        levels[1],
-        levels[2]
+    let kind = if hw.identity.emulated {
+        DeviceKind::Emulator
+    } else {
+        DeviceKind::Board
+    };
+    let now = now_us();
+    let mut seq: Sequencer<RING> = Sequencer::new(
+        Config::new(env!("CARGO_PKG_VERSION"), hw.identity.serial.as_str(), kind),
+        now,
     );
+    let mut levels = capture::levels();
+    let ready = pins::FLASH_READY.asserted(levels[Input::FlashReady as usize]);
+    seq.handle(now, SeqInput::FlashReady { at_us: now, ready });
+    defmt::info!(
+        "controller: serial {}, {}, flash ready {}",
+        hw.identity.serial.as_str(),
+        if hw.identity.emulated { "emulated" } else { "board" },
+        ready
+    );
+
+    let mut decoder: FrameDecoder<MAX_FRAME_LEN> = FrameDecoder::new();
     let mut rx = [0u8; usb::PACKET];
+    let mut frame = [0u8; MAX_FRAME_LEN];
     let mut next_housekeeping = Instant::now() + HOUSEKEEPING_PERIOD;
-    let mut led = true;
+    let mut heartbeat = false;
+    let mut reported_drops = 0u32;
     loop {
-        match select3(
+        // Outputs and messages after every input.
+        apply(&seq, &mut hw.outputs, heartbeat);
+        let backlog = flush(&mut seq, &mut frame);
+
+        // Wake for the sequencer's next deadline, housekeeping, or a message backlog.
+        let mut wake = next_housekeeping;
+        if let Some(deadline_us) = seq.next_deadline() {
+            wake = wake.min(Instant::from_micros(deadline_us));
+        }
+        if backlog {
+            wake = wake.min(Instant::now() + TX_RETRY);
+        }
+        let event = select4(
             usb::RX.read(&mut rx),
             capture::EDGES.receive(),
-            Timer::at(next_housekeeping),
+            Timer::at(wake),
+            usb::LINK.wait(),
         )
-        .await
-        {
-            Either3::First(n) => {
-                // Echo (replaced by the sequencer).
-                let _ = usb::TX.try_write(&rx[..n]);
-            }
-            Either3::Second(edge) => {
-                if let Some(asserted) = take_edge(&mut levels, edge) {
-                    defmt::debug!("edge {} asserted={} at {} us", edge.input, asserted, edge.at_us);
-                    let mut line: heapless::String<64> = heapless::String::new();
-                    let _ = core::fmt::write(
-                        &mut line,
-                        format_args!("EDGE {} {} {}\n", edge.input as u8, asserted, edge.at_us),
-                    );
-                    let _ = usb::TX.try_write(line.as_bytes());
+        .await;
+        match event {
+            Either4::First(n) => {
+                let now = now_us();
+                for &byte in &rx[..n] {
+                    match decoder.push_byte::<Request>(byte) {
+                        Some(Ok(request)) => seq.handle(now, SeqInput::Request(request)),
+                        Some(Err(err)) => seq.handle(now, SeqInput::BadFrame(err)),
+                        None => {}
+                    }
+                    // A request can change the outputs (Abort): apply at once.
+                    apply(&seq, &mut hw.outputs, heartbeat);
                 }
             }
-            Either3::Third(()) => {
-                hw.watchdog.feed(WATCHDOG_TIMEOUT);
-                led = !led;
-                hw.outputs.led(led);
-                next_housekeeping += HOUSEKEEPING_PERIOD;
-                let now = Instant::now();
-                if next_housekeeping < now {
-                    next_housekeeping = now + HOUSEKEEPING_PERIOD;
+            Either4::Second(first) => {
+                // Hand over every queued edge, oldest first, then tick.
+                let now = now_us();
+                let mut next = Some(first);
+                while let Some(edge) = next {
+                    if let Some(input) = to_input(&mut levels, edge) {
+                        seq.handle(now, input);
+                        apply(&seq, &mut hw.outputs, heartbeat);
+                    }
+                    next = capture::EDGES.try_receive().ok();
                 }
+                seq.tick(now);
+            }
+            Either4::Third(()) => {
+                seq.tick(now_us());
+                if Instant::now() >= next_housekeeping {
+                    hw.watchdog.feed(WATCHDOG_TIMEOUT);
+                    heartbeat = heartbeat_phase(Instant::now());
+                    next_housekeeping += if heartbeat {
+                        HEARTBEAT_ON
+                    } else {
+                        HOUSEKEEPING_PERIOD
+                    };
+                    let now = Instant::now();
+                    if next_housekeeping < now {
+                        next_housekeeping = now + HOUSEKEEPING_PERIOD;
+                    }
+                    let drops = capture::EDGES_DROPPED.load(Ordering::Relaxed)
+                        + capture::CAPTURE_ERRORS.load(Ordering::Relaxed);
+                    if drops != reported_drops {
+                        reported_drops = drops;
+                        defmt::warn!("edge capture: {} edges lost", drops);
+                    }
+                }
+            }
+            Either4::Fourth(up) => {
+                let now = now_us();
+                decoder.reset();
+                if up {
+                    seq.handle(now, SeqInput::LinkUp);
+                    // A lone delimiter makes the host's decoder drop any partial frame.
+                    let _ = usb::TX.try_write(&[0]);
+                } else {
+                    seq.handle(now, SeqInput::LinkDown);
+                }
+                defmt::info!("link {}", if up { "up" } else { "down" });
             }
         }
     }
 }
 
-/// Turns a level report into an edge: `Some(asserted)` if the level changed, `None` if it
-/// repeats the known level (start-up report, or a glitch shorter than the handler latency).
-fn take_edge(levels: &mut [bool; 3], edge: Edge) -> Option<bool> {
+/// Records held until acknowledged (~100 bytes each).
+const RING: usize = skinbrdf_sequencer::DEFAULT_RING;
+/// Retry sending queued messages this soon when the USB pipe was full.
+const TX_RETRY: Duration = Duration::from_millis(2);
+/// Idle heartbeat: the LED flashes for this long once per housekeeping cycle.
+const HEARTBEAT_ON: Duration = Duration::from_millis(20);
+
+fn now_us() -> u64 {
+    Instant::now().as_micros()
+}
+
+/// Heartbeat phase: a short flash at the start of every second.
+fn heartbeat_phase(now: Instant) -> bool {
+    now.as_millis() % 1000 < HOUSEKEEPING_PERIOD.as_millis()
+}
+
+/// Drives every pin to the sequencer's levels (the authoritative state, so applying is
+/// idempotent). The LED shows the session (lit while running) or the idle heartbeat.
+fn apply<const N: usize>(seq: &Sequencer<N>, outputs: &mut Outputs, heartbeat: bool) {
+    let levels = seq.outputs();
+    outputs.set(Line::Shutter, levels.shutter);
+    outputs.set(Line::Focus, levels.focus);
+    outputs.set(Line::FlashTrigger, levels.flash_trigger);
+    outputs.led(levels.status_led || heartbeat);
+}
+
+/// Encodes and queues the sequencer's messages while the USB pipe has room for a full frame.
+/// Returns true if messages are left (the pipe was full).
+fn flush<const N: usize>(seq: &mut Sequencer<N>, frame: &mut [u8; MAX_FRAME_LEN]) -> bool {
+    while seq.has_message() {
+        if usb::TX.free_capacity() < MAX_FRAME_LEN {
+            return true;
+        }
+        let Some(msg) = seq.pop_message() else {
+            break;
+        };
+        match skinbrdf_protocol::encode(&msg, frame) {
+            Ok(bytes) => {
+                // Fits: checked above.
+                let _ = usb::TX.try_write(bytes);
+            }
+            Err(_) => defmt::error!("message does not fit a frame (protocol limits violated)"),
+        }
+    }
+    false
+}
+
+/// Turns a level report into a sequencer input: asserted X-sync and photodiode edges, and
+/// every flash-ready change. Reports that repeat the known level (start-up, or a glitch that
+/// the capture merged) and released X-sync/photodiode edges yield `None`.
+fn to_input(levels: &mut [bool; 3], edge: Edge) -> Option<SeqInput> {
     let slot = &mut levels[edge.input as usize];
     if *slot == edge.level_high {
         return None;
     }
     *slot = edge.level_high;
-    let info = match edge.input {
-        Input::Xsync => pins::XSYNC,
-        Input::Photodiode => pins::PHOTODIODE,
-        Input::FlashReady => pins::FLASH_READY,
-    };
-    Some(info.asserted(edge.level_high))
+    let at_us = edge.at_us;
+    match edge.input {
+        Input::Xsync => pins::XSYNC
+            .asserted(edge.level_high)
+            .then_some(SeqInput::XsyncEdge { at_us }),
+        Input::Photodiode => pins::PHOTODIODE
+            .asserted(edge.level_high)
+            .then_some(SeqInput::PhotodiodeEdge { at_us }),
+        Input::FlashReady => Some(SeqInput::FlashReady {
+            at_us,
+            ready: pins::FLASH_READY.asserted(edge.level_high),
+        }),
+    }
 }

@@ -70,6 +70,15 @@ async fn main(spawner: Spawner) {
         env!("CARGO_PKG_VERSION"),
         pins::BOARD
     );
+    for pin in pins::ALL {
+        defmt::info!(
+            "pin {} GP{} {} active-{}",
+            pin.name,
+            pin.gpio,
+            if pin.output { "out" } else { "in" },
+            if pin.active_high { "high" } else { "low" }
+        );
+    }
 
     let watchdog = Watchdog::new(p.WATCHDOG);
     let identity = controller::Identity::detect(&watchdog, p.FLASH);
@@ -91,7 +100,7 @@ async fn main(spawner: Spawner) {
     spawner.spawn(
         controller::run(controller::Hardware {
             outputs,
-            capture,
+            _capture: capture,
             watchdog,
             identity,
         })

@@ -75,13 +75,6 @@ impl Outputs {
         }
     }
 
-    /// Releases every line.
-    pub fn release_all(&mut self) {
-        self.set(Line::Shutter, false);
-        self.set(Line::Focus, false);
-        self.set(Line::FlashTrigger, false);
-    }
-
     /// Status LED on or off.
     pub fn led(&mut self, on: bool) {
         self.led.set_level(level(pins::STATUS_LED, on));

@@ -16,6 +16,7 @@ use embassy_rp::peripherals::USB;
 use embassy_rp::usb::Driver;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
+use embassy_sync::signal::Signal;
 use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
 use embassy_usb::{Builder, Config, UsbDevice};
 use static_cell::StaticCell;
@@ -43,6 +44,9 @@ pub static TX: Pipe<CriticalSectionRawMutex, 2048> = Pipe::new();
 
 /// Bytes received from the host, in USB packet sized chunks.
 pub static RX: Pipe<CriticalSectionRawMutex, 512> = Pipe::new();
+
+/// USB link state changes (true: configured by a host, false: unplugged/reset).
+pub static LINK: Signal<CriticalSectionRawMutex, bool> = Signal::new();
 
 /// Builds the device and the CDC-ACM class.
 pub fn build(
@@ -85,11 +89,11 @@ pub async fn rx_task(mut rx: Receiver<'static, UsbDriver>) -> ! {
     let mut buf = [0u8; PACKET];
     loop {
         rx.wait_connection().await;
-        defmt::info!("usb: host connected");
+        LINK.signal(true);
         while let Ok(n) = rx.read_packet(&mut buf).await {
             RX.write_all(&buf[..n]).await;
         }
-        defmt::info!("usb: host disconnected");
+        LINK.signal(false);
     }
 }
 
