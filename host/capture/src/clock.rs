@@ -1,0 +1,230 @@
+//! Device-to-host clock model: offset and drift from round-trip clock reads.
+//!
+//! The host reads the device clock several times. Each read is a round trip: the host notes its
+//! Unix time `t_send` before the request and `t_recv` after the response, and the device reports
+//! its microsecond clock `d` somewhere in between. Assuming symmetric link latency, the device
+//! read happened at the host midpoint `m = (t_send + t_recv) / 2`, with an error of at most half
+//! the round trip.
+//!
+//! The model is affine, `host = host_ref + (d - device_ref) * (1 + drift)`, fitted by ordinary
+//! least squares of `m` on `d`. Both clocks are large integers (device time since boot may pass
+//! 2^32 us after 71 minutes; host Unix time is ~1.8e15 us), so before any floating point the
+//! fit subtracts a reference from each: device times relative to the first read (as exact `i64`
+//! differences), host times relative to the first midpoint. The sums are then small and centered,
+//! which keeps the normal equations well conditioned. `device_ref_us` is the (integer) mean device
+//! time, where the fitted intercept has the least variance.
+//!
+//! With a single read, or reads too close in device time to see drift
+//! ([`MIN_DRIFT_SPAN_US`]), drift is reported as zero and only the offset is fitted.
+//! The residual RMS (microseconds) is reported with the model: it bounds how well an exposure's
+//! device time can be placed on the host clock.
+
+use skinbrdf_session::capture::ClockModel;
+
+/// One round-trip read of the device clock.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClockRead {
+    /// Host Unix time just before the request was written, microseconds.
+    pub host_send_us: u64,
+    /// Device clock in the response, microseconds since device boot.
+    pub device_us: u64,
+    /// Host Unix time just after the response was decoded, microseconds.
+    pub host_recv_us: u64,
+}
+
+impl ClockRead {
+    /// Round-trip time in microseconds (zero if the host clock stepped backwards).
+    pub fn round_trip_us(&self) -> u64 {
+        self.host_recv_us.saturating_sub(self.host_send_us)
+    }
+}
+
+/// Shortest device-time span over which drift is estimated: 100 ms. Over shorter spans a 1 us
+/// midpoint error is already 10 ppm of drift, more than a crystal's real drift, so the offset-only
+/// model is the better estimate.
+pub const MIN_DRIFT_SPAN_US: u64 = 100_000;
+
+/// Why no clock model could be fitted.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ClockError {
+    /// No reads were taken.
+    #[error("no clock reads to fit a clock model")]
+    NoReads,
+}
+
+/// Fits offset and drift by least squares over the midpoints of `reads`.
+pub fn fit_clock(reads: &[ClockRead]) -> Result<ClockModel, ClockError> {
+    let first = reads.first().ok_or(ClockError::NoReads)?;
+    let d0 = first.device_us;
+    let h0 = first.host_send_us;
+    // Exact integer differences first, then f64 (differences are far below 2^53).
+    let xs: Vec<f64> = reads
+        .iter()
+        .map(|r| (r.device_us as i128 - d0 as i128) as f64)
+        .collect();
+    let ys: Vec<f64> = reads
+        .iter()
+        .map(|r| {
+            let send = r.host_send_us as i128 - h0 as i128;
+            let recv = r.host_recv_us as i128 - h0 as i128;
+            (send + recv) as f64 / 2.0
+        })
+        .collect();
+    let n = reads.len() as f64;
+    let x_mean = xs.iter().sum::<f64>() / n;
+    let y_mean = ys.iter().sum::<f64>() / n;
+    let (mut sxx, mut sxy) = (0.0, 0.0);
+    for (x, y) in xs.iter().zip(&ys) {
+        sxx += (x - x_mean) * (x - x_mean);
+        sxy += (x - x_mean) * (y - y_mean);
+    }
+    let (min_d, max_d) = reads.iter().fold((u64::MAX, 0u64), |(lo, hi), r| {
+        (lo.min(r.device_us), hi.max(r.device_us))
+    });
+    let span = max_d - min_d;
+    let slope = if span >= MIN_DRIFT_SPAN_US && sxx > 0.0 {
+        sxy / sxx
+    } else {
+        1.0
+    };
+    // Reference at the (integer) mean device time.
+    let x_ref = x_mean.round();
+    let device_ref_us = (d0 as i128 + x_ref as i128).clamp(0, u64::MAX as i128) as u64;
+    let y_ref = y_mean + slope * (x_ref - x_mean);
+    let host_ref_us = h0 as f64 + y_ref;
+    let sum_sq: f64 = xs
+        .iter()
+        .zip(&ys)
+        .map(|(x, y)| {
+            let r = y - (y_ref + slope * (x - x_ref));
+            r * r
+        })
+        .sum();
+    Ok(ClockModel {
+        device_ref_us,
+        host_ref_us,
+        drift_ppm: (slope - 1.0) * 1e6,
+        residual_rms_us: (sum_sq / n).sqrt(),
+        samples: u32::try_from(reads.len()).unwrap_or(u32::MAX),
+    })
+}
+
+/// Host Unix time now, in microseconds.
+pub fn host_now_us() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+        .unwrap_or(0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Builds a read of a device whose clock maps to host time as `host = offset + d*(1+drift)`.
+    fn read(
+        device_us: u64,
+        host_at_0: f64,
+        drift_ppm: f64,
+        rtt_us: u64,
+        skew_us: i64,
+    ) -> ClockRead {
+        let host_mid = host_at_0 + device_us as f64 * (1.0 + drift_ppm * 1e-6) + skew_us as f64;
+        let send = (host_mid - rtt_us as f64 / 2.0).round() as u64;
+        ClockRead {
+            host_send_us: send,
+            device_us,
+            host_recv_us: send + rtt_us,
+        }
+    }
+
+    #[test]
+    fn no_reads_is_an_error() {
+        assert_eq!(fit_clock(&[]), Err(ClockError::NoReads));
+    }
+
+    #[test]
+    fn single_read_gives_offset_only() {
+        let r = ClockRead {
+            host_send_us: 1_700_000_000_000_000,
+            device_us: 5_000_000,
+            host_recv_us: 1_700_000_000_000_400,
+        };
+        let m = fit_clock(&[r]).expect("fit");
+        assert_eq!(m.drift_ppm, 0.0);
+        assert_eq!(m.samples, 1);
+        assert!((m.to_host_us(5_000_000) - 1_700_000_000_000_200.0).abs() < 0.5);
+    }
+
+    #[test]
+    fn midpoint_is_used() {
+        // Asymmetric reads around the same line: midpoints lie exactly on it.
+        let reads: Vec<_> = (0..10)
+            .map(|i| read(1_000_000 * i, 1.7e15, 0.0, 100 + 50 * i, 0))
+            .collect();
+        let m = fit_clock(&reads).expect("fit");
+        assert!(m.residual_rms_us < 1.0, "{m:?}");
+        assert!(m.drift_ppm.abs() < 1.0, "{m:?}");
+    }
+
+    #[test]
+    fn residual_reports_scatter() {
+        // Alternating +-10 us scatter around a perfect line gives an RMS of about 10 us.
+        let reads: Vec<_> = (0..20)
+            .map(|i| {
+                read(
+                    500_000 * i,
+                    1.7e15,
+                    20.0,
+                    300,
+                    if i % 2 == 0 { 10 } else { -10 },
+                )
+            })
+            .collect();
+        let m = fit_clock(&reads).expect("fit");
+        assert!((m.residual_rms_us - 10.0).abs() < 1.5, "{m:?}");
+    }
+
+    proptest! {
+        #[test]
+        fn recovers_offset_and_drift(
+            start_us in 0u64..(1u64 << 45),
+            host_at_0 in 1.0e15f64..2.0e15,
+            drift_ppm in -200.0f64..200.0,
+            n in 3usize..40,
+            step_us in 200_000u64..5_000_000,
+            rtt_us in 50u64..2_000,
+            noise in proptest::collection::vec(-3i64..=3, 40),
+        ) {
+            let reads: Vec<_> = (0..n)
+                .map(|i| read(start_us + step_us * i as u64, host_at_0, drift_ppm, rtt_us, noise[i]))
+                .collect();
+            let m = fit_clock(&reads).expect("fit");
+            // Midpoint rounding (0.5 us) plus +-3 us noise over >= 3 reads spaced >= 0.2 s:
+            // drift error stays well under 20 ppm and the mapping within ~5 us in the read span.
+            prop_assert!((m.drift_ppm - drift_ppm).abs() < 20.0, "drift {} vs {}", m.drift_ppm, drift_ppm);
+            let span_end = start_us + step_us * (n as u64 - 1);
+            for d in [start_us, (start_us + span_end) / 2, span_end] {
+                let truth = host_at_0 + d as f64 * (1.0 + drift_ppm * 1e-6);
+                prop_assert!((m.to_host_us(d) - truth).abs() < 5.0,
+                    "at {d}: {} vs {truth}", m.to_host_us(d));
+            }
+            prop_assert!(m.residual_rms_us <= 4.0);
+            prop_assert_eq!(m.samples as usize, n);
+        }
+
+        #[test]
+        fn exact_beyond_u32_range(start_us in (1u64 << 32)..(1u64 << 52), drift_ppm in -50.0f64..50.0) {
+            // Noise-free reads at device times far past 2^32 us: the fit is exact to rounding.
+            let reads: Vec<_> = (0..8)
+                .map(|i| read(start_us + 1_000_000 * i, 1.6e15, drift_ppm, 200, 0))
+                .collect();
+            let m = fit_clock(&reads).expect("fit");
+            prop_assert!(m.residual_rms_us < 1.0, "{:?}", m);
+            prop_assert!((m.drift_ppm - drift_ppm).abs() < 1.0, "{:?}", m);
+            let truth = 1.6e15 + start_us as f64 * (1.0 + drift_ppm * 1e-6);
+            prop_assert!((m.to_host_us(start_us) - truth).abs() < 2.0);
+        }
+    }
+}
