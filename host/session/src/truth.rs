@@ -1,0 +1,151 @@
+//! `truth.json`: the ground truth a synthetic session was rendered from, so every stage can be
+//! scored. Real sessions have none.
+
+use std::path::Path;
+
+use glam::{DVec2, DVec3};
+use serde::{Deserialize, Serialize};
+use skinbrdf_brdf::BrdfModel;
+use skinbrdf_core::{CameraModel, Pose};
+
+use crate::capture::ImageRole;
+use crate::error::FileError;
+
+/// Current `truth.json` format version.
+pub const TRUTH_FORMAT_VERSION: u32 = 1;
+
+/// The ground truth of a synthetic session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Truth {
+    /// Format version ([`TRUTH_FORMAT_VERSION`]).
+    pub format_version: u32,
+    /// Scene name the session was generated from.
+    pub scene: String,
+    /// Random seed used.
+    pub seed: u64,
+    /// The true camera (intrinsics and distortion).
+    pub camera: CameraModel,
+    /// The true BRDF of the skin.
+    pub brdf: BrdfModel,
+    /// The true BRDF of the reflectance standard.
+    pub standard_brdf: BrdfModel,
+    /// Radiometric calibration constant C per RGB channel, sr⁻¹ m⁻² per unit linear pixel
+    /// value: `rho = C D² V / cos(theta_i)` (see `docs/session-format.md`).
+    pub calibration_c: [f64; 3],
+    /// The flash's emitting point, world frame, metres.
+    pub light_position_m: DVec3,
+    /// World from flash frame.
+    pub world_from_flash: Pose,
+    /// World from reflectance-standard frame.
+    pub world_from_standard: Pose,
+    /// The exact surface the images were rendered from (the scan is a noisy, coarser copy).
+    pub surface: SurfaceTruth,
+    /// Per image, in session order.
+    pub images: Vec<ImageTruth>,
+    /// Generator settings that matter for scoring (noise levels, samples per pixel, ...).
+    pub render: RenderTruth,
+}
+
+/// The true surface and how the scan was derived from it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SurfaceTruth {
+    /// Shape description (generator-specific parameters, head frame).
+    pub shape: serde_json::Value,
+    /// Standard deviation of the scanner's vertex noise, metres (0 when none).
+    pub scan_noise_m: f64,
+    /// Mean edge length of the scan mesh, metres.
+    pub scan_spacing_m: f64,
+    /// Number of scan vertices.
+    pub scan_vertices: usize,
+}
+
+/// Render settings recorded for scoring.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RenderTruth {
+    /// Rays per pixel (jittered, box filter over the pixel).
+    pub samples_per_pixel: u32,
+    /// Whether shot/read noise was added.
+    pub sensor_noise: bool,
+    /// Read noise standard deviation, linear units (1.0 = white).
+    pub read_noise: f64,
+    /// Full-well electrons at white (shot noise: variance = V / full_well_e).
+    pub full_well_e: f64,
+    /// Wall time of the render, seconds (informational).
+    pub render_seconds: f64,
+}
+
+/// Ground truth of one image.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ImageTruth {
+    /// Image file (as in `session.toml`).
+    pub file: String,
+    /// Its role.
+    pub role: ImageRole,
+    /// Exposure time, device microseconds (from the capture record, or synthetic).
+    pub exposure_us: u64,
+    /// World from camera.
+    pub world_from_camera: Pose,
+    /// World from head.
+    pub world_from_head: Pose,
+    /// Pixels that see the region of interest of the skin (8-bit PNG), relative to the session.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub forehead_mask: Option<String>,
+    /// Pixels that see any printed target (8-bit PNG), relative to the session.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub targets_mask: Option<String>,
+    /// Pixels that see the reflectance standard's reflecting area (8-bit PNG).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub standard_mask: Option<String>,
+    /// Every target whose centre projects into the image and faces the camera.
+    pub targets: Vec<TargetTruth>,
+}
+
+/// Where a target truly appears in an image.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TargetTruth {
+    /// Which layout it belongs to: `reference`, `headdress`, `flash` or `standard`.
+    pub layout: String,
+    /// tag36h11 id.
+    pub id: u32,
+    /// The four corners in pixels (layout corner order), distortion included.
+    pub corners_px: [DVec2; 4],
+    /// The centre in pixels.
+    pub centre_px: DVec2,
+    /// Whether every corner is unoccluded and inside the image.
+    pub fully_visible: bool,
+}
+
+impl Truth {
+    /// Reads `truth.json`.
+    pub fn load(path: &Path) -> Result<Self, FileError> {
+        let bytes = std::fs::read(path).map_err(|source| FileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let t: Self = serde_json::from_slice(&bytes).map_err(|source| FileError::Json {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        if t.format_version != TRUTH_FORMAT_VERSION {
+            return Err(FileError::Invalid {
+                path: path.to_path_buf(),
+                field: "format_version".into(),
+                problem: format!(
+                    "version {} is not supported (this build reads {TRUTH_FORMAT_VERSION})",
+                    t.format_version
+                ),
+            });
+        }
+        Ok(t)
+    }
+
+    /// Writes `truth.json` atomically.
+    pub fn write(&self, path: &Path) -> Result<(), FileError> {
+        crate::write::write_json_atomic(path, self)
+    }
+
+    /// The truth of the image with this file name.
+    pub fn image(&self, file: &str) -> Option<&ImageTruth> {
+        self.images.iter().find(|i| i.file == file)
+    }
+}

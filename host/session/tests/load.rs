@@ -1,0 +1,210 @@
+//! Loading and validating session directories: a valid one loads; bad ones report every
+//! problem with file and field.
+#![allow(clippy::unwrap_used)] // test helpers
+
+use std::path::Path;
+
+use glam::DVec3;
+use skinbrdf_brdf::BrdfModel;
+use skinbrdf_core::{CameraModel, Pose};
+use skinbrdf_session::write::write_png_rgb16;
+use skinbrdf_session::*;
+
+const W: u32 = 8;
+const H: u32 = 6;
+
+fn target(id: u32, centre: DVec3) -> Target {
+    Target::square(id, 0.04, centre, DVec3::NEG_Z, DVec3::Y).unwrap()
+}
+
+fn valid_file() -> SessionFile {
+    let images = [
+        ("images/m0.png", ImageRole::Measurement),
+        ("images/m1.png", ImageRole::Measurement),
+        ("images/l0.png", ImageRole::LightPosition),
+        ("images/s0.png", ImageRole::ReferenceStandard),
+    ]
+    .into_iter()
+    .map(|(f, role)| ImageEntry {
+        file: f.into(),
+        role,
+        exposure_index: None,
+        linearization: None,
+        mask: None,
+        world_from_camera: None,
+        world_from_head: None,
+    })
+    .collect();
+    SessionFile {
+        format_version: SESSION_FORMAT_VERSION,
+        description: "test".into(),
+        capture: None,
+        camera: CameraSpec::Calibrated(CameraModel::from_fov(W, H, 0.8)),
+        linearization: Linearization::LINEAR,
+        images,
+        targets: TargetLayouts {
+            family: TAG_FAMILY.into(),
+            reference: vec![
+                target(0, DVec3::new(0.0, 0.0, 2.0)),
+                target(1, DVec3::new(0.1, 0.0, 2.0)),
+            ],
+            headdress: vec![target(10, DVec3::new(0.0, 0.1, 0.0))],
+        },
+        flash: FlashSpec {
+            diameter_m: 0.082,
+            light_centre_m: DVec3::ZERO,
+            targets: vec![target(20, DVec3::new(0.08, 0.0, 0.0))],
+        },
+        standard: Some(StandardSpec {
+            brdf: BrdfModel::Lambertian { albedo: [0.99; 3] },
+            size_m: [0.1, 0.1],
+            targets: vec![target(30, DVec3::new(0.08, 0.0, 0.0))],
+        }),
+        geometry: GeometrySpec::Sphere {
+            centre_m: DVec3::ZERO,
+            radius_m: 0.08,
+        },
+        roi: Some(RegionOfInterest {
+            centre_m: DVec3::new(0.0, 0.0, 0.08),
+            radius_m: 0.03,
+        }),
+        known: KnownQuantities {
+            world_from_standard: Some(Pose::IDENTITY),
+            ..Default::default()
+        },
+    }
+}
+
+fn write_dir(dir: &Path, f: &SessionFile) {
+    for im in &f.images {
+        write_png_rgb16(
+            &dir.join(&im.file),
+            W,
+            H,
+            &vec![1000u16; (3 * W * H) as usize],
+        )
+        .unwrap();
+    }
+    Session::write_file(dir, f).unwrap();
+}
+
+#[test]
+fn a_valid_session_loads_and_its_images_linearize() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = valid_file();
+    write_dir(dir.path(), &f);
+    let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.file, f);
+    assert_eq!(s.images_with_role(ImageRole::Measurement).count(), 2);
+    let img = s.load_image(0).unwrap();
+    assert_eq!((img.width, img.height), (W, H));
+    assert!((img.rgb[7][1] - 1000.0 / 65535.0).abs() < 1e-7);
+    assert!(s.load_truth().is_none());
+}
+
+#[test]
+fn every_semantic_problem_is_reported_with_its_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut f = valid_file();
+    write_dir(dir.path(), &f);
+    f.images[1].file = "images/missing.png".into();
+    f.images[2].linearization = Some(Linearization {
+        curve: ToneCurve::Gamma,
+        ..Linearization::LINEAR
+    });
+    f.targets.headdress[0].id = 1; // duplicate of a reference id
+    f.targets.reference[1].size_m = 0.05; // corners no longer match
+    f.flash.diameter_m = -1.0;
+    f.geometry = GeometrySpec::Sphere {
+        centre_m: DVec3::ZERO,
+        radius_m: 0.0,
+    };
+    f.known.calibration_c = Some([1.0, f64::NAN, 1.0]);
+    Session::write_file(dir.path(), &f).unwrap();
+    let errs = Session::load(dir.path()).unwrap_err();
+    let text = errs.to_string();
+    for field in [
+        "images[1].file",
+        "images[2].linearization.gamma",
+        "targets.headdress[0].id",
+        "targets.reference[1].corners_m",
+        "flash.diameter_m",
+        "geometry.radius_m",
+        "known.calibration_c",
+    ] {
+        assert!(errs.has_field(field), "missing `{field}` in:\n{text}");
+    }
+    assert!(errs
+        .problems
+        .iter()
+        .all(|p| p.file.ends_with("session.toml")));
+}
+
+#[test]
+fn every_parse_problem_is_reported_at_once() {
+    let text = toml::to_string(&valid_file()).unwrap();
+    let bad = text
+        .replace("role = \"light-position\"", "role = \"light-posiiton\"")
+        .replace("diameter_m = 0.082", "diameter_m = \"big\"")
+        .replace("format_version = 1", "format_version = 1\nbogus = 3");
+    // Drop one required field of a target.
+    let bad = bad.replacen("size_m = 0.04\n", "", 1);
+    let errs = Session::parse_toml(&bad, Path::new("x/session.toml")).unwrap_err();
+    let text = errs.to_string();
+    assert!(errs.has_field("images[2]"), "{text}");
+    assert!(errs.has_field("flash"), "{text}");
+    assert!(errs.has_field("bogus"), "{text}");
+    assert!(
+        errs.problems
+            .iter()
+            .any(|p| p.field.starts_with("targets.reference[0]")),
+        "{text}"
+    );
+    assert!(text.contains("light-posiiton"), "{text}");
+    assert!(errs.len() >= 4, "{text}");
+}
+
+#[test]
+fn missing_sections_and_needs_are_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut f = valid_file();
+    write_dir(dir.path(), &f);
+    f.targets.reference.clear();
+    f.standard = None;
+    Session::write_file(dir.path(), &f).unwrap();
+    let errs = Session::load(dir.path()).unwrap_err();
+    assert!(errs.has_field("targets.reference"), "{errs}");
+    assert!(errs.has_field("standard"), "{errs}");
+
+    let errs = Session::parse_toml("format_version = 2\n", Path::new("session.toml")).unwrap_err();
+    for field in [
+        "format_version",
+        "camera",
+        "images",
+        "targets",
+        "flash",
+        "geometry",
+    ] {
+        assert!(errs.has_field(field), "missing `{field}` in {errs}");
+    }
+    let errs = Session::parse_toml("format_version = [", Path::new("session.toml")).unwrap_err();
+    assert!(errs.to_string().contains("line 1"), "{errs}");
+}
+
+#[test]
+fn image_size_mismatch_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = valid_file();
+    write_dir(dir.path(), &f);
+    write_png_rgb16(
+        &dir.path().join("images/m1.png"),
+        W + 1,
+        H,
+        &vec![0u16; (3 * (W + 1) * H) as usize],
+    )
+    .unwrap();
+    let errs = Session::load(dir.path()).unwrap_err();
+    assert_eq!(errs.len(), 1, "{errs}");
+    assert!(errs.has_field("images[1].file"));
+    assert!(errs.to_string().contains("9x6"), "{errs}");
+}
