@@ -1,3 +1,13 @@
 //! Coded targets: AprilTag tag36h11 detection with sub-pixel corners, and printable target sheets.
+//!
+//! * [`tag36h11`]: the code table and bit layout ([`tag36h11::tag_bits`] renders a tag's cells).
+//! * [`detect`]: the detector ([`detect::detect`]), corners in the project's pixel convention.
+//! * [`render`]: painting tags into images through a homography (tests, synthetic images).
 
+pub mod detect;
+pub mod image;
+pub mod render;
 pub mod tag36h11;
+
+pub use detect::{detect, DetectStats, Detection, DetectorConfig};
+pub use image::{GrayF32, ImageError};

@@ -1,0 +1,1196 @@
+//! AprilTag tag36h11 detection with sub-pixel corners and their uncertainty.
+//!
+//! # Method
+//!
+//! 1. **Adaptive threshold** (as the reference library): the image is cut into tiles of
+//!    [`DetectorConfig::tile_px`]; each pixel is compared with the mid-level of the minimum and
+//!    maximum over the 3 x 3 neighbouring tiles. Pixels whose neighbourhood contrast is below
+//!    [`DetectorConfig::min_contrast`] (relative to the image's range) are left unclassified, so
+//!    flat regions and uneven flash lighting do not produce spurious components.
+//! 2. **Dark components** (8-connected, union-find) of plausible size; the outer contour of each
+//!    is traced (Moore neighbourhood tracing).
+//! 3. **Quad fit**: four corner candidates from the contour (the farthest point pair and the two
+//!    points farthest from their chord), a line fitted to the middle of each side, rejection when
+//!    the contour strays from the lines (not a quadrilateral), is not convex or too small.
+//! 4. **Edge refinement** on the grey image (not the binary one): along each side, the edge
+//!    position along the normal is the centroid of the squared positive (dark-to-light) gradient
+//!    in a window, re-centred over three passes so the window is symmetric about the edge (an
+//!    off-centre window biases the centroid); a weighted total-least-squares line is fitted, and
+//!    the corners are the intersections of adjacent lines. This is the same edge model as the
+//!    reference library's `refine_edges`.
+//! 5. **Uncertainty**: the residual scatter of the edge points gives each line's offset variance
+//!    at the corner (`σ²/N + σ² t²/Σt²`); a corner's 2 x 2 covariance is
+//!    `σ₁²/sin²φ · u₂u₂ᵀ + σ₂²/sin²φ · u₁u₁ᵀ` for lines of directions `u₁, u₂` meeting at angle
+//!    `φ`. A floor of [`SIGMA_FLOOR_PX`] accounts for model error the residuals cannot see.
+//! 6. **Decoding**: the homography from the tag square to the quad samples all 10 x 10 cells;
+//!    black and white levels are modelled as planes over the tag (fitted to the black border and
+//!    the white outer ring), so a lighting gradient across the tag does not flip bits. The 36 data
+//!    bits are matched against all 587 codes for each of the four corner orderings; the best
+//!    match within [`DetectorConfig::max_hamming`] wins. Quads whose black border is not dark are
+//!    rejected before decoding.
+//!
+//! # Output convention
+//!
+//! Corners are in the project's pixel convention (integer = pixel centre), in the reference
+//! library's order: the printed tag's bottom-left, bottom-right, top-right, top-left (tag frame
+//! `(-1,1)`, `(1,1)`, `(1,-1)`, `(-1,-1)`, see [`crate::tag36h11`]), each the outer corner of the
+//! black border. The reference C library puts pixel centres at half-integers, so its
+//! coordinates are ours + 0.5: `c_lib.p[i] = ours[i] + (0.5, 0.5)`.
+
+// Grid and corner loops index several parallel arrays; iterators would obscure the geometry.
+#![allow(clippy::needless_range_loop)]
+
+use crate::image::GrayF32;
+use crate::tag36h11;
+use glam::{DMat3, DVec2, DVec3};
+use serde::{Deserialize, Serialize};
+
+/// Floor of the corner standard deviation: residual model error of edge fitting on real optics
+/// (blur asymmetry, pixel response) that the fit's own scatter does not show.
+pub const SIGMA_FLOOR_PX: f64 = 0.02;
+
+/// Strength of the Laplacian sharpening of the sampled cell grid for small tags (the reference
+/// library's default `decode_sharpening`).
+pub const DECODE_SHARPENING: f64 = 0.25;
+
+/// Detector settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DetectorConfig {
+    /// Maximum number of corrected bit errors (tag36h11 has distance 11; 2 keeps the false
+    /// positive rate of the reference library's default).
+    pub max_hamming: u32,
+    /// Tile size of the adaptive threshold, pixels.
+    pub tile_px: usize,
+    /// Minimum local contrast (max - min over the tile neighbourhood) as a fraction of the image
+    /// range for a pixel to be classified.
+    pub min_contrast: f32,
+    /// Smallest tag side (black border) to look for, pixels.
+    pub min_side_px: f64,
+    /// Minimum decision margin: the mean distance of the white bits (and of the black bits, the
+    /// smaller of the two) from the threshold, relative to the white/black difference (0..0.5).
+    /// Rejects noise decoded by luck.
+    pub min_margin: f64,
+    /// Maximum deviation of the traced contour from the fitted side lines, as a fraction of the
+    /// side length (plus one pixel for the pixel grid).
+    pub max_side_deviation: f64,
+}
+
+impl DetectorConfig {
+    /// Defaults that work on the real test photos and synthetic sessions.
+    pub const DEFAULT: Self = Self {
+        max_hamming: 2,
+        tile_px: 4,
+        min_contrast: 0.04,
+        min_side_px: 8.0,
+        min_margin: 0.1,
+        max_side_deviation: 0.08,
+    };
+}
+
+impl Default for DetectorConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// One detected tag.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Detection {
+    /// Tag ID in tag36h11.
+    pub id: u32,
+    /// Outer corners of the black border, pixel-centre convention, in the reference library's
+    /// order: bottom-left, bottom-right, top-right, top-left as printed (tag frame `(-1,1)`,
+    /// `(1,1)`, `(1,-1)`, `(-1,-1)`), the order of `skinbrdf_session::Target::corners_m`.
+    pub corners_px: [DVec2; 4],
+    /// 2 x 2 covariance of each corner, px², row-major `[xx, xy, yy]`.
+    pub corner_cov_px2: [[f64; 3]; 4],
+    /// Centre of the tag (image of the tag frame origin).
+    pub center_px: DVec2,
+    /// Number of corrected bit errors.
+    pub hamming: u32,
+    /// Decision margin: the smaller of the mean relative distances of white and black data bits
+    /// from their threshold (0..~0.5; higher is safer).
+    pub decision_margin: f64,
+    /// RMS scatter of the edge points about the fitted sides, pixels.
+    pub edge_rms_px: f64,
+}
+
+impl Detection {
+    /// Standard deviation of each corner along its worst direction, pixels.
+    pub fn corner_sigma_px(&self) -> [f64; 4] {
+        self.corner_cov_px2.map(|[a, b, c]| {
+            let tr = 0.5 * (a + c);
+            let disc = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+            (tr + disc).max(0.0).sqrt()
+        })
+    }
+
+    /// Side length (mean of the four sides), pixels.
+    pub fn side_px(&self) -> f64 {
+        (0..4)
+            .map(|i| self.corners_px[i].distance(self.corners_px[(i + 1) % 4]))
+            .sum::<f64>()
+            / 4.0
+    }
+}
+
+/// Statistics of one detection run (cost and rejections, for reports).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct DetectStats {
+    /// Dark components considered.
+    pub components: usize,
+    /// Components that fitted a quadrilateral.
+    pub quads: usize,
+    /// Quads rejected by decoding (no code within the Hamming limit, dark border or margin).
+    pub rejected_decode: usize,
+    /// Duplicate detections removed.
+    pub duplicates: usize,
+}
+
+/// Detects tag36h11 tags.
+pub fn detect(img: &GrayF32, cfg: &DetectorConfig) -> Vec<Detection> {
+    detect_with_stats(img, cfg).0
+}
+
+/// Detects tag36h11 tags and returns the run's statistics.
+pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>, DetectStats) {
+    let mut stats = DetectStats::default();
+    if img.width < 16 || img.height < 16 {
+        return (Vec::new(), stats);
+    }
+    let dark = threshold(img, cfg);
+    let comps = components(&dark, img.width, img.height, cfg);
+    stats.components = comps.len();
+    let mut out: Vec<Detection> = Vec::new();
+    for comp in &comps {
+        let contour = trace_contour(&comp.labels_view(&dark.labels), img.width, img.height, comp);
+        let Some(quad) = fit_quad(&contour, cfg) else {
+            continue;
+        };
+        stats.quads += 1;
+        let Some(refined) = refine_quad(img, quad) else {
+            stats.rejected_decode += 1;
+            continue;
+        };
+        match decode(img, &refined, cfg) {
+            Some(det) => out.push(det),
+            None => stats.rejected_decode += 1,
+        }
+    }
+    // Remove duplicates: same ID with centres closer than a quarter side; keep the better margin.
+    out.sort_by(|a, b| {
+        b.decision_margin
+            .partial_cmp(&a.decision_margin)
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    let mut kept: Vec<Detection> = Vec::new();
+    for d in out {
+        if kept
+            .iter()
+            .any(|k| k.id == d.id && k.center_px.distance(d.center_px) < 0.25 * k.side_px())
+        {
+            stats.duplicates += 1;
+        } else {
+            kept.push(d);
+        }
+    }
+    kept.sort_by_key(|d| d.id);
+    (kept, stats)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Threshold and components
+
+struct Binary {
+    /// Union-find parent per pixel for dark pixels, `u32::MAX` for others.
+    labels: Vec<u32>,
+}
+
+fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
+    let (w, h) = (img.width, img.height);
+    let ts = cfg.tile_px.max(2);
+    let (tw, th) = (w.div_ceil(ts), h.div_ceil(ts));
+    let mut tmin = vec![f32::INFINITY; tw * th];
+    let mut tmax = vec![f32::NEG_INFINITY; tw * th];
+    let (mut gmin, mut gmax) = (f32::INFINITY, f32::NEG_INFINITY);
+    for y in 0..h {
+        let row = &img.data[y * w..(y + 1) * w];
+        let ty = y / ts;
+        for (x, &v) in row.iter().enumerate() {
+            let t = ty * tw + x / ts;
+            tmin[t] = tmin[t].min(v);
+            tmax[t] = tmax[t].max(v);
+        }
+    }
+    for (&a, &b) in tmin.iter().zip(&tmax) {
+        gmin = gmin.min(a);
+        gmax = gmax.max(b);
+    }
+    let min_diff = cfg.min_contrast * (gmax - gmin).max(1e-12);
+    // 3x3 tile dilation of min and max.
+    let mut nmin = vec![0f32; tw * th];
+    let mut nmax = vec![0f32; tw * th];
+    for ty in 0..th {
+        for tx in 0..tw {
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let (x, y) = (tx as i64 + dx, ty as i64 + dy);
+                    if x < 0 || y < 0 || x >= tw as i64 || y >= th as i64 {
+                        continue;
+                    }
+                    let t = y as usize * tw + x as usize;
+                    lo = lo.min(tmin[t]);
+                    hi = hi.max(tmax[t]);
+                }
+            }
+            nmin[ty * tw + tx] = lo;
+            nmax[ty * tw + tx] = hi;
+        }
+    }
+    let mut labels = vec![u32::MAX; w * h];
+    for y in 0..h {
+        let ty = y / ts;
+        for x in 0..w {
+            let t = ty * tw + x / ts;
+            let (lo, hi) = (nmin[t], nmax[t]);
+            if hi - lo < min_diff {
+                continue;
+            }
+            let v = img.data[y * w + x];
+            if v <= 0.5 * (lo + hi) {
+                labels[y * w + x] = (y * w + x) as u32;
+            }
+        }
+    }
+    // Union-find over 8-connected dark pixels.
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if labels[i] == u32::MAX {
+                continue;
+            }
+            let link = |j: usize, labels: &mut Vec<u32>| {
+                if labels[j] != u32::MAX {
+                    union(labels, i as u32, j as u32);
+                }
+            };
+            if x > 0 {
+                link(i - 1, &mut labels);
+            }
+            if y > 0 {
+                link(i - w, &mut labels);
+                if x > 0 {
+                    link(i - w - 1, &mut labels);
+                }
+                if x + 1 < w {
+                    link(i - w + 1, &mut labels);
+                }
+            }
+        }
+    }
+    for i in 0..w * h {
+        if labels[i] != u32::MAX {
+            labels[i] = find(&mut labels, i as u32);
+        }
+    }
+    Binary { labels }
+}
+
+fn find(p: &mut [u32], mut i: u32) -> u32 {
+    let mut root = i;
+    while p[root as usize] != root {
+        root = p[root as usize];
+    }
+    while p[i as usize] != root {
+        let next = p[i as usize];
+        p[i as usize] = root;
+        i = next;
+    }
+    root
+}
+
+fn union(p: &mut [u32], a: u32, b: u32) {
+    let ra = find(p, a);
+    let rb = find(p, b);
+    if ra != rb {
+        // Keep the smaller index as root: the root is then the first pixel in raster order,
+        // which is where contour tracing starts.
+        let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+        p[hi as usize] = lo;
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Component {
+    root: u32,
+    count: usize,
+}
+
+impl Component {
+    fn labels_view<'a>(&self, labels: &'a [u32]) -> LabelView<'a> {
+        LabelView {
+            labels,
+            root: self.root,
+        }
+    }
+}
+
+struct LabelView<'a> {
+    labels: &'a [u32],
+    root: u32,
+}
+
+fn components(b: &Binary, w: usize, h: usize, cfg: &DetectorConfig) -> Vec<Component> {
+    let mut count = std::collections::HashMap::<u32, (usize, usize, usize, usize, usize)>::new();
+    for y in 0..h {
+        for x in 0..w {
+            let l = b.labels[y * w + x];
+            if l == u32::MAX {
+                continue;
+            }
+            let e = count.entry(l).or_insert((0, x, x, y, y));
+            e.0 += 1;
+            e.1 = e.1.min(x);
+            e.2 = e.2.max(x);
+            e.3 = e.3.min(y);
+            e.4 = e.4.max(y);
+        }
+    }
+    let min_side = cfg.min_side_px.max(4.0);
+    let mut comps: Vec<Component> = count
+        .into_iter()
+        .filter(|(_, (n, x0, x1, y0, y1))| {
+            let bw = (x1 - x0 + 1) as f64;
+            let bh = (y1 - y0 + 1) as f64;
+            // The border ring alone covers 7/16 of the square: require a fraction of the
+            // smallest tag's area, and a bounding box that can hold a tag.
+            bw.max(bh) >= min_side
+                && bw.min(bh) >= 0.25 * min_side
+                && *n as f64 >= 0.3 * min_side * min_side
+                && bw < w as f64
+                && bh < h as f64
+        })
+        .map(|(root, (n, ..))| Component { root, count: n })
+        .collect();
+    comps.sort_by_key(|c| c.root);
+    comps
+}
+
+/// Moore-neighbourhood tracing of the outer contour, starting at the component's first pixel in
+/// raster order (its root).
+fn trace_contour(lv: &LabelView<'_>, w: usize, h: usize, comp: &Component) -> Vec<DVec2> {
+    const DIRS: [(i64, i64); 8] = [
+        (1, 0),
+        (1, 1),
+        (0, 1),
+        (-1, 1),
+        (-1, 0),
+        (-1, -1),
+        (0, -1),
+        (1, -1),
+    ];
+    let inside = |x: i64, y: i64| -> bool {
+        x >= 0
+            && y >= 0
+            && (x as usize) < w
+            && (y as usize) < h
+            && lv.labels[y as usize * w + x as usize] == lv.root
+    };
+    let start = (
+        (comp.root as usize % w) as i64,
+        (comp.root as usize / w) as i64,
+    );
+    let dir_of = |from: (i64, i64), to: (i64, i64)| -> usize {
+        let d = (to.0 - from.0, to.1 - from.1);
+        DIRS.iter().position(|&e| e == d).unwrap_or(4)
+    };
+    let step = |p: (i64, i64), back: (i64, i64)| -> Option<((i64, i64), (i64, i64))> {
+        let db = dir_of(p, back);
+        for k in 1..=8 {
+            let d = (db + k) % 8;
+            let q = (p.0 + DIRS[d].0, p.1 + DIRS[d].1);
+            if inside(q.0, q.1) {
+                let pd = (d + 7) % 8;
+                return Some((q, (p.0 + DIRS[pd].0, p.1 + DIRS[pd].1)));
+            }
+        }
+        None
+    };
+    let mut contour = vec![DVec2::new(start.0 as f64, start.1 as f64)];
+    let Some((first, mut back)) = step(start, (start.0 - 1, start.1)) else {
+        return contour;
+    };
+    let mut p = first;
+    let limit = 4 * comp.count + 16;
+    while contour.len() < limit {
+        if p == start {
+            // Jacob's criterion variant: stop when leaving the start the same way as at first.
+            if let Some((q, _)) = step(p, back) {
+                if q == first {
+                    break;
+                }
+            }
+        }
+        contour.push(DVec2::new(p.0 as f64, p.1 as f64));
+        let Some((q, b)) = step(p, back) else { break };
+        p = q;
+        back = b;
+    }
+    contour
+}
+
+// ---------------------------------------------------------------------------------------------
+// Quad fitting
+
+/// A line `n · x = d` with unit normal `n`.
+#[derive(Debug, Clone, Copy)]
+struct Line {
+    n: DVec2,
+    d: f64,
+    /// Centroid of the fitted points and their spread along the line (for the covariance).
+    centroid: DVec2,
+    sum_t2: f64,
+    count: f64,
+    sigma: f64,
+}
+
+impl Line {
+    fn dir(&self) -> DVec2 {
+        DVec2::new(-self.n.y, self.n.x)
+    }
+    fn intersect(&self, o: &Line) -> Option<DVec2> {
+        let det = self.n.x * o.n.y - self.n.y * o.n.x;
+        if det.abs() < 1e-9 {
+            return None;
+        }
+        Some(DVec2::new(
+            (self.d * o.n.y - self.n.y * o.d) / det,
+            (self.n.x * o.d - self.d * o.n.x) / det,
+        ))
+    }
+    /// Variance of the line's offset along its normal at point `p`.
+    fn offset_var_at(&self, p: DVec2) -> f64 {
+        let t = (p - self.centroid).dot(self.dir());
+        let s2 = self.sigma * self.sigma;
+        s2 / self.count.max(1.0) + s2 * t * t / self.sum_t2.max(1e-9)
+    }
+}
+
+/// Weighted total-least-squares line through points.
+fn fit_line(pts: &[(DVec2, f64)]) -> Option<Line> {
+    let wsum: f64 = pts.iter().map(|p| p.1).sum();
+    if pts.len() < 2 || wsum <= 0.0 {
+        return None;
+    }
+    let c = pts.iter().map(|(p, w)| *p * *w).sum::<DVec2>() / wsum;
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for (p, w) in pts {
+        let d = *p - c;
+        sxx += w * d.x * d.x;
+        sxy += w * d.x * d.y;
+        syy += w * d.y * d.y;
+    }
+    // Direction = principal eigenvector of the scatter matrix.
+    let theta = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+    let dir = DVec2::new(theta.cos(), theta.sin());
+    let n = DVec2::new(-dir.y, dir.x);
+    let mut res2 = 0.0;
+    let mut sum_t2 = 0.0;
+    for (p, w) in pts {
+        let r = (*p - c).dot(n);
+        res2 += w * r * r;
+        let t = (*p - c).dot(dir);
+        sum_t2 += t * t;
+    }
+    let count = pts.len() as f64;
+    let dof = (count - 2.0).max(1.0);
+    let sigma = (res2 / wsum * count / dof).sqrt();
+    Some(Line {
+        n,
+        d: n.dot(c),
+        centroid: c,
+        sum_t2,
+        count,
+        sigma,
+    })
+}
+
+fn signed_area(q: &[DVec2; 4]) -> f64 {
+    let mut a = 0.0;
+    for i in 0..4 {
+        let (p, r) = (q[i], q[(i + 1) % 4]);
+        a += p.x * r.y - r.x * p.y;
+    }
+    0.5 * a
+}
+
+fn is_convex(q: &[DVec2; 4]) -> bool {
+    let mut sign = 0.0;
+    for i in 0..4 {
+        let a = q[(i + 1) % 4] - q[i];
+        let b = q[(i + 2) % 4] - q[(i + 1) % 4];
+        let c = a.perp_dot(b);
+        if c.abs() < 1e-9 || (sign != 0.0 && c.signum() != sign) {
+            return false;
+        }
+        sign = c.signum();
+    }
+    true
+}
+
+/// Fits a quadrilateral to a closed contour. The result is ordered with positive signed area in
+/// image coordinates (clockwise on screen).
+fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
+    let n = contour.len();
+    if (n as f64) < 3.0 * cfg.min_side_px {
+        return None;
+    }
+    let c = contour.iter().copied().sum::<DVec2>() / n as f64;
+    let far = |from: DVec2| -> usize {
+        (0..n)
+            .max_by(|&a, &b| {
+                contour[a]
+                    .distance_squared(from)
+                    .total_cmp(&contour[b].distance_squared(from))
+            })
+            .unwrap_or(0)
+    };
+    let i0 = far(c);
+    let i2 = far(contour[i0]);
+    let (a, b) = (contour[i0], contour[i2]);
+    let chord = (b - a).normalize_or_zero();
+    let dist = |i: usize| (contour[i] - a).perp_dot(chord);
+    let arc = |from: usize, to: usize| -> Vec<usize> {
+        let mut v = Vec::new();
+        let mut i = (from + 1) % n;
+        while i != to {
+            v.push(i);
+            i = (i + 1) % n;
+        }
+        v
+    };
+    let arc1 = arc(i0, i2);
+    let arc2 = arc(i2, i0);
+    let i1 = *arc1
+        .iter()
+        .max_by(|&&x, &&y| dist(x).abs().total_cmp(&dist(y).abs()))?;
+    let i3 = *arc2
+        .iter()
+        .max_by(|&&x, &&y| dist(x).abs().total_cmp(&dist(y).abs()))?;
+    let diag = a.distance(b);
+    if dist(i1).abs() < 0.2 * diag || dist(i3).abs() < 0.2 * diag {
+        return None;
+    }
+    let idx = [i0, i1, i2, i3];
+    let mut lines = Vec::with_capacity(4);
+    for k in 0..4 {
+        let (s, e) = (idx[k], idx[(k + 1) % 4]);
+        let seg = arc(s, e);
+        let len = seg.len();
+        if len < 3 {
+            return None;
+        }
+        // Middle 70 % of the side: the traced corners are rounded by the pixel grid and blur.
+        let lo = (len as f64 * 0.15) as usize;
+        let hi = (len as f64 * 0.85).ceil() as usize;
+        let pts: Vec<(DVec2, f64)> = seg[lo..hi.min(len)]
+            .iter()
+            .map(|&i| (contour[i], 1.0))
+            .collect();
+        let line = fit_line(&pts)?;
+        let side = contour[s].distance(contour[e]);
+        let tol = 1.0 + cfg.max_side_deviation * side;
+        for &i in &seg[lo..hi.min(len)] {
+            if (contour[i].dot(line.n) - line.d).abs() > tol {
+                return None;
+            }
+        }
+        lines.push(line);
+    }
+    let mut q = [DVec2::ZERO; 4];
+    for k in 0..4 {
+        q[k] = lines[(k + 3) % 4].intersect(&lines[k])?;
+    }
+    if !is_convex(&q) {
+        return None;
+    }
+    for k in 0..4 {
+        let side = q[k].distance(q[(k + 1) % 4]);
+        if side < cfg.min_side_px || q[k].distance(c) > 2.0 * diag {
+            return None;
+        }
+    }
+    if signed_area(&q) < 0.0 {
+        q.reverse();
+    }
+    Some(q)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Edge refinement
+
+struct RefinedQuad {
+    corners: [DVec2; 4],
+    cov: [[f64; 3]; 4],
+    edge_rms_px: f64,
+}
+
+/// Refines the sides on the grey image. `q` has positive signed area (clockwise on screen with y
+/// down), so the outward normal of side `a -> b` is `perp(b - a)` rotated to point out.
+fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
+    let mut corners = q;
+    let mut lines: Vec<Line> = Vec::new();
+    let side_mean = (0..4).map(|k| q[k].distance(q[(k + 1) % 4])).sum::<f64>() / 4.0;
+    let cell = side_mean / 8.0;
+    // Search window half-width: the initial error is about a pixel; never wider than most of a
+    // cell so the window stays inside the black border and white ring.
+    let mut range = (0.8 * cell).clamp(1.0, 3.0);
+    for _pass in 0..3 {
+        lines.clear();
+        for k in 0..4 {
+            let (a, b) = (corners[k], corners[(k + 1) % 4]);
+            let len = a.distance(b);
+            let dir = (b - a) / len;
+            // With positive signed area in y-down coordinates the interior is to the right of
+            // a -> b, i.e. along (-dir.y, dir.x)... outward is the opposite.
+            let outward = DVec2::new(dir.y, -dir.x);
+            let nsamp = (len.round() as usize).clamp(6, 400);
+            let mut pts = Vec::with_capacity(nsamp);
+            for s in 0..nsamp {
+                // Stay a cell away from the corners, where the other side's edge interferes.
+                let margin = (cell * 0.75).min(0.25 * len) / len;
+                let t = margin + (1.0 - 2.0 * margin) * (s as f64 + 0.5) / nsamp as f64;
+                let p = a + (b - a) * t;
+                if !img.contains(p, range + 2.0) {
+                    continue;
+                }
+                let (mut mw, mut mn) = (0.0, 0.0);
+                let step = 0.25;
+                let mut off = -range;
+                while off <= range + 1e-9 {
+                    let g1 = img.bilinear(p + outward * (off + 0.5));
+                    let g2 = img.bilinear(p + outward * (off - 0.5));
+                    let g = g1 - g2;
+                    if g > 0.0 {
+                        let wgt = g * g;
+                        mw += wgt;
+                        mn += wgt * off;
+                    }
+                    off += step;
+                }
+                if mw <= 0.0 {
+                    continue;
+                }
+                pts.push((p + outward * (mn / mw), mw));
+            }
+            if pts.len() < 4 {
+                return None;
+            }
+            // Weights by gradient energy, normalised so the covariance uses the point count.
+            let wmax = pts.iter().map(|p| p.1).fold(0.0, f64::max);
+            for p in &mut pts {
+                p.1 = (p.1 / wmax).sqrt();
+            }
+            lines.push(fit_line(&pts)?);
+        }
+        let mut next = [DVec2::ZERO; 4];
+        for k in 0..4 {
+            next[k] = lines[(k + 3) % 4].intersect(&lines[k])?;
+        }
+        let moved = (0..4)
+            .map(|k| next[k].distance(corners[k]))
+            .fold(0.0, f64::max);
+        if !is_convex(&next) || moved > 3.0 * cell.max(2.0) {
+            return None;
+        }
+        corners = next;
+        range = (0.5 * cell).clamp(1.0, 2.0);
+    }
+    let mut cov = [[0.0; 3]; 4];
+    for k in 0..4 {
+        let (l1, l2) = (&lines[(k + 3) % 4], &lines[k]);
+        let sin = l1.n.perp_dot(l2.n).abs().max(0.05);
+        let floor2 = SIGMA_FLOOR_PX * SIGMA_FLOOR_PX;
+        let v1 = l1.offset_var_at(corners[k]) + floor2;
+        let v2 = l2.offset_var_at(corners[k]) + floor2;
+        let (u1, u2) = (l1.dir(), l2.dir());
+        let s2 = sin * sin;
+        // A shift of line 1 moves the corner along line 2's direction, and vice versa.
+        cov[k] = [
+            (v1 * u2.x * u2.x + v2 * u1.x * u1.x) / s2,
+            (v1 * u2.x * u2.y + v2 * u1.x * u1.y) / s2,
+            (v1 * u2.y * u2.y + v2 * u1.y * u1.y) / s2,
+        ];
+    }
+    let edge_rms_px = (lines.iter().map(|l| l.sigma * l.sigma).sum::<f64>() / 4.0).sqrt();
+    Some(RefinedQuad {
+        corners,
+        cov,
+        edge_rms_px,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Decoding
+
+/// Homography mapping the tag square `(-1,-1), (1,-1), (1,1), (-1,1)` to `q`.
+pub fn square_to_quad(q: &[DVec2; 4]) -> Option<DMat3> {
+    // Closed form (Heckbert): unit square to quad, composed with the scaling from [-1,1]^2.
+    let (p0, p1, p2, p3) = (q[0], q[1], q[2], q[3]);
+    let s = p0 - p1 + p2 - p3;
+    let d1 = p1 - p2;
+    let d2 = p3 - p2;
+    let den = d1.perp_dot(d2);
+    if den.abs() < 1e-12 {
+        return None;
+    }
+    let g = s.perp_dot(d2) / den;
+    let h = d1.perp_dot(s) / den;
+    // Maps unit-square (u, v) in [0,1]^2 with (0,0)->p0, (1,0)->p1, (1,1)->p2, (0,1)->p3.
+    let m = DMat3::from_cols(
+        DVec3::new(p1.x - p0.x + g * p1.x, p1.y - p0.y + g * p1.y, g),
+        DVec3::new(p3.x - p0.x + h * p3.x, p3.y - p0.y + h * p3.y, h),
+        DVec3::new(p0.x, p0.y, 1.0),
+    );
+    // [-1,1] -> [0,1]: u = (x + 1) / 2.
+    let sq = DMat3::from_cols(
+        DVec3::new(0.5, 0.0, 0.0),
+        DVec3::new(0.0, 0.5, 0.0),
+        DVec3::new(0.5, 0.5, 1.0),
+    );
+    Some(m * sq)
+}
+
+/// Applies a homography to a point.
+pub fn apply_h(h: &DMat3, p: DVec2) -> DVec2 {
+    let r = *h * DVec3::new(p.x, p.y, 1.0);
+    DVec2::new(r.x / r.z, r.y / r.z)
+}
+
+/// Mean grey value of cell (row, col) of the 10 x 10 grid: the cell centre, averaged with 3 x 3
+/// points in its middle when cells are large enough (`spread` in cell units, 0 = centre only).
+fn sample_cell(img: &GrayF32, h: &DMat3, row: usize, col: usize, spread: f64) -> Option<f64> {
+    let cw = 2.0 / tag36h11::WIDTH_AT_BORDER as f64;
+    let u0 = -1.0 + (col as f64 - 0.5) * cw;
+    let v0 = -1.0 + (row as f64 - 0.5) * cw;
+    let offs: &[f64] = if spread > 0.0 {
+        &[-1.0, 0.0, 1.0]
+    } else {
+        &[0.0]
+    };
+    let mut acc = 0.0;
+    let mut n = 0.0;
+    for sy in offs {
+        for sx in offs {
+            let p = apply_h(h, DVec2::new(u0 + sx * spread * cw, v0 + sy * spread * cw));
+            if !img.contains(p, 0.0) {
+                continue;
+            }
+            acc += img.bilinear(p);
+            n += 1.0;
+        }
+    }
+    (n > 0.0).then(|| acc / n)
+}
+
+/// Least-squares plane `a + b u + c v` through `(u, v, value)`; falls back to the mean when the
+/// points do not span the plane.
+fn fit_plane(pts: &[(f64, f64, f64)]) -> Option<[f64; 3]> {
+    if pts.is_empty() {
+        return None;
+    }
+    let mean = pts.iter().map(|p| p.2).sum::<f64>() / pts.len() as f64;
+    let mut ata = DMat3::ZERO;
+    let mut atb = DVec3::ZERO;
+    for &(u, v, z) in pts {
+        let r = DVec3::new(1.0, u, v);
+        ata += DMat3::from_cols(r * r.x, r * r.y, r * r.z);
+        atb += r * z;
+    }
+    if pts.len() < 6 || ata.determinant().abs() < 1e-9 {
+        return Some([mean, 0.0, 0.0]);
+    }
+    let s = ata.inverse() * atb;
+    Some([s.x, s.y, s.z])
+}
+
+fn cell_uv(row: usize, col: usize) -> (f64, f64) {
+    let cw = 2.0 / tag36h11::WIDTH_AT_BORDER as f64;
+    (
+        -1.0 + (col as f64 - 0.5) * cw,
+        -1.0 + (row as f64 - 0.5) * cw,
+    )
+}
+
+fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detection> {
+    let q = rq.corners;
+    // Sample the grid once in the quad's own order; rotations permute the grid.
+    let h = square_to_quad(&q)?;
+    let side_px = (0..4)
+        .map(|k| q[k].distance(q[(k + 1) % 4]))
+        .fold(f64::INFINITY, f64::min);
+    let cell_px = side_px / tag36h11::WIDTH_AT_BORDER as f64;
+    let spread = if cell_px >= 4.0 { 0.2 } else { 0.0 };
+    let mut raw = [[None; 10]; 10];
+    for (r, row) in raw.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = sample_cell(img, &h, r, c, spread);
+        }
+    }
+    // Sharpen the sampled grid (Laplacian, as the reference library's decode_sharpening) to
+    // undo the blur that mixes neighbouring cells when cells are only a few pixels wide.
+    let mut grid = raw;
+    if cell_px < 6.0 {
+        for r in 0..10 {
+            for c in 0..10 {
+                let Some(v) = raw[r][c] else { continue };
+                let mut lap = 0.0;
+                let mut n = 0.0;
+                for (dr, dc) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                    let (rr, cc) = (r as i64 + dr, c as i64 + dc);
+                    if (0..10).contains(&rr) && (0..10).contains(&cc) {
+                        if let Some(nv) = raw[rr as usize][cc as usize] {
+                            lap += v - nv;
+                            n += 1.0;
+                        }
+                    }
+                }
+                if n > 0.0 {
+                    grid[r][c] = Some(v + DECODE_SHARPENING * lap * 4.0 / n);
+                }
+            }
+        }
+    }
+    let ring = |r: usize, c: usize, k: usize| r.min(c).min(9 - r).min(9 - c) == k;
+    let mut black = Vec::new();
+    let mut white = Vec::new();
+    for r in 0..10 {
+        for c in 0..10 {
+            let Some(v) = grid[r][c] else { continue };
+            let (u, w) = cell_uv(r, c);
+            if ring(r, c, 1) {
+                black.push((u, w, v));
+            } else if ring(r, c, 0) {
+                white.push((u, w, v));
+            }
+        }
+    }
+    if black.len() < 20 {
+        return None;
+    }
+    let bp = fit_plane(&black)?;
+    let eval = |p: &[f64; 3], u: f64, v: f64| p[0] + p[1] * u + p[2] * v;
+    // White reference: the outer ring when it is mostly visible, else the brightest data cells.
+    let wp = if white.len() >= 18 {
+        fit_plane(&white)?
+    } else {
+        let mut data: Vec<f64> = (2..8)
+            .flat_map(|r| (2..8).map(move |c| (r, c)))
+            .filter_map(|(r, c)| grid[r][c])
+            .collect();
+        data.sort_by(f64::total_cmp);
+        let top = &data[data.len() * 3 / 4..];
+        [top.iter().sum::<f64>() / top.len().max(1) as f64, 0.0, 0.0]
+    };
+    // Border must be dark against the white model.
+    let mut bright_border = 0;
+    for &(u, v, z) in &black {
+        let (lo, hi) = (eval(&bp, u, v), eval(&wp, u, v));
+        if hi - lo <= 0.0 || z > 0.5 * (lo + hi) {
+            bright_border += 1;
+        }
+    }
+    if bright_border > 3 {
+        return None;
+    }
+    // Read the data bits for each of the four rotations (corner shifts).
+    let mut best: Option<(u32, u32, usize, f64)> = None; // (hamming, id, shift, margin)
+    for shift in 0..4 {
+        let mut code = 0u64;
+        let (mut white_m, mut white_n, mut black_m, mut black_n) = (0.0, 0.0, 0.0, 0.0);
+        let mut ok = true;
+        for i in 0..tag36h11::NBITS {
+            // Cell (row, col) in the tag's own frame, mapped into the quad's frame by the shift:
+            // a corner shift by one is a quarter turn of the grid.
+            let (mut r, mut c) = (
+                tag36h11::BIT_Y[i] as usize + 1,
+                tag36h11::BIT_X[i] as usize + 1,
+            );
+            for _ in 0..shift {
+                // Quarter turn: tag corner k sits at quad corner k + 1 ...
+                let (nr, nc) = (c, 9 - r);
+                r = nr;
+                c = nc;
+            }
+            let Some(v) = grid[r][c] else {
+                ok = false;
+                break;
+            };
+            let (u, w) = cell_uv(r, c);
+            let (lo, hi) = (eval(&bp, u, w), eval(&wp, u, w));
+            let thr = 0.5 * (lo + hi);
+            let m = (v - thr) / (hi - lo).max(1e-12);
+            code <<= 1;
+            if v > thr {
+                code |= 1;
+                white_m += m;
+                white_n += 1.0;
+            } else {
+                black_m -= m;
+                black_n += 1.0;
+            }
+        }
+        let margin = (white_m / f64::max(white_n, 1.0)).min(black_m / f64::max(black_n, 1.0));
+        if !ok {
+            continue;
+        }
+        for (id, &cw) in tag36h11::CODES.iter().enumerate() {
+            let d = (cw ^ code).count_ones();
+            if d <= cfg.max_hamming && best.is_none_or(|b| d < b.0) {
+                best = Some((d, id as u32, shift, margin));
+            }
+        }
+    }
+    let (hamming, id, shift, margin) = best?;
+    if margin < cfg.min_margin {
+        return None;
+    }
+    // Reorder corners so corner 0 is the tag's printed top-left. With the grid turned by
+    // `shift` quarter turns, the tag's corner k is the quad's corner k - shift.
+    let mut corners = [DVec2::ZERO; 4];
+    let mut cov = [[0.0; 3]; 4];
+    for k in 0..4 {
+        let j = (k + shift) % 4;
+        corners[k] = q[j];
+        cov[k] = rq.cov[j];
+    }
+    let ht = square_to_quad(&corners)?;
+    // Output in the reference library's order (bottom-left, bottom-right, top-right, top-left).
+    let rev = |a: [DVec2; 4]| [a[3], a[2], a[1], a[0]];
+    let revc = |a: [[f64; 3]; 4]| [a[3], a[2], a[1], a[0]];
+    Some(Detection {
+        id,
+        corners_px: rev(corners),
+        corner_cov_px2: revc(cov),
+        center_px: apply_h(&ht, DVec2::ZERO),
+        hamming,
+        decision_margin: margin,
+        edge_rms_px: rq.edge_rms_px,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::paint_tag;
+    use rand::{Rng, SeedableRng};
+
+    fn blank(w: usize, h: usize, v: f32) -> GrayF32 {
+        GrayF32::new(w, h, vec![v; w * h]).expect("size matches")
+    }
+
+    /// Homography of a tag of half-size `s` px centred at `c`, turned by `angle` and with a
+    /// perspective term `(g, h)`.
+    fn tag_h(c: DVec2, s: f64, angle: f64, g: f64, h: f64) -> DMat3 {
+        let (sn, cs) = angle.sin_cos();
+        DMat3::from_cols(
+            DVec3::new(s * cs + c.x * g, s * sn + c.y * g, g),
+            DVec3::new(-s * sn + c.x * h, s * cs + c.y * h, h),
+            DVec3::new(c.x, c.y, 1.0),
+        )
+    }
+
+    fn truth_corners(h: &DMat3) -> [DVec2; 4] {
+        [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)]
+            .map(|(x, y)| apply_h(h, DVec2::new(x, y)))
+    }
+
+    #[test]
+    fn finds_rotated_and_foreshortened_tags_with_subpixel_corners() {
+        let mut img = blank(640, 480, 0.5);
+        let cases = [
+            (3usize, DVec2::new(120.0, 120.0), 40.0, 0.0, 0.0, 0.0),
+            (42, DVec2::new(320.0, 120.0), 50.0, 1.7, 0.0005, 0.0),
+            (100, DVec2::new(510.0, 130.0), 45.0, 3.0, -0.0008, 0.0004),
+            (586, DVec2::new(150.0, 350.0), 30.0, 4.4, 0.0, 0.0012),
+            (7, DVec2::new(420.0, 340.0), 60.0, -0.3, 0.0007, 0.0007),
+        ];
+        let mut truth = Vec::new();
+        for &(id, c, s, a, g, h) in &cases {
+            let hm = tag_h(c, s, a, g, h);
+            assert!(paint_tag(&mut img, &hm, id, 0.08, 0.9, 8));
+            truth.push((id as u32, truth_corners(&hm)));
+        }
+        let dets = detect(&img, &DetectorConfig::default());
+        assert_eq!(dets.len(), cases.len(), "{dets:?}");
+        for (id, corners) in truth {
+            let d = dets.iter().find(|d| d.id == id).expect("tag found");
+            for k in 0..4 {
+                let e = d.corners_px[k].distance(corners[k]);
+                assert!(e < 0.1, "tag {id} corner {k}: error {e} px");
+            }
+            assert_eq!(d.hamming, 0);
+        }
+    }
+
+    #[test]
+    fn survives_noise_blur_and_a_lighting_gradient_with_honest_sigma() {
+        let (w, h) = (400usize, 300usize);
+        let mut img = blank(w, h, 0.0);
+        let hm = tag_h(DVec2::new(200.3, 150.7), 70.0, 0.4, 0.0003, -0.0002);
+        // Paint into a white card, then apply a strong left-to-right flash falloff and noise.
+        for v in img.data.iter_mut() {
+            *v = 0.9;
+        }
+        assert!(paint_tag(&mut img, &hm, 11, 0.05, 0.9, 8));
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        // 3x3 box blur.
+        let src = img.clone();
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                let mut s = 0.0;
+                for dy in 0..3 {
+                    for dx in 0..3 {
+                        s += src.data[(y + dy - 1) * w + x + dx - 1];
+                    }
+                }
+                img.data[y * w + x] = s / 9.0;
+            }
+        }
+        for y in 0..h {
+            for x in 0..w {
+                let gain = 0.35 + 0.65 * x as f32 / w as f32;
+                let n: f32 = rng.random_range(-0.03..0.03);
+                img.data[y * w + x] = img.data[y * w + x] * gain + n;
+            }
+        }
+        let dets = detect(&img, &DetectorConfig::default());
+        assert_eq!(dets.len(), 1, "{dets:?}");
+        let truth = truth_corners(&hm);
+        let d = &dets[0];
+        assert_eq!(d.id, 11);
+        let sig = d.corner_sigma_px();
+        for k in 0..4 {
+            let e = d.corners_px[k].distance(truth[k]);
+            assert!(e < 0.15, "corner {k}: error {e}");
+            // The stated uncertainty is within a factor of a few of the actual error scale.
+            assert!(sig[k] > 0.005 && sig[k] < 0.3, "sigma {}", sig[k]);
+        }
+    }
+
+    #[test]
+    fn rejects_plain_squares_and_noise() {
+        let mut img = blank(300, 300, 0.8);
+        // A black square with no code, and a square with a random (non-code) pattern.
+        for y in 50..130 {
+            for x in 50..130 {
+                img.data[y * 300 + x] = 0.1;
+            }
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        for v in img.data[160 * 300..].iter_mut() {
+            if rng.random_bool(0.3) {
+                *v = 0.1;
+            }
+        }
+        assert!(detect(&img, &DetectorConfig::default()).is_empty());
+    }
+
+    #[test]
+    fn corrects_bit_errors_up_to_the_limit() {
+        let mut img = blank(240, 240, 0.8);
+        let hm = tag_h(DVec2::new(120.0, 120.0), 80.0, 0.0, 0.0, 0.0);
+        assert!(paint_tag(&mut img, &hm, 9, 0.1, 0.9, 4));
+        // Flip two data cells by painting over them (partial occlusion).
+        let cell = 20.0;
+        for (r, c) in [(3usize, 3usize), (5, 6)] {
+            let x0 = 120.0 - 100.0 + c as f64 * cell;
+            let y0 = 120.0 - 100.0 + r as f64 * cell;
+            let v = img.bilinear(DVec2::new(x0 + 10.0, y0 + 10.0));
+            let nv = if v > 0.5 { 0.1 } else { 0.9 };
+            for y in y0 as usize + 2..(y0 + cell) as usize - 2 {
+                for x in x0 as usize + 2..(x0 + cell) as usize - 2 {
+                    img.data[y * 240 + x] = nv;
+                }
+            }
+        }
+        let dets = detect(&img, &DetectorConfig::default());
+        assert_eq!(dets.len(), 1);
+        assert_eq!((dets[0].id, dets[0].hamming), (9, 2));
+        let strict = DetectorConfig {
+            max_hamming: 1,
+            ..DetectorConfig::default()
+        };
+        assert!(detect(&img, &strict).is_empty());
+    }
+}
+
+#[cfg(test)]
+mod debug_real {
+    use super::*;
+
+    #[test]
+    #[ignore]
+    fn debug_misses() {
+        let dir =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/apriltag");
+        let cases = [
+            ("33369213973_9d9bb4cc96_c", 456.75, 340.5),
+            ("34085369442_304b6bafd9_c", 309.2, 400.1),
+            ("34085369442_304b6bafd9_c", 441.4, 342.7),
+            ("34085369442_304b6bafd9_c", 701.5, 114.0),
+        ];
+        let cfg = DetectorConfig::default();
+        for (stem, x, y) in cases {
+            let img = GrayF32::load(&dir.join(format!("{stem}.jpg"))).expect("load");
+            let dark = threshold(&img, &cfg);
+            let comps = components(&dark, img.width, img.height, &cfg);
+            let w = img.width;
+            // the label at a few pixels around the point
+            let mut labs = std::collections::BTreeSet::new();
+            for dy in -8i64..=8 {
+                for dx in -8i64..=8 {
+                    let (px, py) = ((x as i64 + dx) as usize, (y as i64 + dy) as usize);
+                    let l = dark.labels[py * w + px];
+                    if l != u32::MAX {
+                        labs.insert(l);
+                    }
+                }
+            }
+            eprintln!("== {stem} ({x},{y}): labels {labs:?}");
+            for comp in comps.iter().filter(|c| labs.contains(&c.root)) {
+                let contour =
+                    trace_contour(&comp.labels_view(&dark.labels), img.width, img.height, comp);
+                let (mut lo, mut hi) = (DVec2::splat(1e9), DVec2::splat(-1e9));
+                for p in &contour {
+                    lo = lo.min(*p);
+                    hi = hi.max(*p);
+                }
+                let quad = fit_quad(&contour, &cfg);
+                eprintln!(
+                    "  comp {} n={} contour={} bbox {lo}..{hi} quad={quad:?}",
+                    comp.root,
+                    comp.count,
+                    contour.len()
+                );
+                if let Some(q) = quad {
+                    let r = refine_quad(&img, q);
+                    eprintln!("   refined={:?}", r.as_ref().map(|r| r.corners));
+                    if let Some(r) = r {
+                        let d = decode(
+                            &img,
+                            &r,
+                            &DetectorConfig {
+                                max_hamming: 5,
+                                min_margin: 0.0,
+                                ..cfg
+                            },
+                        );
+                        eprintln!("   decode={d:?}");
+                    }
+                }
+            }
+        }
+    }
+}
