@@ -109,6 +109,32 @@ pub fn fit_clock(reads: &[ClockRead]) -> Result<ClockModel, ClockError> {
     })
 }
 
+/// A read whose round trip exceeds this many times the median round trip (plus
+/// [`RTT_SLACK_US`]) was delayed on one leg (host descheduled, USB retry); its midpoint is biased,
+/// so [`select_reads`] leaves it out of the fit.
+pub const RTT_OUTLIER_FACTOR: u64 = 3;
+
+/// Absolute slack added to the outlier threshold, so sub-millisecond jitter on a fast link never
+/// discards reads.
+pub const RTT_SLACK_US: u64 = 1_000;
+
+/// The reads whose round trip is not an outlier (see [`RTT_OUTLIER_FACTOR`]).
+pub fn select_reads(reads: &[ClockRead]) -> Vec<ClockRead> {
+    let mut rtts: Vec<u64> = reads.iter().map(ClockRead::round_trip_us).collect();
+    rtts.sort_unstable();
+    let Some(&median) = rtts.get(rtts.len() / 2) else {
+        return Vec::new();
+    };
+    let limit = median
+        .saturating_mul(RTT_OUTLIER_FACTOR)
+        .saturating_add(RTT_SLACK_US);
+    reads
+        .iter()
+        .copied()
+        .filter(|r| r.round_trip_us() <= limit)
+        .collect()
+}
+
 /// Host Unix time now, in microseconds.
 pub fn host_now_us() -> u64 {
     std::time::SystemTime::now()
@@ -166,6 +192,18 @@ mod tests {
         let m = fit_clock(&reads).expect("fit");
         assert!(m.residual_rms_us < 1.0, "{m:?}");
         assert!(m.drift_ppm.abs() < 1.0, "{m:?}");
+    }
+
+    #[test]
+    fn slow_round_trips_are_left_out() {
+        let mut reads: Vec<_> = (0..10)
+            .map(|i| read(1_000_000 * i, 1.7e15, 0.0, 200, 0))
+            .collect();
+        reads.push(read(10_500_000, 1.7e15, 0.0, 80_000, 30_000));
+        let kept = select_reads(&reads);
+        assert_eq!(kept.len(), 10);
+        let m = fit_clock(&kept).expect("fit");
+        assert!(m.residual_rms_us < 1.0, "{m:?}");
     }
 
     #[test]

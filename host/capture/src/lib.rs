@@ -19,3 +19,11 @@ pub use plan::{load_plan, parse_plan, validate_plan, PlanError};
 pub use ports::{list_ports, PortListing};
 pub use store::{read_capture, CaptureWriter, StoreError};
 pub use transport::{memory_pair, MemoryTransport, SerialTransport, Transport, TransportError};
+pub mod client;
+pub mod session;
+
+pub use client::{Client, ClientError};
+pub use session::{
+    run_capture, CaptureError, CaptureObserver, CaptureOptions, Connector, GroupDecision,
+    OnceConnector, SerialConnector, Unattended,
+};

@@ -151,6 +151,16 @@ pub fn validate_plan(plan: &CapturePlan, origin: &Path) -> Result<(), PlanError>
             "the plan has no shot groups (add at least one [[groups]] table)".into(),
         ));
     }
+    if plan.groups.len() > skinbrdf_protocol::MAX_GROUPS {
+        return Err(invalid(
+            "groups".into(),
+            format!(
+                "{} groups exceed the controller's limit of {}",
+                plan.groups.len(),
+                skinbrdf_protocol::MAX_GROUPS
+            ),
+        ));
+    }
     if plan.max_retries > MAX_RETRIES {
         return Err(invalid(
             "max_retries".into(),
@@ -171,6 +181,16 @@ pub fn validate_plan(plan: &CapturePlan, origin: &Path) -> Result<(), PlanError>
 fn validate_group(_index: usize, g: &ShotGroup) -> Result<(), (&'static str, String)> {
     if g.label.trim().is_empty() {
         return Err(("label", "the label is empty".into()));
+    }
+    if g.label.len() > skinbrdf_protocol::LABEL_LEN {
+        return Err((
+            "label",
+            format!(
+                "{} bytes exceed the controller's limit of {} bytes",
+                g.label.len(),
+                skinbrdf_protocol::LABEL_LEN
+            ),
+        ));
     }
     if g.count == 0 {
         return Err(("count", "a group must have at least one shot".into()));
@@ -357,6 +377,16 @@ flash_mode = "controller-on-xsync"
             msg.contains("flash_ready_timeout_us") && msg.contains("one hour"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn long_label_is_rejected() {
+        let text = GOOD.replace(
+            "label = \"measurement\"",
+            "label = \"measurement around the circle of the head\"",
+        );
+        let msg = parse_plan(&text, origin()).expect_err("long").to_string();
+        assert!(msg.contains(".label") && msg.contains("24 bytes"), "{msg}");
     }
 
     #[test]

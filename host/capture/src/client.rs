@@ -1,0 +1,569 @@
+//! The request/response client over a [`Transport`].
+//!
+//! [`Client::connect`] opens a conversation: it sends a lone `0x00` (terminating whatever
+//! partial frame the device holds), then `Hello`, and turns every way that can fail into a
+//! precise [`ClientError`]: silence or bytes that are not our frames (not our device), a
+//! version mismatch (reported by the device, or a frame whose CRC is right but whose content
+//! does not decode), a transport error.
+//!
+//! Every request gets a fresh sequence number; [`Client::request`] writes it and reads until
+//! the response with that number arrives, queueing the events that arrive meanwhile (read them
+//! with [`Client::next_event`]). Responses to other sequence numbers (answers to requests that
+//! timed out earlier) are dropped. Frames that fail to decode are counted and skipped: the
+//! protocol's decoder resynchronises on the next delimiter.
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+use skinbrdf_protocol::{
+    encode_to_vec, DeviceError, DeviceInfo, DeviceKind, DeviceMessage, Event, FrameDecoder,
+    FrameError, Request, RequestBody, ResponseBody, MAX_FRAME_LEN, PROTOCOL_VERSION,
+};
+use skinbrdf_session::capture::DeviceIdentity;
+
+use crate::clock::{host_now_us, ClockRead};
+use crate::transport::{Transport, TransportError};
+
+/// Default time a request waits for its response.
+pub const DEFAULT_REQUEST_TIMEOUT: Duration = Duration::from_millis(1500);
+
+/// Handshake attempts before the device is declared silent (the first `Hello` may be lost
+/// while a USB device finishes enumerating).
+pub const HANDSHAKE_ATTEMPTS: u32 = 3;
+
+/// Why talking to the device failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ClientError {
+    /// The link failed (no such port, disconnect, ...).
+    #[error(transparent)]
+    Transport(#[from] TransportError),
+    /// Nothing came back to the handshake.
+    #[error(
+        "{port}: not our device: no answer to the handshake after {attempts} tries \
+         (is it a skinbrdf trigger controller running its firmware?)"
+    )]
+    Silent {
+        /// The port.
+        port: String,
+        /// Handshake attempts made.
+        attempts: u32,
+    },
+    /// Bytes came back, but no valid skinbrdf frame.
+    #[error(
+        "{port}: not our device: it answered with {bytes} bytes that are not skinbrdf frames \
+         ({last_error})"
+    )]
+    NotOurDevice {
+        /// The port.
+        port: String,
+        /// Bytes received.
+        bytes: usize,
+        /// The last frame error seen.
+        last_error: String,
+    },
+    /// The device speaks another protocol version.
+    #[error(
+        "{port}: protocol version mismatch: the device speaks version {device}, this host \
+         speaks {host}; update {older}"
+    )]
+    VersionMismatch {
+        /// The port.
+        port: String,
+        /// The device's version (0 if unknown: its frames did not decode).
+        device: u32,
+        /// Ours.
+        host: u32,
+        /// Which side to update.
+        older: &'static str,
+    },
+    /// The device answered a request with an error.
+    #[error("{port}: the device refused {request}: {error}")]
+    Device {
+        /// The port.
+        port: String,
+        /// The request's name.
+        request: &'static str,
+        /// The device's error.
+        error: DeviceError,
+    },
+    /// No response within the timeout.
+    #[error("{port}: no response to {request} within {timeout_ms} ms")]
+    Timeout {
+        /// The port.
+        port: String,
+        /// The request's name.
+        request: &'static str,
+        /// The timeout.
+        timeout_ms: u128,
+    },
+    /// The device answered with a response of the wrong kind.
+    #[error("{port}: unexpected response to {request}: {got}")]
+    Unexpected {
+        /// The port.
+        port: String,
+        /// The request's name.
+        request: &'static str,
+        /// What came back.
+        got: String,
+    },
+}
+
+/// Counters of the host side of the link.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LinkStats {
+    /// Frames decoded.
+    pub frames: u64,
+    /// Frames rejected (CRC, COBS, oversized, undecodable).
+    pub bad_frames: u64,
+    /// Responses whose sequence number matched no outstanding request.
+    pub stray_responses: u64,
+    /// Bytes received.
+    pub bytes: u64,
+}
+
+/// Name of a request for messages.
+pub fn request_name(body: &RequestBody) -> &'static str {
+    match body {
+        RequestBody::Hello { .. } => "Hello",
+        RequestBody::ReadClock => "ReadClock",
+        RequestBody::LoadPlan(_) => "LoadPlan",
+        RequestBody::Run { .. } => "Run",
+        RequestBody::Abort => "Abort",
+        RequestBody::AckRecords { .. } => "AckRecords",
+        RequestBody::FetchRecords { .. } => "FetchRecords",
+        RequestBody::Ping => "Ping",
+        RequestBody::SetWatchdog { .. } => "SetWatchdog",
+        RequestBody::GetStatus => "GetStatus",
+    }
+}
+
+/// The device's identity as capture.json records it.
+pub fn identity(info: &DeviceInfo) -> DeviceIdentity {
+    DeviceIdentity {
+        protocol_version: info.protocol_version,
+        firmware_version: info.firmware_version.as_str().to_string(),
+        serial: info.serial.as_str().to_string(),
+        kind: match info.kind {
+            DeviceKind::Board => "board",
+            DeviceKind::Simulator => "simulator",
+            DeviceKind::Emulator => "emulator",
+        }
+        .to_string(),
+    }
+}
+
+/// A connected, handshaken conversation with a controller.
+pub struct Client<T: Transport> {
+    transport: T,
+    port: String,
+    decoder: Box<FrameDecoder<MAX_FRAME_LEN>>,
+    pending: Vec<u8>,
+    events: VecDeque<Event>,
+    next_seq: u32,
+    info: Option<DeviceInfo>,
+    stats: LinkStats,
+    last_frame_error: Option<FrameError>,
+    /// How long a request waits for its response.
+    pub request_timeout: Duration,
+}
+
+impl<T: Transport> std::fmt::Debug for Client<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Client")
+            .field("port", &self.port)
+            .field("next_seq", &self.next_seq)
+            .field("stats", &self.stats)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<T: Transport> Client<T> {
+    /// Wraps a transport without handshaking (see [`Client::connect`]).
+    pub fn new(transport: T) -> Self {
+        let port = transport.name();
+        Self {
+            transport,
+            port,
+            decoder: Box::new(FrameDecoder::new()),
+            pending: Vec::new(),
+            events: VecDeque::new(),
+            next_seq: 1,
+            info: None,
+            stats: LinkStats::default(),
+            last_frame_error: None,
+            request_timeout: DEFAULT_REQUEST_TIMEOUT,
+        }
+    }
+
+    /// Opens a conversation: resynchronises the line and handshakes.
+    pub fn connect(transport: T, request_timeout: Duration) -> Result<Self, ClientError> {
+        let mut client = Self::new(transport);
+        client.request_timeout = request_timeout;
+        client.handshake()?;
+        Ok(client)
+    }
+
+    /// The port name.
+    pub fn port(&self) -> &str {
+        &self.port
+    }
+
+    /// The handshake answer, once connected.
+    pub fn info(&self) -> Option<&DeviceInfo> {
+        self.info.as_ref()
+    }
+
+    /// Link counters.
+    pub fn stats(&self) -> LinkStats {
+        self.stats
+    }
+
+    /// Gives the transport back.
+    pub fn into_transport(self) -> T {
+        self.transport
+    }
+
+    /// (Re-)runs the handshake on this link.
+    pub fn handshake(&mut self) -> Result<DeviceInfo, ClientError> {
+        let bytes_before = self.stats.bytes;
+        for _ in 0..HANDSHAKE_ATTEMPTS {
+            self.transport.write_all(&[0])?;
+            let body = RequestBody::Hello {
+                protocol_version: PROTOCOL_VERSION,
+            };
+            match self.request(body) {
+                Ok(ResponseBody::Hello(info)) => {
+                    if info.protocol_version != PROTOCOL_VERSION {
+                        return Err(self.mismatch(info.protocol_version));
+                    }
+                    self.info = Some(info.clone());
+                    return Ok(info);
+                }
+                Ok(other) => {
+                    return Err(ClientError::Unexpected {
+                        port: self.port.clone(),
+                        request: "Hello",
+                        got: format!("{other:?}"),
+                    })
+                }
+                Err(ClientError::Device {
+                    error: DeviceError::VersionMismatch { device, .. },
+                    ..
+                }) => return Err(self.mismatch(device)),
+                Err(ClientError::Timeout { .. }) => continue,
+                Err(e) => return Err(e),
+            }
+        }
+        let received = self.stats.bytes - bytes_before;
+        if matches!(self.last_frame_error, Some(FrameError::Decode)) && self.stats.frames == 0 {
+            // Frames with a good CRC that do not decode: a skinbrdf device of another version.
+            return Err(self.mismatch(0));
+        }
+        if received > 0 {
+            return Err(ClientError::NotOurDevice {
+                port: self.port.clone(),
+                bytes: usize::try_from(received).unwrap_or(usize::MAX),
+                last_error: self
+                    .last_frame_error
+                    .map_or_else(|| "no frame delimiter".to_string(), |e| e.to_string()),
+            });
+        }
+        Err(ClientError::Silent {
+            port: self.port.clone(),
+            attempts: HANDSHAKE_ATTEMPTS,
+        })
+    }
+
+    fn mismatch(&self, device: u32) -> ClientError {
+        ClientError::VersionMismatch {
+            port: self.port.clone(),
+            device,
+            host: PROTOCOL_VERSION,
+            older: if device != 0 && device < PROTOCOL_VERSION {
+                "the firmware"
+            } else {
+                "skinbrdf on the host"
+            },
+        }
+    }
+
+    /// Sends a request and waits for its response (events arriving meanwhile are queued).
+    pub fn request(&mut self, body: RequestBody) -> Result<ResponseBody, ClientError> {
+        let name = request_name(&body);
+        let seq = self.next_seq;
+        self.next_seq = self.next_seq.wrapping_add(1);
+        let frame = encode_to_vec(&Request { seq, body }).map_err(|e| ClientError::Unexpected {
+            port: self.port.clone(),
+            request: name,
+            got: format!("cannot encode the request: {e}"),
+        })?;
+        self.transport.write_all(&frame)?;
+        let deadline = Instant::now() + self.request_timeout;
+        loop {
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(ClientError::Timeout {
+                    port: self.port.clone(),
+                    request: name,
+                    timeout_ms: self.request_timeout.as_millis(),
+                });
+            }
+            match self.read_message(deadline - now)? {
+                Some(DeviceMessage::Response(r)) if r.seq == seq => {
+                    return r.result.map_err(|error| ClientError::Device {
+                        port: self.port.clone(),
+                        request: name,
+                        error,
+                    });
+                }
+                Some(DeviceMessage::Response(r)) => {
+                    self.stats.stray_responses += 1;
+                    tracing::debug!(seq = r.seq, "stray response dropped");
+                }
+                Some(DeviceMessage::Event(e)) => self.events.push_back(e),
+                None => {}
+            }
+        }
+    }
+
+    /// Reads the device clock once, timing the round trip on the host clock.
+    pub fn read_clock(&mut self) -> Result<ClockRead, ClientError> {
+        let host_send_us = host_now_us();
+        match self.request(RequestBody::ReadClock)? {
+            ResponseBody::Clock { device_us } => Ok(ClockRead {
+                host_send_us,
+                device_us,
+                host_recv_us: host_now_us(),
+            }),
+            other => Err(ClientError::Unexpected {
+                port: self.port.clone(),
+                request: "ReadClock",
+                got: format!("{other:?}"),
+            }),
+        }
+    }
+
+    /// The next event: a queued one, or one read within `timeout`.
+    pub fn next_event(&mut self, timeout: Duration) -> Result<Option<Event>, ClientError> {
+        if let Some(e) = self.events.pop_front() {
+            return Ok(Some(e));
+        }
+        let deadline = Instant::now() + timeout;
+        loop {
+            let now = Instant::now();
+            let left = deadline.saturating_duration_since(now);
+            match self.read_message(left)? {
+                Some(DeviceMessage::Event(e)) => return Ok(Some(e)),
+                Some(DeviceMessage::Response(_)) => self.stats.stray_responses += 1,
+                None if Instant::now() >= deadline => return Ok(None),
+                None => {}
+            }
+        }
+    }
+
+    /// Writes raw bytes (tests: garbage, oversized frames).
+    pub fn write_raw(&mut self, bytes: &[u8]) -> Result<(), ClientError> {
+        Ok(self.transport.write_all(bytes)?)
+    }
+
+    /// Reads one decoded message, waiting at most `timeout` for bytes. `None`: nothing complete.
+    fn read_message(&mut self, timeout: Duration) -> Result<Option<DeviceMessage>, ClientError> {
+        if let Some(m) = self.decode_pending() {
+            return Ok(Some(m));
+        }
+        let mut buf = [0u8; 512];
+        let n = self.transport.read(&mut buf, timeout)?;
+        self.stats.bytes += n as u64;
+        self.pending.extend_from_slice(&buf[..n]);
+        Ok(self.decode_pending())
+    }
+
+    fn decode_pending(&mut self) -> Option<DeviceMessage> {
+        while !self.pending.is_empty() {
+            match self.decoder.feed::<DeviceMessage>(&self.pending) {
+                Some((result, rest)) => {
+                    let consumed = self.pending.len() - rest.len();
+                    self.pending.drain(..consumed);
+                    match result {
+                        Ok(m) => {
+                            self.stats.frames += 1;
+                            return Some(m);
+                        }
+                        Err(e) => {
+                            self.stats.bad_frames += 1;
+                            self.last_frame_error = Some(e);
+                            tracing::debug!(error = %e, "bad frame from the device");
+                        }
+                    }
+                }
+                None => self.pending.clear(),
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transport::memory_pair;
+    use skinbrdf_protocol::{Response, Status};
+
+    /// A scripted device: answers each decoded request with `answer(request)`.
+    fn fake_device(
+        mut port: crate::transport::MemoryTransport,
+        answer: impl Fn(&Request) -> Vec<Vec<u8>> + Send + 'static,
+    ) -> std::thread::JoinHandle<()> {
+        std::thread::spawn(move || {
+            let mut dec: FrameDecoder<MAX_FRAME_LEN> = FrameDecoder::new();
+            let mut buf = [0u8; 256];
+            loop {
+                let n = match port.read(&mut buf, Duration::from_millis(20)) {
+                    Ok(n) => n,
+                    Err(_) => return,
+                };
+                let mut input = &buf[..n];
+                while let Some((res, rest)) = dec.feed::<Request>(input) {
+                    input = rest;
+                    if let Ok(req) = res {
+                        for frame in answer(&req) {
+                            if port.write_all(&frame).is_err() {
+                                return;
+                            }
+                        }
+                    }
+                }
+            }
+        })
+    }
+
+    fn frame(m: &DeviceMessage) -> Vec<u8> {
+        encode_to_vec(m).expect("encode").to_vec()
+    }
+
+    fn info(version: u32) -> DeviceInfo {
+        DeviceInfo {
+            protocol_version: version,
+            firmware_version: skinbrdf_protocol::truncated("0.1.0"),
+            serial: skinbrdf_protocol::truncated("TEST-1"),
+            kind: DeviceKind::Simulator,
+            clock_us: 5,
+        }
+    }
+
+    fn respond(seq: u32, result: Result<ResponseBody, DeviceError>) -> Vec<u8> {
+        frame(&DeviceMessage::Response(Response { seq, result }))
+    }
+
+    #[test]
+    fn handshake_and_requests_with_interleaved_events() {
+        let (host, dev) = memory_pair();
+        let t = fake_device(dev, |req| match req.body {
+            RequestBody::Hello { .. } => {
+                vec![respond(
+                    req.seq,
+                    Ok(ResponseBody::Hello(info(PROTOCOL_VERSION))),
+                )]
+            }
+            RequestBody::ReadClock => vec![
+                frame(&DeviceMessage::Event(Event::FlashReady {
+                    at_us: 1,
+                    ready: true,
+                    recycle_us: None,
+                })),
+                b"\x01\x02garbage\x00".to_vec(),
+                respond(
+                    req.seq.wrapping_add(100),
+                    Ok(ResponseBody::Pong { device_us: 0 }),
+                ),
+                respond(req.seq, Ok(ResponseBody::Clock { device_us: 1 << 40 })),
+            ],
+            _ => vec![respond(req.seq, Err(DeviceError::NoPlan))],
+        });
+        let mut c = Client::connect(host, Duration::from_secs(2)).expect("connect");
+        assert_eq!(c.info().expect("info").serial.as_str(), "TEST-1");
+        let r = c.read_clock().expect("clock");
+        assert_eq!(r.device_us, 1 << 40);
+        assert!(r.host_recv_us >= r.host_send_us);
+        assert!(matches!(
+            c.next_event(Duration::ZERO).expect("event"),
+            Some(Event::FlashReady { ready: true, .. })
+        ));
+        assert_eq!(c.stats().bad_frames, 1);
+        assert_eq!(c.stats().stray_responses, 1);
+        let err = c
+            .request(RequestBody::Run {
+                first_group: 0,
+                last_group: 0,
+            })
+            .expect_err("refused");
+        assert!(err.to_string().contains("refused Run"), "{err}");
+        drop(c);
+        t.join().expect("device thread");
+    }
+
+    #[test]
+    fn version_mismatch_is_reported() {
+        let (host, dev) = memory_pair();
+        let t = fake_device(dev, |req| {
+            vec![respond(
+                req.seq,
+                Err(DeviceError::VersionMismatch {
+                    device: PROTOCOL_VERSION + 1,
+                    host: PROTOCOL_VERSION,
+                }),
+            )]
+        });
+        let err = Client::connect(host, Duration::from_secs(2)).expect_err("mismatch");
+        let msg = err.to_string();
+        assert!(matches!(err, ClientError::VersionMismatch { .. }), "{msg}");
+        assert!(
+            msg.contains("version mismatch") && msg.contains("skinbrdf on the host"),
+            "{msg}"
+        );
+        t.join().expect("device thread");
+    }
+
+    #[test]
+    fn silent_device_is_not_ours() {
+        let (host, _dev) = memory_pair();
+        let err = Client::connect(host, Duration::from_millis(20)).expect_err("silent");
+        assert!(matches!(err, ClientError::Silent { .. }), "{err}");
+        assert!(err.to_string().contains("not our device"));
+    }
+
+    #[test]
+    fn chatty_foreign_device_is_not_ours() {
+        let (host, dev) = memory_pair();
+        let t = fake_device(dev, |_| vec![b"AT+OK\r\nhello from a GPS\r\n\x00".to_vec()]);
+        let err = Client::connect(host, Duration::from_millis(50)).expect_err("foreign");
+        assert!(matches!(err, ClientError::NotOurDevice { .. }), "{err}");
+        t.join().expect("device thread");
+    }
+
+    #[test]
+    fn status_round_trips() {
+        // Keeps the Status type in the client's vocabulary (used by the session runner).
+        let s = Status {
+            now_us: 1,
+            state: skinbrdf_protocol::SessionState::Idle,
+            next_index: 0,
+            unacked: 0,
+            oldest_unacked: None,
+            flash_ready: true,
+            bad_frames: 0,
+            dropped_messages: 0,
+            watchdog_us: 0,
+        };
+        let bytes = respond(3, Ok(ResponseBody::Status(s.clone())));
+        let mut dec: FrameDecoder<MAX_FRAME_LEN> = FrameDecoder::new();
+        let (m, _) = dec.feed::<DeviceMessage>(&bytes).expect("frame");
+        assert_eq!(
+            m.expect("decode"),
+            DeviceMessage::Response(Response {
+                seq: 3,
+                result: Ok(ResponseBody::Status(s))
+            })
+        );
+    }
+}

@@ -1,0 +1,849 @@
+//! Running a capture plan: [`run_capture`].
+//!
+//! The host connects and handshakes, reads the device clock a few times, loads the plan and
+//! runs it group by group (asking the [`CaptureObserver`] before each group, so the CLI can
+//! prompt the operator). Every exposure record is appended to the [`CaptureRecord`], written
+//! atomically to `capture.json` and only *then* acknowledged to the device, so the device
+//! forgets a record only once it is on disk.
+//!
+//! **No record lost, none duplicated.** Records are accepted strictly in index order: a record
+//! below the next expected index is a duplicate and dropped, one above it is held back and the
+//! gap fetched (`FetchRecords`). When the link fails (disconnect, or a keep-alive that times
+//! out) the host reconnects through its [`Connector`], handshakes again, reads the device
+//! status and fetches every record from the next expected index on: the device holds all
+//! unacknowledged records in its ring buffer, so nothing taken during the outage is lost.
+//!
+//! **Keep-alive and clock.** While waiting for events the host sends `GetStatus` every
+//! [`CaptureOptions::keepalive`]: it feeds the device's host watchdog, detects a run that ended
+//! while its events were lost, and each answer is also a round-trip clock read. The clock model
+//! is refitted over all reads before every write, and every exposure's `host_time_us` is mapped
+//! through the latest model.
+//!
+//! **Abort.** When [`CaptureOptions::abort`] is set (Ctrl-C) or the observer declines a group,
+//! the host sends `Abort` (the device releases every output), collects the records taken so
+//! far, writes `capture.json` with `complete: false` and returns [`CaptureError::Aborted`].
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use skinbrdf_protocol as proto;
+use skinbrdf_protocol::{
+    DeviceError, Event, ExhaustedAction, ExposureRecord, Fault, FaultKind, LogLevel, RequestBody,
+    ResponseBody, SessionOutcome, SessionState, Status,
+};
+use skinbrdf_session::capture::{
+    CapturePlan, CaptureRecord, ClockModel, Exposure, FlashMode, ImageRole, ShotGroup, ShotOutcome,
+    CAPTURE_FORMAT_VERSION,
+};
+
+use crate::client::{identity, Client, ClientError, DEFAULT_REQUEST_TIMEOUT};
+use crate::clock::{fit_clock, host_now_us, select_reads, ClockError, ClockRead};
+use crate::plan::{validate_plan, PlanError};
+use crate::store::{CaptureWriter, StoreError};
+use crate::transport::{SerialTransport, Transport, TransportError};
+
+/// Opens (and re-opens, after a link failure) the byte link to the device.
+pub trait Connector {
+    /// Opens a fresh link.
+    fn connect(&mut self) -> Result<Box<dyn Transport>, TransportError>;
+}
+
+/// Opens a serial port by path (reconnects reopen the same path).
+#[derive(Debug, Clone)]
+pub struct SerialConnector {
+    /// The port path.
+    pub path: String,
+}
+
+impl Connector for SerialConnector {
+    fn connect(&mut self) -> Result<Box<dyn Transport>, TransportError> {
+        Ok(Box::new(SerialTransport::open(&self.path)?))
+    }
+}
+
+/// Any closure that opens a link is a connector.
+impl<F> Connector for F
+where
+    F: FnMut() -> Result<Box<dyn Transport>, TransportError>,
+{
+    fn connect(&mut self) -> Result<Box<dyn Transport>, TransportError> {
+        self()
+    }
+}
+
+/// A single already-open link: a reconnect after it fails is impossible.
+#[derive(Debug)]
+pub struct OnceConnector<T>(Option<T>);
+
+impl<T> OnceConnector<T> {
+    /// Wraps an open link.
+    pub fn new(transport: T) -> Self {
+        Self(Some(transport))
+    }
+}
+
+impl<T: Transport + 'static> Connector for OnceConnector<T> {
+    fn connect(&mut self) -> Result<Box<dyn Transport>, TransportError> {
+        match self.0.take() {
+            Some(t) => Ok(Box::new(t)),
+            None => Err(TransportError::Disconnected {
+                port: "the link (it cannot be reopened)".into(),
+            }),
+        }
+    }
+}
+
+/// Settings of a capture run.
+#[derive(Debug, Clone)]
+pub struct CaptureOptions {
+    /// Session directory for `capture.json` (`None`: keep the record in memory only).
+    pub out_dir: Option<PathBuf>,
+    /// How long a request waits for its response.
+    pub request_timeout: Duration,
+    /// Clock reads before the session starts (more reads: a better initial offset).
+    pub initial_clock_reads: u32,
+    /// Interval of `GetStatus` keep-alives (also clock reads) while waiting for events.
+    pub keepalive: Duration,
+    /// Host watchdog to set on the device, device microseconds (`None`: leave the device's).
+    pub watchdog_us: Option<u64>,
+    /// How long to keep trying to reconnect after the link fails.
+    pub reconnect_window: Duration,
+    /// Pause between reconnect attempts.
+    pub reconnect_pause: Duration,
+    /// Flash-trigger pulse width for `controller-on-xsync` groups.
+    pub flash_trigger_pulse_us: u64,
+    /// How long after X-sync the photodiode must see the flash.
+    pub flash_window_us: u64,
+    /// Set from another thread (Ctrl-C) to abort cleanly.
+    pub abort: Arc<AtomicBool>,
+}
+
+impl Default for CaptureOptions {
+    fn default() -> Self {
+        Self {
+            out_dir: None,
+            request_timeout: DEFAULT_REQUEST_TIMEOUT,
+            initial_clock_reads: 16,
+            keepalive: Duration::from_millis(500),
+            watchdog_us: None,
+            reconnect_window: Duration::from_secs(30),
+            reconnect_pause: Duration::from_millis(100),
+            flash_trigger_pulse_us: 1_000,
+            flash_window_us: proto::ShotGroup::DEFAULT_FLASH_WINDOW_US,
+            abort: Arc::new(AtomicBool::new(false)),
+        }
+    }
+}
+
+/// What the observer wants before a group.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GroupDecision {
+    /// Shoot the group.
+    Continue,
+    /// Abort the session.
+    Abort,
+}
+
+/// Progress callbacks (all optional).
+#[allow(unused_variables)]
+pub trait CaptureObserver {
+    /// Connected and handshaken; the initial clock model is fitted.
+    fn connected(&mut self, record: &CaptureRecord) {}
+    /// Before group `index` is shot; `shots` exposures were recorded so far.
+    fn before_group(&mut self, index: usize, group: &ShotGroup, shots: usize) -> GroupDecision {
+        GroupDecision::Continue
+    }
+    /// An exposure was recorded (and written).
+    fn exposure(&mut self, exposure: &Exposure, record: &ExposureRecord) {}
+    /// The device reported a fault.
+    fn fault(&mut self, fault: &Fault) {}
+    /// The flash-ready input changed.
+    fn flash_ready(&mut self, ready: bool, recycle_us: Option<u64>) {}
+    /// A device log line, or a host-side warning.
+    fn log(&mut self, level: LogLevel, text: &str) {}
+    /// Group `index` finished.
+    fn group_done(&mut self, index: usize) {}
+    /// The link failed; reconnecting.
+    fn link_lost(&mut self, error: &ClientError) {}
+    /// Reconnected; `fetched` records were recovered.
+    fn reconnected(&mut self, fetched: u32) {}
+}
+
+/// An observer that continues every group and reports nothing.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Unattended;
+
+impl CaptureObserver for Unattended {}
+
+/// Why a capture did not complete.
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureError {
+    /// The plan cannot be run on this controller.
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    /// Connecting or talking to the device failed.
+    #[error(transparent)]
+    Client(#[from] ClientError),
+    /// `capture.json` could not be written.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// No clock model.
+    #[error(transparent)]
+    Clock(#[from] ClockError),
+    /// The device ended the session on a fault.
+    #[error("device fault: {detail}; the session stopped after {shots_kept} exposures (all kept)")]
+    DeviceFault {
+        /// What the device reported.
+        detail: String,
+        /// Exposures recorded.
+        shots_kept: usize,
+    },
+    /// The operator aborted.
+    #[error("aborted by the operator after {shots_kept} exposures (all kept)")]
+    Aborted {
+        /// Exposures recorded.
+        shots_kept: usize,
+    },
+    /// The link failed and could not be re-established.
+    #[error("lost the device and could not reconnect within {window_s} s ({last_error}); {shots_kept} exposures kept")]
+    LinkLost {
+        /// The reconnect window.
+        window_s: u64,
+        /// The last error.
+        last_error: String,
+        /// Exposures recorded.
+        shots_kept: usize,
+    },
+}
+
+/// Converts a session plan to the protocol's plan (the plan must be valid).
+pub fn to_protocol_plan(
+    plan: &CapturePlan,
+    options: &CaptureOptions,
+) -> Result<proto::Plan, PlanError> {
+    let origin = std::path::Path::new("the plan");
+    validate_plan(plan, origin)?;
+    let mut groups = heapless::Vec::new();
+    for g in &plan.groups {
+        let label =
+            heapless::String::try_from(g.label.as_str()).map_err(|_| PlanError::Invalid {
+                path: origin.to_path_buf(),
+                location: format!("label {:?}", g.label),
+                problem: "too long for the controller".into(),
+            })?;
+        let group = proto::ShotGroup {
+            label,
+            role: match g.role {
+                ImageRole::Measurement => proto::ImageRole::Measurement,
+                ImageRole::LightPosition => proto::ImageRole::LightPosition,
+                ImageRole::ReferenceStandard => proto::ImageRole::ReferenceStandard,
+                ImageRole::StandardPosition => proto::ImageRole::StandardPosition,
+            },
+            count: g.count,
+            min_interval_us: g.min_interval_us,
+            pre_focus_us: g.pre_focus_us,
+            shutter_pulse_us: g.shutter_pulse_us,
+            xsync_timeout_us: g.xsync_timeout_us,
+            flash_ready_timeout_us: g.flash_ready_timeout_us,
+            flash_window_us: options.flash_window_us,
+            flash_mode: match g.flash_mode {
+                FlashMode::CameraHotShoe => proto::FlashMode::CameraHotShoe,
+                FlashMode::ControllerOnXsync => proto::FlashMode::ControllerOnXsync,
+            },
+        };
+        groups.push(group).map_err(|_| PlanError::Invalid {
+            path: origin.to_path_buf(),
+            location: "groups".into(),
+            problem: "too many groups for the controller".into(),
+        })?;
+    }
+    Ok(proto::Plan {
+        groups,
+        policy: proto::FaultPolicy {
+            max_retries: plan.max_retries,
+            on_exhausted: ExhaustedAction::AbortSession,
+        },
+        flash_trigger_pulse_us: options.flash_trigger_pulse_us,
+    })
+}
+
+fn role(r: proto::ImageRole) -> ImageRole {
+    match r {
+        proto::ImageRole::Measurement => ImageRole::Measurement,
+        proto::ImageRole::LightPosition => ImageRole::LightPosition,
+        proto::ImageRole::ReferenceStandard => ImageRole::ReferenceStandard,
+        proto::ImageRole::StandardPosition => ImageRole::StandardPosition,
+    }
+}
+
+fn outcome(o: proto::ShotOutcome) -> ShotOutcome {
+    match o {
+        proto::ShotOutcome::Ok => ShotOutcome::Ok,
+        proto::ShotOutcome::MissingXsync => ShotOutcome::MissingXsync,
+        proto::ShotOutcome::MissingFlash => ShotOutcome::MissingFlash,
+        proto::ShotOutcome::FlashNotReady => ShotOutcome::FlashNotReady,
+        proto::ShotOutcome::Aborted => ShotOutcome::Aborted,
+    }
+}
+
+/// The capture.json exposure for a device record, its time mapped through `clock`.
+pub fn exposure_from_record(r: &ExposureRecord, clock: &ClockModel) -> Exposure {
+    let shutter_command_us = r.shutter_command_us.unwrap_or(r.started_us);
+    Exposure {
+        index: r.index,
+        group: r.group,
+        role: role(r.role),
+        shutter_command_us,
+        xsync_us: r.xsync_us,
+        flash_fired_us: r.flash_fired_us,
+        recycle_us: r.recycle_us,
+        outcome: outcome(r.outcome),
+        host_time_us: clock.to_host_us(r.xsync_us.unwrap_or(shutter_command_us)),
+        image: None,
+    }
+}
+
+/// How a run (one `Run` request) ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RunEnd {
+    Groups {
+        next_index: u32,
+    },
+    Session {
+        outcome: SessionOutcome,
+        records: u32,
+    },
+}
+
+struct Runner<'a, C: Connector, O: CaptureObserver> {
+    connector: C,
+    observer: &'a mut O,
+    options: &'a CaptureOptions,
+    client: Option<Client<Box<dyn Transport>>>,
+    writer: Option<CaptureWriter>,
+    record: CaptureRecord,
+    raw: Vec<ExposureRecord>,
+    held: BTreeMap<u32, ExposureRecord>,
+    reads: Vec<ClockRead>,
+    run_end: Option<RunEnd>,
+    last_fault: Option<Fault>,
+    last_request: Instant,
+    aborting: bool,
+}
+
+/// Runs `plan` on the device behind `connector`, writing `capture.json` after every exposure
+/// when `options.out_dir` is set. Returns the complete record, or an error after keeping every
+/// exposure taken (see [`CaptureError`]).
+pub fn run_capture<C: Connector, O: CaptureObserver>(
+    connector: C,
+    plan: &CapturePlan,
+    options: &CaptureOptions,
+    observer: &mut O,
+) -> Result<CaptureRecord, CaptureError> {
+    let proto_plan = to_protocol_plan(plan, options)?;
+    let writer = match &options.out_dir {
+        Some(dir) => Some(CaptureWriter::create(dir)?),
+        None => None,
+    };
+    let mut connector = connector;
+    let transport = connector.connect().map_err(ClientError::from)?;
+    let client = Client::connect(transport, options.request_timeout)?;
+    let device = client
+        .info()
+        .map(identity)
+        .ok_or_else(|| ClientError::Unexpected {
+            port: client.port().to_string(),
+            request: "Hello",
+            got: "no device info".into(),
+        })?;
+    let mut runner = Runner {
+        connector,
+        observer,
+        options,
+        client: Some(client),
+        writer,
+        record: CaptureRecord {
+            format_version: CAPTURE_FORMAT_VERSION,
+            plan: plan.clone(),
+            device,
+            clock: ClockModel {
+                device_ref_us: 0,
+                host_ref_us: 0.0,
+                drift_ppm: 0.0,
+                residual_rms_us: 0.0,
+                samples: 0,
+            },
+            exposures: Vec::new(),
+            complete: false,
+        },
+        raw: Vec::new(),
+        held: BTreeMap::new(),
+        reads: Vec::new(),
+        run_end: None,
+        last_fault: None,
+        last_request: Instant::now(),
+        aborting: false,
+    };
+    runner.run(&proto_plan)
+}
+
+impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
+    fn client(&mut self) -> Result<&mut Client<Box<dyn Transport>>, ClientError> {
+        self.client
+            .as_mut()
+            .ok_or(ClientError::Transport(TransportError::Disconnected {
+                port: "the device".into(),
+            }))
+    }
+
+    fn request(&mut self, body: RequestBody) -> Result<ResponseBody, ClientError> {
+        self.last_request = Instant::now();
+        let response = self.client()?.request(body);
+        // Events that arrived while waiting are handled by the caller's event loop.
+        response
+    }
+
+    fn shots(&self) -> usize {
+        self.record.exposures.len()
+    }
+
+    fn next_index(&self) -> u32 {
+        u32::try_from(self.record.exposures.len()).unwrap_or(u32::MAX)
+    }
+
+    fn run(&mut self, plan: &proto::Plan) -> Result<CaptureRecord, CaptureError> {
+        self.prepare()?;
+        let total_shots = match self.request(RequestBody::LoadPlan(plan.clone()))? {
+            ResponseBody::PlanLoaded { total_shots } => total_shots,
+            other => return Err(self.unexpected("LoadPlan", &other).into()),
+        };
+        tracing::info!(total_shots, "plan loaded");
+        self.refit_and_write()?;
+        self.observer.connected(&self.record);
+        for (g, group) in self.record.plan.groups.clone().iter().enumerate() {
+            if self.options.abort.load(Ordering::SeqCst) {
+                return self.abort();
+            }
+            if self.observer.before_group(g, group, self.shots()) == GroupDecision::Abort
+                || self.options.abort.load(Ordering::SeqCst)
+            {
+                return self.abort();
+            }
+            let gi = u32::try_from(g).unwrap_or(u32::MAX);
+            self.run_end = None;
+            self.with_reconnect(|r| {
+                match r.request(RequestBody::Run {
+                    first_group: gi,
+                    last_group: gi,
+                }) {
+                    Ok(_) => Ok(()),
+                    // A retried `Run` whose first copy reached the device: it runs (or ran).
+                    Err(ClientError::Device {
+                        error: DeviceError::Busy,
+                        ..
+                    }) => Ok(()),
+                    Err(ClientError::Device {
+                        error: DeviceError::BadGroupRange { next_group, .. },
+                        ..
+                    }) if next_group > gi => Ok(()),
+                    Err(e) => Err(e.into()),
+                }
+            })?;
+            match self.wait_run()? {
+                RunEnd::Groups { .. } => self.observer.group_done(g),
+                RunEnd::Session {
+                    outcome: SessionOutcome::Completed,
+                    ..
+                } => {
+                    self.observer.group_done(g);
+                    break;
+                }
+                RunEnd::Session { outcome, .. } => return self.session_failed(outcome),
+            }
+        }
+        self.record.complete = true;
+        self.refit_and_write()?;
+        Ok(self.record.clone())
+    }
+
+    /// Clears what a previous host left on the device, sets the watchdog, reads the clock.
+    fn prepare(&mut self) -> Result<(), CaptureError> {
+        let status = self.status()?;
+        if status.state == SessionState::Running {
+            self.observer.log(
+                LogLevel::Warn,
+                "the device was running a session of an earlier connection: aborting it",
+            );
+            self.request(RequestBody::Abort)?;
+        }
+        let status = self.status()?;
+        if status.unacked > 0 {
+            self.observer.log(
+                LogLevel::Warn,
+                &format!(
+                    "the device held {} unacknowledged records of an earlier session: \
+                     releasing them (they are not part of this session)",
+                    status.unacked
+                ),
+            );
+            match self.request(RequestBody::AckRecords {
+                next_index: status.next_index,
+            }) {
+                Ok(_)
+                | Err(ClientError::Device {
+                    error: DeviceError::AlreadyAcked { .. },
+                    ..
+                }) => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+        if let Some(timeout_us) = self.options.watchdog_us {
+            self.request(RequestBody::SetWatchdog { timeout_us })?;
+        }
+        for _ in 0..self.options.initial_clock_reads.max(1) {
+            let read = self.client()?.read_clock()?;
+            self.reads.push(read);
+        }
+        self.drain_queued()?;
+        Ok(())
+    }
+
+    fn status(&mut self) -> Result<Status, ClientError> {
+        let host_send_us = host_now_us();
+        match self.request(RequestBody::GetStatus)? {
+            ResponseBody::Status(s) => {
+                self.reads.push(ClockRead {
+                    host_send_us,
+                    device_us: s.now_us,
+                    host_recv_us: host_now_us(),
+                });
+                Ok(s)
+            }
+            other => Err(self.unexpected("GetStatus", &other)),
+        }
+    }
+
+    fn unexpected(&self, request: &'static str, got: &ResponseBody) -> ClientError {
+        ClientError::Unexpected {
+            port: self
+                .client
+                .as_ref()
+                .map_or_else(String::new, |c| c.port().to_string()),
+            request,
+            got: format!("{got:?}"),
+        }
+    }
+
+    /// Handles queued events without waiting.
+    fn drain_queued(&mut self) -> Result<(), CaptureError> {
+        while let Some(e) = self.client()?.next_event(Duration::ZERO)? {
+            self.handle_event(e)?;
+        }
+        Ok(())
+    }
+
+    /// Waits until the current run ends, keeping the link alive and recovering from failures.
+    fn wait_run(&mut self) -> Result<RunEnd, CaptureError> {
+        loop {
+            if self.options.abort.load(Ordering::SeqCst) && !self.aborting {
+                return Err(self.abort().err().unwrap_or(CaptureError::Aborted {
+                    shots_kept: self.shots(),
+                }));
+            }
+            let step = self.with_reconnect(|r| r.step());
+            step?;
+            if let Some(&max) = self.held.keys().next_back() {
+                let want = max.saturating_add(1);
+                self.with_reconnect(|r| r.ensure_records(want))?;
+            }
+            if let Some(end) = self.run_end {
+                let n = match end {
+                    RunEnd::Groups { next_index } => next_index,
+                    RunEnd::Session { records, .. } => records,
+                };
+                self.with_reconnect(|r| r.ensure_records(n))?;
+                return Ok(end);
+            }
+        }
+    }
+
+    /// One wait for an event, or a keep-alive when due.
+    fn step(&mut self) -> Result<(), CaptureError> {
+        let since = self.last_request.elapsed();
+        if since >= self.options.keepalive {
+            return self.keepalive();
+        }
+        let wait = (self.options.keepalive - since).min(Duration::from_millis(100));
+        if let Some(e) = self.client()?.next_event(wait)? {
+            self.handle_event(e)?;
+        }
+        self.drain_queued()
+    }
+
+    /// `GetStatus`: feeds the watchdog, reads the clock, notices a run that ended unseen.
+    fn keepalive(&mut self) -> Result<(), CaptureError> {
+        let status = self.status()?;
+        self.drain_queued()?;
+        if self.run_end.is_none() && status.state != SessionState::Running {
+            self.run_end = Some(run_end_from_status(&status));
+        }
+        Ok(())
+    }
+
+    /// Makes sure every record below `n` is held, fetching what is missing.
+    fn ensure_records(&mut self, n: u32) -> Result<(), CaptureError> {
+        let mut tries = 0;
+        while self.next_index() < n {
+            tries += 1;
+            if tries > 3 {
+                return Err(ClientError::Timeout {
+                    port: self.client()?.port().to_string(),
+                    request: "FetchRecords (records did not arrive)",
+                    timeout_ms: self.options.request_timeout.as_millis(),
+                }
+                .into());
+            }
+            let from_index = self.next_index();
+            match self.request(RequestBody::FetchRecords { from_index })? {
+                ResponseBody::Fetching { count } => {
+                    tracing::debug!(from_index, count, "fetching records");
+                }
+                other => return Err(self.unexpected("FetchRecords", &other).into()),
+            }
+            let deadline = Instant::now() + self.options.request_timeout;
+            while self.next_index() < n && Instant::now() < deadline {
+                let left = deadline.saturating_duration_since(Instant::now());
+                if let Some(e) = self.client()?.next_event(left)? {
+                    self.handle_event(e)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn handle_event(&mut self, event: Event) -> Result<(), CaptureError> {
+        match event {
+            Event::Record(r) => self.accept(r)?,
+            Event::FlashReady {
+                ready, recycle_us, ..
+            } => self.observer.flash_ready(ready, recycle_us),
+            Event::Fault(f) => {
+                self.last_fault = Some(f);
+                self.observer.fault(&f);
+            }
+            Event::Log { level, text, .. } => self.observer.log(level, text.as_str()),
+            Event::GroupsDone { next_index, .. } => {
+                if self.run_end.is_none() {
+                    self.run_end = Some(RunEnd::Groups { next_index });
+                }
+            }
+            Event::SessionDone {
+                outcome, records, ..
+            } => self.run_end = Some(RunEnd::Session { outcome, records }),
+        }
+        Ok(())
+    }
+
+    /// Accepts a record in index order: duplicates dropped, early ones held back.
+    fn accept(&mut self, r: ExposureRecord) -> Result<(), CaptureError> {
+        let next = self.next_index();
+        if r.index < next {
+            tracing::debug!(index = r.index, "duplicate record dropped");
+            return Ok(());
+        }
+        if r.index > next {
+            self.held.insert(r.index, r);
+            return Ok(());
+        }
+        let mut progressed = vec![r];
+        let mut want = next + 1;
+        while let Some(h) = self.held.remove(&want) {
+            progressed.push(h);
+            want += 1;
+        }
+        for r in progressed {
+            let e = exposure_from_record(&r, &self.record.clock);
+            self.record.exposures.push(e);
+            self.raw.push(r);
+        }
+        self.refit_and_write()?;
+        for (e, r) in self
+            .record
+            .exposures
+            .iter()
+            .zip(&self.raw)
+            .skip(usize::try_from(next).unwrap_or(usize::MAX))
+        {
+            self.observer.exposure(e, r);
+        }
+        let next_index = self.next_index();
+        match self.request(RequestBody::AckRecords { next_index }) {
+            Ok(_) => Ok(()),
+            // Acks are an optimisation of the device's memory: a refused ack loses nothing.
+            Err(ClientError::Device { error, .. }) => {
+                tracing::debug!(%error, "ack refused");
+                Ok(())
+            }
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    /// Refits the clock over all reads, remaps every exposure and writes `capture.json`.
+    fn refit_and_write(&mut self) -> Result<(), CaptureError> {
+        let kept = select_reads(&self.reads);
+        let clock = fit_clock(if kept.is_empty() { &self.reads } else { &kept })?;
+        self.record.clock = clock;
+        for (e, r) in self.record.exposures.iter_mut().zip(&self.raw) {
+            *e = Exposure {
+                image: e.image.take(),
+                ..exposure_from_record(r, &clock)
+            };
+        }
+        if let Some(w) = &self.writer {
+            w.write(&self.record)?;
+        }
+        Ok(())
+    }
+
+    /// Runs `f`; on a link failure reconnects (within the window) and runs it again.
+    fn with_reconnect(
+        &mut self,
+        mut f: impl FnMut(&mut Self) -> Result<(), CaptureError>,
+    ) -> Result<(), CaptureError> {
+        loop {
+            match f(self) {
+                Err(CaptureError::Client(e)) if is_link_failure(&e) => self.reconnect(e)?,
+                other => return other,
+            }
+        }
+    }
+
+    fn reconnect(&mut self, error: ClientError) -> Result<(), CaptureError> {
+        self.observer.link_lost(&error);
+        // Close the old link first: a serial port is opened exclusively.
+        self.client = None;
+        let deadline = Instant::now() + self.options.reconnect_window;
+        let mut last_error = error.to_string();
+        loop {
+            if self.options.abort.load(Ordering::SeqCst) {
+                self.refit_and_write()?;
+                return Err(CaptureError::Aborted {
+                    shots_kept: self.shots(),
+                });
+            }
+            if Instant::now() >= deadline {
+                self.refit_and_write()?;
+                return Err(CaptureError::LinkLost {
+                    window_s: self.options.reconnect_window.as_secs(),
+                    last_error,
+                    shots_kept: self.shots(),
+                });
+            }
+            match self.connector.connect() {
+                Ok(t) => match Client::connect(t, self.options.request_timeout) {
+                    Ok(c) => {
+                        self.client = Some(c);
+                        break;
+                    }
+                    Err(e @ ClientError::VersionMismatch { .. }) => return Err(e.into()),
+                    Err(e) => last_error = e.to_string(),
+                },
+                Err(e) => last_error = e.to_string(),
+            }
+            std::thread::sleep(self.options.reconnect_pause);
+        }
+        let before = self.next_index();
+        let status = self.status()?;
+        self.drain_queued()?;
+        self.ensure_records(status.next_index)?;
+        if self.run_end.is_none() && status.state != SessionState::Running {
+            self.run_end = Some(run_end_from_status(&status));
+        }
+        self.observer.reconnected(self.next_index() - before);
+        Ok(())
+    }
+
+    fn abort(&mut self) -> Result<CaptureRecord, CaptureError> {
+        self.aborting = true;
+        if let Some(c) = self.client.as_mut() {
+            if let Err(e) = c.request(RequestBody::Abort) {
+                self.observer
+                    .log(LogLevel::Warn, &format!("abort request failed: {e}"));
+            }
+        }
+        if let Ok(status) = self.status() {
+            // Keep every record taken before the abort.
+            let _ = self.drain_queued();
+            if let Err(e) = self.ensure_records(status.next_index) {
+                self.observer.log(
+                    LogLevel::Warn,
+                    &format!("could not fetch every record: {e}"),
+                );
+            }
+        }
+        self.refit_and_write()?;
+        Err(CaptureError::Aborted {
+            shots_kept: self.shots(),
+        })
+    }
+
+    fn session_failed(&mut self, outcome: SessionOutcome) -> Result<CaptureRecord, CaptureError> {
+        self.refit_and_write()?;
+        let detail = match (outcome, self.last_fault) {
+            (_, Some(f)) => format!(
+                "{} at record {}",
+                fault_text(f.kind),
+                f.index.map_or_else(|| "-".into(), |i| i.to_string())
+            ),
+            (SessionOutcome::Aborted, None) => "the device aborted the session".into(),
+            _ => "the session faulted".into(),
+        };
+        Err(CaptureError::DeviceFault {
+            detail,
+            shots_kept: self.shots(),
+        })
+    }
+}
+
+/// What a status says about a run that is no longer running.
+fn run_end_from_status(status: &Status) -> RunEnd {
+    match status.state {
+        SessionState::Completed => RunEnd::Session {
+            outcome: SessionOutcome::Completed,
+            records: status.next_index,
+        },
+        SessionState::Aborted => RunEnd::Session {
+            outcome: SessionOutcome::Faulted,
+            records: status.next_index,
+        },
+        _ => RunEnd::Groups {
+            next_index: status.next_index,
+        },
+    }
+}
+
+/// True for errors a reconnect can cure.
+fn is_link_failure(e: &ClientError) -> bool {
+    matches!(
+        e,
+        ClientError::Transport(
+            TransportError::Disconnected { .. }
+                | TransportError::WriteTimeout { .. }
+                | TransportError::Io { .. }
+        ) | ClientError::Timeout { .. }
+    )
+}
+
+/// A fault kind in words.
+pub fn fault_text(kind: FaultKind) -> &'static str {
+    match kind {
+        FaultKind::MissingXsync => "camera did not fire (no X-sync)",
+        FaultKind::MissingFlash => "flash misfire (no light on the photodiode)",
+        FaultKind::FlashNotReady => "flash never became ready",
+        FaultKind::RetriesExhausted => "retries exhausted",
+        FaultKind::HostSilent => "host silent: the device's watchdog stopped the session",
+    }
+}
