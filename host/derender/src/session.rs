@@ -1,0 +1,270 @@
+//! The whole derender of a session as plain data: geometry, camera, light, C (known or from the
+//! standard), one pose pair per image, and images loaded one at a time (a 36-image session of
+//! 24 MP images never sits in memory at once).
+
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use serde::Serialize;
+use skinbrdf_brdf::BrdfModel;
+use skinbrdf_core::{BrdfSample, CameraModel, Pose};
+
+use crate::calibrate::{calibrate_c, Calibration, StandardImage};
+use crate::geometry::Geometry;
+use crate::image::{derender_image, FilterCounts, ImageView, Measurement};
+use crate::{DerenderConfig, DerenderError};
+
+/// Poses of one image.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ImagePoses {
+    /// World from camera.
+    pub world_from_camera: Pose,
+    /// World from head.
+    pub world_from_head: Pose,
+}
+
+/// Where the poses came from (reported).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum PoseSource {
+    /// `truth.json` (synthetic sessions).
+    Truth,
+    /// Known poses in `session.toml`.
+    Session,
+    /// The pose stage's `poses.json`.
+    Estimated,
+}
+
+/// A decoded linear image owned by the caller's loader.
+#[derive(Debug, Clone)]
+pub struct OwnedImage {
+    /// Width.
+    pub width: u32,
+    /// Height.
+    pub height: u32,
+    /// Linear RGB.
+    pub rgb: Vec<[f32; 3]>,
+    /// Saturation flags.
+    pub saturated: Vec<bool>,
+    /// Optional user mask (true = use).
+    pub mask: Option<Vec<bool>>,
+    /// Optional target mask (true = on a target).
+    pub targets: Option<Vec<bool>>,
+}
+
+impl OwnedImage {
+    /// A view for [`derender_image`].
+    pub fn view(&self) -> ImageView<'_> {
+        ImageView {
+            width: self.width,
+            height: self.height,
+            rgb: &self.rgb,
+            saturated: Some(&self.saturated),
+        }
+    }
+}
+
+/// How C is obtained.
+#[derive(Debug, Clone)]
+pub enum CalibrationInput {
+    /// Known per channel.
+    Known([f64; 3]),
+    /// From the standard: its BRDF, size, pose, and the session indices of its images.
+    Standard {
+        /// Its BRDF.
+        brdf: BrdfModel,
+        /// Reflecting area, metres.
+        size_m: [f64; 2],
+        /// World from standard.
+        world_from_standard: Pose,
+        /// `(session image index, world_from_camera)` per standard image.
+        images: Vec<(usize, Pose)>,
+    },
+}
+
+/// Everything derendering needs besides the geometry and the pixels.
+#[derive(Debug, Clone)]
+pub struct DerenderInputs {
+    /// The calibrated camera.
+    pub camera: CameraModel,
+    /// Light (flash emitting point), world frame, metres.
+    pub light_position_m: DVec3,
+    /// C.
+    pub calibration: CalibrationInput,
+    /// `(session image index, poses)` per measurement image.
+    pub measurements: Vec<(usize, ImagePoses)>,
+    /// Where the poses came from.
+    pub pose_source: PoseSource,
+}
+
+/// Wall time per stage.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct StageTimes {
+    /// Loading and repairing the scan, seconds.
+    pub mesh_load_s: f64,
+    /// Building the BVH, seconds.
+    pub bvh_s: f64,
+    /// Shading normals, seconds.
+    pub normals_s: f64,
+    /// Convexity test, seconds.
+    pub convexity_s: f64,
+    /// Decoding and linearizing images, seconds.
+    pub image_load_s: f64,
+    /// Estimating C, seconds.
+    pub calibration_s: f64,
+    /// Rays and samples, seconds.
+    pub derender_s: f64,
+    /// Everything, seconds.
+    pub total_s: f64,
+}
+
+/// Per-image summary.
+#[derive(Debug, Clone, Serialize)]
+pub struct ImageReport {
+    /// Session image index.
+    pub image_index: usize,
+    /// Filter counts.
+    pub counts: FilterCounts,
+    /// Pixel box that got rays.
+    pub bbox_px: Option<[u32; 4]>,
+}
+
+/// The result of derendering a session.
+#[derive(Debug, Clone, Serialize)]
+pub struct DerenderReport {
+    /// The samples.
+    #[serde(skip)]
+    pub samples: Vec<BrdfSample>,
+    /// Counts over all images.
+    pub counts: FilterCounts,
+    /// Per image.
+    pub images: Vec<ImageReport>,
+    /// C used.
+    pub c: [f64; 3],
+    /// C estimated from the standard (with its spread), when it was.
+    pub calibration: Option<Calibration>,
+    /// Whether shadow rays were cast, and why.
+    pub shadow_rays: bool,
+    /// Shadow rays cast.
+    pub shadow_rays_cast: u64,
+    /// The convexity verdict.
+    pub region_can_self_shadow: bool,
+    /// Normal fit radius used, metres (0 for vertex normals).
+    pub normal_radius_m: f64,
+    /// Poses used.
+    pub pose_source: PoseSource,
+    /// The configuration.
+    pub config: DerenderConfig,
+    /// Timings.
+    pub times: StageTimes,
+    /// Primary rays cast.
+    pub primary_rays: u64,
+    /// Error against truth, when known.
+    pub truth_error: Option<crate::TruthError>,
+}
+
+/// Derenders from plain data. `load(i)` decodes session image `i`.
+pub fn derender_with_loader(
+    geom: &Geometry,
+    inputs: &DerenderInputs,
+    cfg: &DerenderConfig,
+    mut load: impl FnMut(usize) -> Result<OwnedImage, DerenderError>,
+) -> Result<DerenderReport, DerenderError> {
+    cfg.validate()?;
+    let start = Instant::now();
+    let mut times = StageTimes {
+        bvh_s: geom.bvh_time.as_secs_f64(),
+        normals_s: geom.normals_time.as_secs_f64(),
+        convexity_s: geom.convexity_time.as_secs_f64(),
+        ..Default::default()
+    };
+    let mut load_time = Duration::ZERO;
+    let (c, calibration) = match &inputs.calibration {
+        CalibrationInput::Known(c) => (*c, None),
+        CalibrationInput::Standard {
+            brdf,
+            size_m,
+            world_from_standard,
+            images,
+        } => {
+            let mut owned = Vec::new();
+            for (i, wfc) in images {
+                let t = Instant::now();
+                owned.push((load(*i)?, *wfc));
+                load_time += t.elapsed();
+            }
+            let t = Instant::now();
+            let views: Vec<StandardImage<'_>> = owned
+                .iter()
+                .map(|(img, wfc)| StandardImage {
+                    image: img.view(),
+                    world_from_camera: *wfc,
+                    world_from_standard: *world_from_standard,
+                    mask: img.mask.as_deref(),
+                })
+                .collect();
+            let cal = calibrate_c(
+                &inputs.camera,
+                inputs.light_position_m,
+                brdf,
+                *size_m,
+                &views,
+                cfg.c_estimator,
+                cfg,
+            )?;
+            times.calibration_s = t.elapsed().as_secs_f64();
+            (cal.c, Some(cal))
+        }
+    };
+    let mut samples = Vec::new();
+    let mut counts = FilterCounts::default();
+    let mut images = Vec::new();
+    let mut shadow_rays_cast = 0;
+    let mut derender_time = Duration::ZERO;
+    for (i, poses) in &inputs.measurements {
+        let t = Instant::now();
+        let img = load(*i)?;
+        load_time += t.elapsed();
+        let t = Instant::now();
+        let index = u16::try_from(*i)
+            .map_err(|_| DerenderError::Input(format!("image index {i} exceeds 65535")))?;
+        let m = Measurement {
+            image_index: index,
+            image: img.view(),
+            world_from_camera: poses.world_from_camera,
+            world_from_head: poses.world_from_head,
+            mask: img.mask.as_deref(),
+            targets: img.targets.as_deref(),
+        };
+        let r = derender_image(geom, &inputs.camera, inputs.light_position_m, c, &m, cfg);
+        derender_time += t.elapsed();
+        counts.add(&r.counts);
+        shadow_rays_cast += r.shadow_rays;
+        images.push(ImageReport {
+            image_index: *i,
+            counts: r.counts,
+            bbox_px: r.bbox_px,
+        });
+        samples.extend(r.samples);
+    }
+    times.image_load_s = load_time.as_secs_f64();
+    times.derender_s = derender_time.as_secs_f64();
+    times.total_s =
+        start.elapsed().as_secs_f64() + times.bvh_s + times.normals_s + times.convexity_s;
+    let primary_rays = counts.considered - counts.off_mask - counts.on_target - counts.no_ray;
+    Ok(DerenderReport {
+        samples,
+        counts,
+        images,
+        c,
+        calibration,
+        shadow_rays: cfg.shadows.needs_rays(geom.can_self_shadow),
+        shadow_rays_cast,
+        region_can_self_shadow: geom.can_self_shadow,
+        normal_radius_m: geom.normals.radius_m,
+        pose_source: inputs.pose_source,
+        config: *cfg,
+        times,
+        primary_rays,
+        truth_error: None,
+    })
+}

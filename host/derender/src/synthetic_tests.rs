@@ -1,0 +1,321 @@
+//! End-to-end tests on a scene rendered here analytically: an exact sphere (the "head") seen by
+//! a distorted camera from several poses, lit by a point light, with a Lafortune BRDF; and a
+//! Lambertian standard. Derendering uses a tessellated copy of the sphere, so the test covers
+//! the mesh approximation, the planar-fit normals, the ray/pose/distortion chain and the
+//! radiometry (equations 2 and 3).
+
+#![allow(clippy::manual_is_multiple_of, clippy::needless_range_loop)]
+
+use glam::{DQuat, DVec2, DVec3, Vec3};
+use skinbrdf_brdf::{BrdfModel, Lafortune, LafortuneLobe};
+use skinbrdf_core::{BrdfAngles, BrownConrady, CameraModel, Pose, TriMesh};
+use skinbrdf_mesh::NormalMethod;
+
+use crate::*;
+
+const RADIUS: f64 = 0.08;
+const C_TRUE: [f64; 3] = [2.0, 2.5, 3.0];
+
+fn brdf() -> BrdfModel {
+    BrdfModel::Lafortune(Lafortune {
+        diffuse_albedo: [0.55, 0.35, 0.25],
+        lobes: vec![LafortuneLobe {
+            cxy: [-0.9; 3],
+            cz: [0.9; 3],
+            exponent: [12.0; 3],
+        }],
+    })
+}
+
+fn camera() -> CameraModel {
+    let mut c = CameraModel::from_fov(320, 240, 30f64.to_radians());
+    c.distortion = BrownConrady {
+        k1: -0.08,
+        k2: 0.01,
+        ..BrownConrady::NONE
+    };
+    c
+}
+
+fn uv_sphere(r: f32, n_lat: u32, n_lon: u32) -> TriMesh {
+    let mut positions = vec![Vec3::new(0.0, 0.0, r)];
+    for i in 1..n_lat {
+        let th = std::f32::consts::PI * i as f32 / n_lat as f32;
+        for j in 0..n_lon {
+            let ph = 2.0 * std::f32::consts::PI * j as f32 / n_lon as f32;
+            positions.push(Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()) * r);
+        }
+    }
+    positions.push(Vec3::new(0.0, 0.0, -r));
+    let last = positions.len() as u32 - 1;
+    let ring = |i: u32, j: u32| 1 + (i - 1) * n_lon + (j % n_lon);
+    let mut indices = Vec::new();
+    for j in 0..n_lon {
+        indices.push([0, ring(1, j), ring(1, j + 1)]);
+        indices.push([last, ring(n_lat - 1, j + 1), ring(n_lat - 1, j)]);
+    }
+    for i in 1..n_lat - 1 {
+        for j in 0..n_lon {
+            let (a, b, c, d) = (
+                ring(i, j),
+                ring(i, j + 1),
+                ring(i + 1, j),
+                ring(i + 1, j + 1),
+            );
+            indices.push([a, c, d]);
+            indices.push([a, d, b]);
+        }
+    }
+    TriMesh {
+        positions,
+        indices,
+        normals: None,
+    }
+}
+
+/// Renders the exact sphere (head frame centre at the origin) analytically: one ray per pixel
+/// centre, `V = rho cos θ_i / (C D²)`.
+fn render_sphere(cam: &CameraModel, wfc: &Pose, wfh: &Pose, light_w: DVec3) -> OwnedImage {
+    let hfw = wfh.inverse();
+    let hfc = hfw * *wfc;
+    let light = hfw.transform_point(light_w);
+    let o = hfc.translation_m;
+    let model = brdf();
+    let n = (cam.width_px * cam.height_px) as usize;
+    let mut rgb = vec![[0.0f32; 3]; n];
+    for y in 0..cam.height_px {
+        for x in 0..cam.width_px {
+            let Some(dc) = cam.pixel_ray(DVec2::new(x as f64, y as f64)) else {
+                continue;
+            };
+            let d = hfc.transform_vector(dc);
+            let b = o.dot(d);
+            let disc = b * b - (o.length_squared() - RADIUS * RADIUS);
+            if disc <= 0.0 {
+                continue;
+            }
+            let t = -b - disc.sqrt();
+            let p = o + d * t;
+            let nrm = p.normalize();
+            let wi = (light - p).normalize();
+            let dist = (light - p).length();
+            let we = -d;
+            if nrm.dot(wi) <= 0.0 {
+                continue;
+            }
+            let a = BrdfAngles::from_world(nrm, wi, we);
+            let rho = model.eval_angles(a.theta_i_rad, a.theta_e_rad, a.phi_d_rad);
+            rgb[(y * cam.width_px + x) as usize] =
+                std::array::from_fn(|c| (rho[c] * nrm.dot(wi) / (C_TRUE[c] * dist * dist)) as f32);
+        }
+    }
+    OwnedImage {
+        width: cam.width_px,
+        height: cam.height_px,
+        rgb,
+        saturated: vec![false; n],
+        mask: None,
+        targets: None,
+    }
+}
+
+/// Renders a Lambertian standard (albedo 0.99) in the plane z = 0 of its frame.
+fn render_standard(
+    cam: &CameraModel,
+    wfc: &Pose,
+    wfs: &Pose,
+    light_w: DVec3,
+    size: f64,
+) -> OwnedImage {
+    let sfw = wfs.inverse();
+    let sfc = sfw * *wfc;
+    let light = sfw.transform_point(light_w);
+    let o = sfc.translation_m;
+    let n = (cam.width_px * cam.height_px) as usize;
+    let mut rgb = vec![[0.0f32; 3]; n];
+    for y in 0..cam.height_px {
+        for x in 0..cam.width_px {
+            let Some(dc) = cam.pixel_ray(DVec2::new(x as f64, y as f64)) else {
+                continue;
+            };
+            let d = sfc.transform_vector(dc);
+            if d.z >= 0.0 {
+                continue;
+            }
+            let t = -o.z / d.z;
+            let p = o + d * t;
+            if p.x.abs() > size / 2.0 || p.y.abs() > size / 2.0 {
+                continue;
+            }
+            let wi = (light - p).normalize();
+            let dist = (light - p).length();
+            rgb[(y * cam.width_px + x) as usize] = std::array::from_fn(|c| {
+                (0.99 / std::f64::consts::PI * wi.z / (C_TRUE[c] * dist * dist)) as f32
+            });
+        }
+    }
+    OwnedImage {
+        width: cam.width_px,
+        height: cam.height_px,
+        rgb,
+        saturated: vec![false; n],
+        mask: None,
+        targets: None,
+    }
+}
+
+struct Scene {
+    inputs: DerenderInputs,
+    images: Vec<OwnedImage>,
+}
+
+fn scene() -> Scene {
+    let cam = camera();
+    let light = DVec3::new(0.12, -0.08, 0.7);
+    // The head sits at the world origin, turned differently per image; the camera is fixed.
+    let wfc = Pose::look_at(DVec3::new(0.0, 0.0, 0.75), DVec3::ZERO, DVec3::Y).unwrap();
+    let mut images = Vec::new();
+    let mut measurements = Vec::new();
+    for k in 0..4 {
+        let yaw = -0.5 + 0.33 * k as f64;
+        let wfh = Pose::new(
+            DQuat::from_rotation_y(yaw) * DQuat::from_rotation_x(0.2),
+            DVec3::new(0.005 * k as f64, 0.0, 0.0),
+        );
+        images.push(render_sphere(&cam, &wfc, &wfh, light));
+        measurements.push((
+            k,
+            ImagePoses {
+                world_from_camera: wfc,
+                world_from_head: wfh,
+            },
+        ));
+    }
+    let wfs = Pose::new(DQuat::from_rotation_x(0.3), DVec3::new(0.0, 0.0, 0.05));
+    images.push(render_standard(&cam, &wfc, &wfs, light, 0.1));
+    Scene {
+        inputs: DerenderInputs {
+            camera: cam,
+            light_position_m: light,
+            calibration: CalibrationInput::Standard {
+                brdf: BrdfModel::Lambertian { albedo: [0.99; 3] },
+                size_m: [0.1, 0.1],
+                world_from_standard: wfs,
+                images: vec![(4, wfc)],
+            },
+            measurements,
+            pose_source: PoseSource::Truth,
+        },
+        images,
+    }
+}
+
+fn geometry(normals: NormalMethod) -> Geometry {
+    let roi = Roi {
+        centre_m: DVec3::new(0.0, 0.0, RADIUS),
+        radius_m: 0.06,
+    };
+    Geometry::new(uv_sphere(RADIUS as f32, 160, 320), normals, Some(roi)).unwrap()
+}
+
+#[test]
+fn noise_free_sphere_derenders_within_half_a_percent() {
+    let s = scene();
+    let geom = geometry(NormalMethod::PlanarFit { radius_m: 0.004 });
+    assert!(!geom.can_self_shadow, "a sphere is convex");
+    let cfg = DerenderConfig::DEFAULT;
+    let r = derender_with_loader(&geom, &s.inputs, &cfg, |i| Ok(s.images[i].clone())).unwrap();
+    let cal = r.calibration.as_ref().unwrap();
+    for c in 0..3 {
+        assert!(
+            (cal.c[c] - C_TRUE[c]).abs() / C_TRUE[c] < 1e-3,
+            "C {:?} vs {C_TRUE:?}",
+            cal.c
+        );
+        assert!(cal.rel_spread[c] < 1e-3);
+    }
+    assert!(!r.shadow_rays && r.shadow_rays_cast == 0);
+    assert!(r.counts.kept > 5000, "{:?}", r.counts);
+    assert!(r.counts.grazing > 0 && r.counts.off_region > 0);
+    let e = truth_error(&r.samples, &brdf()).unwrap();
+    assert!(e.median_rel_error < 0.005, "{e:?}");
+    // Counts add up.
+    let dropped: u64 = r.counts.reasons().iter().map(|(_, n)| n).sum();
+    assert_eq!(dropped + r.counts.kept, r.counts.considered);
+}
+
+#[test]
+fn known_c_forced_shadows_and_stride() {
+    let mut s = scene();
+    s.inputs.calibration = CalibrationInput::Known(C_TRUE);
+    let geom = geometry(NormalMethod::Vertex);
+    let cfg = DerenderConfig {
+        stride: 2,
+        shadows: ShadowMode::Always,
+        ..DerenderConfig::DEFAULT
+    };
+    let r = derender_with_loader(&geom, &s.inputs, &cfg, |i| Ok(s.images[i].clone())).unwrap();
+    assert!(r.shadow_rays_cast > 0);
+    // Lit hemisphere of a sphere: shadow rays find nothing within the grazing bound.
+    assert_eq!(r.counts.shadowed, 0);
+    let e = truth_error(&r.samples, &brdf()).unwrap();
+    assert!(e.median_rel_error < 0.005, "{e:?}");
+    for smp in &r.samples {
+        assert!(smp.pixel[0] % 2 == 0 && smp.pixel[1] % 2 == 0);
+    }
+}
+
+#[test]
+fn saturation_floor_and_masks_are_counted() {
+    let s = scene();
+    let geom = geometry(NormalMethod::Vertex);
+    let mut img = s.images[0].clone();
+    let n = img.rgb.len();
+    img.saturated = (0..n).map(|i| i % 7 == 0).collect();
+    img.mask = Some((0..n).map(|i| i % 5 != 0).collect());
+    img.targets = Some((0..n).map(|i| i % 11 == 0).collect());
+    let mut inputs = s.inputs.clone();
+    inputs.calibration = CalibrationInput::Known(C_TRUE);
+    inputs.measurements.truncate(1);
+    let cfg = DerenderConfig {
+        noise_floor: 0.05,
+        ..DerenderConfig::DEFAULT
+    };
+    let r = derender_with_loader(&geom, &inputs, &cfg, |_| Ok(img.clone())).unwrap();
+    let c = r.counts;
+    assert!(
+        c.off_mask > 0 && c.on_target > 0 && c.saturated > 0 && c.below_noise_floor > 0,
+        "{c:?}"
+    );
+    let dropped: u64 = c.reasons().iter().map(|(_, n)| n).sum();
+    assert_eq!(dropped + c.kept, c.considered);
+    for smp in &r.samples {
+        let i = smp.pixel[1] as usize * img.width as usize + smp.pixel[0] as usize;
+        assert!(i % 7 != 0 && i % 5 != 0 && i % 11 != 0);
+    }
+}
+
+#[test]
+fn bad_config_is_refused() {
+    let s = scene();
+    let geom = geometry(NormalMethod::Vertex);
+    for cfg in [
+        DerenderConfig {
+            grazing_limit_deg: 90.0,
+            ..DerenderConfig::DEFAULT
+        },
+        DerenderConfig {
+            stride: 0,
+            ..DerenderConfig::DEFAULT
+        },
+        DerenderConfig {
+            noise_floor: f64::NAN,
+            ..DerenderConfig::DEFAULT
+        },
+    ] {
+        assert!(matches!(
+            derender_with_loader(&geom, &s.inputs, &cfg, |i| Ok(s.images[i].clone())),
+            Err(DerenderError::Input(_))
+        ));
+    }
+}
