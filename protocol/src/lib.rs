@@ -24,6 +24,8 @@ pub use frame::{
     decode_frame_in_place, encode, encode_to_vec, DecoderStats, EncodeError, FrameDecoder,
     FrameError, CRC32, CRC_LEN,
 };
+/// The `heapless` version the message types use (`String<N>`, `Vec<T, N>`).
+pub use heapless;
 pub use limits::*;
 pub use messages::*;
 

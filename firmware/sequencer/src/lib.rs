@@ -55,6 +55,11 @@ pub const DEFAULT_WATCHDOG_US: u64 = 10_000_000;
 pub const DEFAULT_RING: usize = 64;
 /// Outgoing message queue depth; overflow drops messages (counted), never records.
 pub const TX_QUEUE_LEN: usize = 16;
+/// After a flash, the flash-ready level is not trusted for this long: a flash drops its ready
+/// signal when it fires, but that edge may reach us a little after the photodiode edge, and a
+/// shot started in between would trigger a recycling flash. Flashes drop ready well within
+/// 1 ms; 10 ms is a generous bound that costs nothing against 0.5-3 s recycle times.
+pub const FLASH_READY_SETTLE_US: u64 = 10_000;
 
 /// An abstract output line; the driver maps it to a pin (and its polarity).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -266,10 +271,14 @@ pub struct Sequencer<const RING: usize = DEFAULT_RING> {
     run: Option<RunState>,
     flash_ready: bool,
     last_flash_us: Option<u64>,
+    /// Time of the most recent photodiode edge (never cleared).
+    last_light_us: Option<u64>,
     last_recycle_us: Option<u64>,
     last_shutter_us: Option<u64>,
     bad_frames: u32,
     dropped_messages: u32,
+    /// The last response, for retries that reuse its `seq`.
+    last_response: Option<Response>,
 }
 
 impl<const RING: usize> Sequencer<RING> {
@@ -295,10 +304,12 @@ impl<const RING: usize> Sequencer<RING> {
             run: None,
             flash_ready: false,
             last_flash_us: None,
+            last_light_us: None,
             last_recycle_us: None,
             last_shutter_us: None,
             bad_frames: 0,
             dropped_messages: 0,
+            last_response: None,
         }
     }
 
@@ -344,11 +355,13 @@ impl<const RING: usize> Sequencer<RING> {
                 self.advance_to(now_us);
                 self.link_up = true;
                 self.handshaken = false;
+                self.last_response = None;
             }
             Input::LinkDown => {
                 self.advance_to(now_us);
                 self.link_up = false;
                 self.handshaken = false;
+                self.last_response = None;
                 self.tx.clear();
                 self.resend_from = None;
             }
@@ -384,8 +397,9 @@ impl<const RING: usize> Sequencer<RING> {
                         earliest_us,
                         ready_deadline_us,
                     } => {
-                        if earliest_us > self.now_us {
-                            consider(Some(earliest_us));
+                        let go_us = earliest_us.max(self.settle_until_us());
+                        if go_us > self.now_us {
+                            consider(Some(go_us));
                         }
                         consider(Some(ready_deadline_us));
                     }
@@ -587,9 +601,17 @@ impl<const RING: usize> Sequencer<RING> {
 
     fn flash_ready_and_interval_ok(&self, a: Attempt, t: u64) -> bool {
         match a.stage {
-            Stage::WaitReady { earliest_us, .. } => self.flash_ready && earliest_us <= t,
+            Stage::WaitReady { earliest_us, .. } => {
+                self.flash_ready && earliest_us <= t && self.settle_until_us() <= t
+            }
             _ => false,
         }
+    }
+
+    /// Until when the ready level is not trusted ([`FLASH_READY_SETTLE_US`] after a flash).
+    fn settle_until_us(&self) -> u64 {
+        self.last_light_us
+            .map_or(0, |f| f.saturating_add(FLASH_READY_SETTLE_US))
     }
 
     /// Starts the run's next attempt (or waits for ring space).
@@ -615,7 +637,9 @@ impl<const RING: usize> Sequencer<RING> {
             started_us: t,
             stage: Stage::WaitReady {
                 earliest_us,
-                ready_deadline_us: earliest_us.saturating_add(g.flash_ready_timeout_us),
+                ready_deadline_us: earliest_us
+                    .max(self.settle_until_us())
+                    .saturating_add(g.flash_ready_timeout_us),
             },
             shutter_command_us: None,
             xsync_us: None,
@@ -694,6 +718,7 @@ impl<const RING: usize> Sequencer<RING> {
 
     fn on_photodiode(&mut self, at: u64) {
         self.last_flash_us = Some(at);
+        self.last_light_us = Some(at);
         self.last_recycle_us = None;
         let Some(mut a) = self.attempt() else {
             self.log(at, LogLevel::Warn, "flash seen outside an exposure");
@@ -885,11 +910,25 @@ impl<const RING: usize> Sequencer<RING> {
 
     fn on_request(&mut self, req: Request) {
         self.last_request_us = self.now_us;
-        let result = self.answer(req.body);
-        self.push_message(DeviceMessage::Response(Response {
-            seq: req.seq,
-            result,
-        }));
+        let is_hello = matches!(req.body, RequestBody::Hello { .. });
+        let response = match &self.last_response {
+            // A retry (same seq as the last request): answer again, do not execute again.
+            Some(last) if last.seq == req.seq && !is_hello => last.clone(),
+            _ => {
+                let response = Response {
+                    seq: req.seq,
+                    result: self.answer(req.body),
+                };
+                // A handshake starts a new conversation: no retry may reach back past it.
+                self.last_response = if is_hello {
+                    None
+                } else {
+                    Some(response.clone())
+                };
+                response
+            }
+        };
+        self.push_message(DeviceMessage::Response(response));
         // Ring space may have been freed by an ack.
         if let Some(run) = self.run {
             if run.current.is_none() && !self.ring.is_full() {

@@ -2,6 +2,8 @@
 //! leave a camera or flash line held outside a running session, and abort / watchdog always
 //! end in the safe state.
 
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
+
 mod world;
 
 use proptest::prelude::*;

@@ -1,6 +1,8 @@
 //! Sequencer behaviour: handshake, shot timing, recycle wait, timeouts, faults and policy,
 //! abort, watchdog, safe state, ack / no loss, u64 clock.
 
+#![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
+
 mod world;
 
 use skinbrdf_protocol::*;
@@ -811,4 +813,97 @@ fn bad_frames_are_counted() {
         computed: 2,
     }));
     assert_eq!(w.seq.status().bad_frames, 2);
+}
+
+#[test]
+fn a_retry_with_the_same_seq_is_answered_not_executed() {
+    let mut w: World = World::connected(T0, Hardware::default());
+    let p = plan(
+        vec![group(
+            "m",
+            ImageRole::Measurement,
+            2,
+            FlashMode::CameraHotShoe,
+        )],
+        0,
+        ExhaustedAction::AbortSession,
+    );
+    w.request(RequestBody::LoadPlan(p)).expect("plan");
+    let run = Request {
+        seq: 77,
+        body: RequestBody::Run {
+            first_group: 0,
+            last_group: 0,
+        },
+    };
+    w.input(Input::Request(run.clone()));
+    w.advance(10_000);
+    // The response was lost; the host retries with the same seq.
+    let before = w.msgs.len();
+    w.input(Input::Request(run.clone()));
+    let again: Vec<_> = w.msgs[before..]
+        .iter()
+        .filter_map(|m| match m {
+            DeviceMessage::Response(r) => Some(r.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        again,
+        vec![Response {
+            seq: 77,
+            result: Ok(ResponseBody::Running { first_index: 0 })
+        }]
+    );
+    // A new seq executes: now it is busy.
+    assert_eq!(
+        w.request(RequestBody::Run {
+            first_group: 0,
+            last_group: 0
+        }),
+        Err(DeviceError::Busy)
+    );
+    // A handshake clears the cache.
+    w.request(RequestBody::Hello {
+        protocol_version: PROTOCOL_VERSION,
+    })
+    .expect("hello");
+    w.input(Input::Request(run));
+    assert!(matches!(
+        w.msgs.last(),
+        Some(DeviceMessage::Response(Response {
+            seq: 77,
+            result: Err(DeviceError::Busy)
+        }))
+    ));
+}
+
+#[test]
+fn ready_level_is_not_trusted_right_after_a_flash() {
+    // The ready line drops 2 ms after the light; with no interval and no pre-focus the next
+    // shot would otherwise start while the flash is already recycling.
+    let hw = Hardware {
+        ready_drop_delay_us: 2_000,
+        shutter_lag_us: 80_000,
+        ..Hardware::default()
+    };
+    let mut w: World = World::connected(T0, hw);
+    let mut g = group("m", ImageRole::Measurement, 4, FlashMode::CameraHotShoe);
+    g.min_interval_us = 0;
+    g.pre_focus_us = 0;
+    g.shutter_pulse_us = 10_000;
+    let p = plan(vec![g], 0, ExhaustedAction::AbortSession);
+    load_and_run(&mut w, p);
+    w.advance(30_000_000);
+    let recs = w.records();
+    assert_eq!(recs.len(), 4);
+    assert!(
+        recs.iter().all(|r| r.outcome == ShotOutcome::Ok),
+        "{recs:?}"
+    );
+    assert_eq!(w.triggers_while_recycling, 0);
+    for pair in recs.windows(2) {
+        let gap = pair[1].shutter_command_us.unwrap() - pair[0].flash_fired_us.unwrap();
+        assert!(gap >= hw.recycle_us, "waited for the recycle: {gap}");
+    }
 }

@@ -31,6 +31,8 @@ pub struct Hardware {
     pub becomes_ready: bool,
     /// The flash is wired as in this mode (who triggers it).
     pub mode: FlashMode,
+    /// Delay of the ready line's falling edge after the light.
+    pub ready_drop_delay_us: u64,
 }
 
 impl Default for Hardware {
@@ -43,6 +45,7 @@ impl Default for Hardware {
             flash_fires: true,
             becomes_ready: true,
             mode: FlashMode::CameraHotShoe,
+            ready_drop_delay_us: 0,
         }
     }
 }
@@ -58,6 +61,8 @@ pub struct World<const RING: usize = 64> {
     pub next_seq: u32,
     /// Extra delay between an edge and its `handle` (interrupt latency).
     pub handling_delay_us: u64,
+    /// Flash triggers that found the flash recycling.
+    pub triggers_while_recycling: u32,
 }
 
 impl<const RING: usize> World<RING> {
@@ -76,6 +81,7 @@ impl<const RING: usize> World<RING> {
             pin_log: Vec::new(),
             next_seq: 1,
             handling_delay_us: 0,
+            triggers_while_recycling: 0,
         };
         w.input(Input::FlashReady {
             at_us: start_us,
@@ -129,10 +135,13 @@ impl<const RING: usize> World<RING> {
     }
 
     fn flash_triggered(&mut self, t: u64) {
+        if !self.flash_ready {
+            self.triggers_while_recycling += 1;
+        }
         if self.flash_ready && self.hw.flash_fires {
             let fire = t + self.hw.flash_delay_us;
             self.schedule(fire, Stim::Photodiode);
-            self.schedule(fire, Stim::Ready(false));
+            self.schedule(fire + self.hw.ready_drop_delay_us, Stim::Ready(false));
             if self.hw.becomes_ready {
                 self.schedule(fire + self.hw.recycle_us, Stim::Ready(true));
             }
