@@ -26,8 +26,8 @@
 use portable_atomic::{AtomicU32, Ordering};
 
 use embassy_rp::interrupt::{self as irq, InterruptExt, Priority};
-use embassy_rp::pac::interrupt;
 use embassy_rp::pac;
+use embassy_rp::pac::interrupt;
 use embassy_rp::peripherals::PIO0;
 use embassy_rp::pio::{
     Common, Config, Direction, FifoJoin, LoadedProgram, Pio, PioPin, ShiftConfig, ShiftDirection,
@@ -180,8 +180,20 @@ impl Capture {
         );
         let program = common.load_program(&prg.program);
         configure(&mut common, &mut sm0, &program, xsync, crate::pins::XSYNC);
-        configure(&mut common, &mut sm1, &program, photodiode, crate::pins::PHOTODIODE);
-        configure(&mut common, &mut sm2, &program, flash_ready, crate::pins::FLASH_READY);
+        configure(
+            &mut common,
+            &mut sm1,
+            &program,
+            photodiode,
+            crate::pins::PHOTODIODE,
+        );
+        configure(
+            &mut common,
+            &mut sm2,
+            &program,
+            flash_ready,
+            crate::pins::FLASH_READY,
+        );
 
         let mhz = (embassy_rp::clocks::clk_sys_freq() / 1_000_000).max(1);
         US_PER_CYCLE_Q24.store((1 << 24) / mhz, Ordering::Relaxed);

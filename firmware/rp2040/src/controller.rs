@@ -49,8 +49,11 @@ impl Identity {
         if emulated {
             let _ = serial.push_str("EMULATOR");
         } else {
-            let mut flash =
-                embassy_rp::flash::Flash::<_, embassy_rp::flash::Blocking, { 2 * 1024 * 1024 }>::new_blocking(flash);
+            let mut flash = embassy_rp::flash::Flash::<
+                _,
+                embassy_rp::flash::Blocking,
+                { 2 * 1024 * 1024 },
+            >::new_blocking(flash);
             let mut uid = [0u8; 8];
             if flash.blocking_unique_id(&mut uid).is_ok() {
                 for b in uid {
@@ -70,7 +73,11 @@ fn scratch0(_watchdog: &Watchdog) -> u32 {
 }
 
 const fn hex(nibble: u8) -> char {
-    (if nibble < 10 { b'0' + nibble } else { b'a' + nibble - 10 }) as char
+    (if nibble < 10 {
+        b'0' + nibble
+    } else {
+        b'a' + nibble - 10
+    }) as char
 }
 
 /// Everything the controller owns.
@@ -105,7 +112,11 @@ pub async fn run(mut hw: Hardware) -> ! {
     defmt::info!(
         "controller: serial {}, {}, flash ready {}",
         hw.identity.serial.as_str(),
-        if hw.identity.emulated { "emulated" } else { "board" },
+        if hw.identity.emulated {
+            "emulated"
+        } else {
+            "board"
+        },
         ready
     );
 

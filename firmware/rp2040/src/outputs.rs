@@ -8,8 +8,8 @@
 //! high-impedance input; the external pull-downs on the optocoupler drivers keep them off).
 
 use embassy_rp::gpio::{Level, Output, Pin};
-use embassy_rp::Peri;
 use embassy_rp::pac;
+use embassy_rp::Peri;
 
 use crate::pins::{self, PinInfo};
 
@@ -69,9 +69,9 @@ impl Outputs {
         match line {
             Line::Shutter => self.shutter.set_level(level(pins::SHUTTER, asserted)),
             Line::Focus => self.focus.set_level(level(pins::FOCUS, asserted)),
-            Line::FlashTrigger => {
-                self.flash_trigger.set_level(level(pins::FLASH_TRIGGER, asserted))
-            }
+            Line::FlashTrigger => self
+                .flash_trigger
+                .set_level(level(pins::FLASH_TRIGGER, asserted)),
         }
     }
 

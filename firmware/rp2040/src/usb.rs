@@ -52,7 +52,10 @@ pub static LINK: Signal<CriticalSectionRawMutex, bool> = Signal::new();
 pub fn build(
     driver: UsbDriver,
     serial: &'static str,
-) -> (UsbDevice<'static, UsbDriver>, CdcAcmClass<'static, UsbDriver>) {
+) -> (
+    UsbDevice<'static, UsbDriver>,
+    CdcAcmClass<'static, UsbDriver>,
+) {
     let mut config = Config::new(VID, PID);
     config.manufacturer = Some(MANUFACTURER);
     config.product = Some(PRODUCT);
