@@ -17,8 +17,11 @@ pub mod transport;
 pub use clock::{fit_clock, ClockError, ClockRead};
 pub use plan::{load_plan, parse_plan, validate_plan, PlanError};
 pub use ports::{list_ports, PortListing};
+/// The wire protocol crate, re-exported for observers and tests.
+pub use skinbrdf_protocol as protocol;
 pub use store::{read_capture, CaptureWriter, StoreError};
 pub use transport::{memory_pair, MemoryTransport, SerialTransport, Transport, TransportError};
+
 pub mod client;
 pub mod session;
 
