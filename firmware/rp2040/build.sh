@@ -18,7 +18,10 @@ if ! command -v python3 >/dev/null 2>&1; then
   apt-get update -qq && apt-get install -y -qq python3
 fi
 
-cargo build --release --locked
+# Not --locked: Cargo.lock pins every version, but a new dependency of the path crates
+# (../sequencer, ../../protocol, owned by others) must not break this build; cargo then only
+# adds the missing entries.
+cargo build --release
 
 TARGET_DIR="${CARGO_TARGET_DIR:-$PWD/target}"
 ELF="$TARGET_DIR/thumbv6m-none-eabi/release/skinbrdf-rp2040"
