@@ -61,14 +61,14 @@ pub struct Edge {
     pub input: Input,
     /// Raw pin level after the change.
     pub level_high: bool,
-    /// System timer (microseconds since boot) read at the start of the interrupt handler.
+    /// Edge time: system timer microseconds since boot, latency-corrected (see module docs).
     pub at_us: u64,
 }
 
 /// Captured edges, oldest first. Big enough for a burst of bounces on all three inputs.
 pub static EDGES: Channel<CriticalSectionRawMutex, Edge, 32> = Channel::new();
 
-/// Edges lost because [`EDGES`] was full (reported in logs; should stay 0).
+/// Edges lost because [`EDGES`] was full (logged by the controller; should stay 0).
 pub static EDGES_DROPPED: AtomicU32 = AtomicU32::new(0);
 
 /// Mask of the state machines in use (SM0..SM2).
