@@ -1,1 +1,19 @@
-//! Photogrammetry: camera calibration, PnP with RANSAC, Levenberg-Marquardt pose refinement, flash triangulation.
+//! Photogrammetry: camera calibration, PnP with RANSAC, Levenberg-Marquardt pose refinement,
+//! flash triangulation, and the per-session pose estimate.
+//!
+//! * [`pnp::estimate_pose`]: a camera pose from known 3D points, with covariance and diagnostics.
+//! * [`calib::calibrate`]: intrinsics and distortion by bundle adjustment over several views.
+//! * [`session::estimate_session`]: every pose of a session (camera per image, head per
+//!   measurement image, flash, reference standard), the entry point of the pipeline.
+//! * [`lm`]: the dense robust Levenberg-Marquardt solver they share.
+
+pub mod calib;
+pub mod error;
+pub mod geometry;
+pub mod lm;
+pub mod pnp;
+pub mod session;
+
+pub use error::{Diagnostic, PoseError};
+pub use pnp::{estimate_pose, PnpConfig, PointObs, PoseEstimate};
+pub use session::{estimate_session, PoseConfig, SessionPoses};

@@ -1,0 +1,81 @@
+//! Typed failures and warnings of pose estimation.
+
+use serde::{Deserialize, Serialize};
+
+/// A pose could not be estimated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PoseError {
+    /// Not enough targets or points were seen.
+    #[error("too few targets: {found} targets ({points} points) found, {needed} needed")]
+    TooFewTargets {
+        /// Targets found.
+        found: usize,
+        /// Points found.
+        points: usize,
+        /// Targets needed.
+        needed: usize,
+    },
+    /// The configuration does not determine the unknowns.
+    #[error("degenerate configuration: {what} (measure {measure:.3e})")]
+    Degenerate {
+        /// What is degenerate.
+        what: &'static str,
+        /// The measure (e.g. ratio of singular values).
+        measure: f64,
+    },
+    /// The normal equations are too ill-conditioned to trust the solution.
+    #[error("ill-conditioned estimate: condition number {condition_number:.3e}")]
+    IllConditioned {
+        /// Condition number of the column-scaled normal matrix.
+        condition_number: f64,
+    },
+    /// No hypothesis explained the observations.
+    #[error("no consistent pose among {targets} targets")]
+    NoConsensus {
+        /// Targets tried.
+        targets: usize,
+    },
+    /// An image could not be read.
+    #[error("image {file}: {problem}")]
+    Image {
+        /// The file.
+        file: String,
+        /// What went wrong.
+        problem: String,
+    },
+    /// The session lacks something the estimate needs.
+    #[error("session: {0}")]
+    Session(String),
+}
+
+/// A warning attached to an estimate (the estimate is still returned).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum Diagnostic {
+    /// A target is seen at a grazing angle (angle between its normal and the view direction).
+    GrazingTarget {
+        /// Tag ID.
+        target: u32,
+        /// Angle, degrees.
+        angle_deg: f64,
+        /// Whether it was still used.
+        used: bool,
+    },
+    /// Targets whose corners disagree with the consensus were dropped.
+    OutlierTargets {
+        /// Tag IDs.
+        targets: Vec<u32>,
+    },
+    /// The normal matrix is poorly conditioned (near-planar / near-collinear / small field).
+    IllConditioned {
+        /// Condition number.
+        condition_number: f64,
+    },
+    /// Only one target was used: its pose may be ambiguous (planar flip).
+    SingleTarget,
+    /// A stage was skipped because the session gives the quantity.
+    Skipped {
+        /// What was skipped and why.
+        reason: String,
+    },
+}

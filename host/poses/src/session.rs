@@ -1,0 +1,588 @@
+//! Every pose of a session from its images: camera per image (reference targets), head per image
+//! (headdress targets), the flash (light-position images), the reflectance standard
+//! (standard-position images), and, when the camera is not calibrated, its intrinsics from the
+//! reference field.
+//!
+//! Known quantities in the session skip their stage and say so in [`SessionPoses::skipped`]:
+//! a known `world_from_camera`/`world_from_head` per image, `known.world_from_flash` or
+//! `known.light_position_m`, `known.world_from_standard`, `known.stationary_sample`.
+//!
+//! Composite poses (head, flash, standard in the world) combine two PnP estimates; their
+//! covariance is propagated to first order through the composition (numerical Jacobian), with
+//! the two estimates independent (they use disjoint targets). The flash position is the
+//! inverse-covariance-weighted mean over the light-position images.
+
+use crate::calib::{calibrate, guess_camera, CalibConfig, Calibration};
+use crate::error::{Diagnostic, PoseError};
+use crate::pnp::{estimate_pose, exp_so3, target_points, PnpConfig, PointObs, PoseEstimate};
+use glam::{DVec2, DVec3};
+use nalgebra::{DMatrix, Matrix3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use skinbrdf_core::{CameraModel, Pose};
+use skinbrdf_session::{CameraSpec, ImageRole, Session, Target, Truth};
+use skinbrdf_targets::{detect::detect_with_stats, Detection, DetectorConfig, GrayF32};
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// Settings of [`estimate_session`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseConfig {
+    /// Target detection.
+    pub detector: DetectorConfig,
+    /// Per-image PnP.
+    pub pnp: PnpConfig,
+    /// Calibration (used when the camera is `to-be-calibrated`, or when `recalibrate`).
+    pub calib: CalibConfig,
+    /// Recalibrate even a calibrated camera from the reference field.
+    pub recalibrate: bool,
+}
+
+impl PoseConfig {
+    /// Defaults.
+    pub const DEFAULT: Self = Self {
+        detector: DetectorConfig::DEFAULT,
+        pnp: PnpConfig::DEFAULT,
+        calib: CalibConfig::DEFAULT,
+        recalibrate: false,
+    };
+}
+
+impl Default for PoseConfig {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// A pose with its 6 x 6 covariance (orientation increment rad, then position m; world frame).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseWithCov {
+    /// The pose (`world_from_x`).
+    pub pose: Pose,
+    /// Row-major 6 x 6 covariance (empty when the pose was given, not estimated).
+    pub covariance: Vec<f64>,
+    /// RMS reprojection error of the targets used, pixels (0 when given).
+    pub rms_px: f64,
+    /// Targets used.
+    pub targets_used: usize,
+    /// Where it came from: `estimated` or `known`.
+    pub source: String,
+}
+
+impl PoseWithCov {
+    fn known(pose: Pose) -> Self {
+        Self {
+            pose,
+            covariance: Vec::new(),
+            rms_px: 0.0,
+            targets_used: 0,
+            source: "known".into(),
+        }
+    }
+
+    fn from_estimate(e: &PoseEstimate) -> Self {
+        Self {
+            pose: e.frame_from_camera,
+            covariance: e.covariance.clone(),
+            rms_px: e.rms_px,
+            targets_used: e.targets_used.len(),
+            source: "estimated".into(),
+        }
+    }
+
+    /// Position standard deviation (root of the covariance trace), metres.
+    pub fn position_sigma_m(&self) -> f64 {
+        if self.covariance.len() < 36 {
+            return 0.0;
+        }
+        (self.covariance[21] + self.covariance[28] + self.covariance[35])
+            .max(0.0)
+            .sqrt()
+    }
+}
+
+/// The poses of one image.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ImagePoses {
+    /// Image file (as in `session.toml`).
+    pub file: String,
+    /// Its role.
+    pub role: ImageRole,
+    /// Tags detected, per layout (`reference`, `headdress`, `flash`, `standard`, `unknown`).
+    pub targets_found: HashMap<String, usize>,
+    /// World from camera.
+    pub world_from_camera: Option<PoseWithCov>,
+    /// World from head.
+    pub world_from_head: Option<PoseWithCov>,
+    /// World from flash (light-position images).
+    pub world_from_flash: Option<PoseWithCov>,
+    /// World from standard (standard-position images).
+    pub world_from_standard: Option<PoseWithCov>,
+    /// Detection time, milliseconds.
+    pub detect_ms: f64,
+    /// Pose estimation time, milliseconds.
+    pub pose_ms: f64,
+    /// Warnings.
+    pub diagnostics: Vec<Diagnostic>,
+    /// Failures of individual estimates (the image's other poses may still be valid).
+    pub errors: Vec<String>,
+}
+
+/// All poses of a session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SessionPoses {
+    /// The camera used (given, or calibrated here).
+    pub camera: CameraModel,
+    /// The calibration, when one was run.
+    pub calibration: Option<Calibration>,
+    /// Per image, in session order.
+    pub images: Vec<ImagePoses>,
+    /// The flash's emitting point, world frame.
+    pub light_position_m: Option<DVec3>,
+    /// Its 3 x 3 covariance, m², row-major.
+    pub light_position_cov_m2: Vec<f64>,
+    /// World from flash (from the first light-position image that saw the flash, or known).
+    pub world_from_flash: Option<PoseWithCov>,
+    /// World from standard.
+    pub world_from_standard: Option<PoseWithCov>,
+    /// Stages skipped because the session gives the quantity.
+    pub skipped: Vec<String>,
+    /// Total wall time, milliseconds.
+    pub total_ms: f64,
+}
+
+/// Which layout a tag belongs to, with its geometry.
+#[derive(Debug, Clone, Copy)]
+enum Layout {
+    Reference,
+    Headdress,
+    Flash,
+    Standard,
+}
+
+impl Layout {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Reference => "reference",
+            Self::Headdress => "headdress",
+            Self::Flash => "flash",
+            Self::Standard => "standard",
+        }
+    }
+}
+
+fn layout_table(session: &Session) -> HashMap<u32, (Layout, Target)> {
+    let f = &session.file;
+    let mut m = HashMap::new();
+    for t in &f.targets.reference {
+        m.insert(t.id, (Layout::Reference, *t));
+    }
+    for t in &f.targets.headdress {
+        m.insert(t.id, (Layout::Headdress, *t));
+    }
+    for t in &f.flash.targets {
+        m.insert(t.id, (Layout::Flash, *t));
+    }
+    if let Some(s) = &f.standard {
+        for t in &s.targets {
+            m.insert(t.id, (Layout::Standard, *t));
+        }
+    }
+    m
+}
+
+/// Loads an image as grey (mean of the linear channels).
+fn load_grey(session: &Session, index: usize) -> Result<GrayF32, PoseError> {
+    let img = session.load_image(index).map_err(|e| PoseError::Image {
+        file: session.file.images[index].file.clone(),
+        problem: e.to_string(),
+    })?;
+    let data = img
+        .rgb
+        .iter()
+        .map(|p| (p[0] + p[1] + p[2]) / 3.0)
+        .collect::<Vec<f32>>();
+    GrayF32::new(img.width as usize, img.height as usize, data).map_err(|e| PoseError::Image {
+        file: session.file.images[index].file.clone(),
+        problem: e.to_string(),
+    })
+}
+
+fn points_for(
+    dets: &[Detection],
+    table: &HashMap<u32, (Layout, Target)>,
+    which: &str,
+) -> Vec<PointObs> {
+    let mut pts = Vec::new();
+    for d in dets {
+        if let Some((l, t)) = table.get(&d.id) {
+            if l.name() == which {
+                pts.extend(target_points(
+                    d.id,
+                    &t.corners_m,
+                    t.outward_normal(),
+                    &d.corners_px,
+                    &d.corner_sigma_px(),
+                ));
+            }
+        }
+    }
+    pts
+}
+
+/// Composes `world_from_camera * (frame_from_camera)⁻¹` with first-order covariance.
+fn compose(cam: &PoseWithCov, frame: &PoseEstimate) -> PoseWithCov {
+    let f = |x: &[f64]| -> Pose {
+        let wc = Pose::new(
+            exp_so3(DVec3::new(x[0], x[1], x[2])) * cam.pose.rotation,
+            cam.pose.translation_m + DVec3::new(x[3], x[4], x[5]),
+        );
+        let fc = Pose::new(
+            exp_so3(DVec3::new(x[6], x[7], x[8])) * frame.frame_from_camera.rotation,
+            frame.frame_from_camera.translation_m + DVec3::new(x[9], x[10], x[11]),
+        );
+        wc * fc.inverse()
+    };
+    let x0 = [0.0; 12];
+    let p0 = f(&x0);
+    let mut sigma_in = DMatrix::<f64>::zeros(12, 12);
+    if cam.covariance.len() == 36 {
+        for i in 0..6 {
+            for j in 0..6 {
+                sigma_in[(i, j)] = cam.covariance[i * 6 + j];
+            }
+        }
+    }
+    for i in 0..6 {
+        for j in 0..6 {
+            sigma_in[(6 + i, 6 + j)] = frame.covariance[i * 6 + j];
+        }
+    }
+    let mut jac = DMatrix::<f64>::zeros(6, 12);
+    for c in 0..12 {
+        let h = 1e-7;
+        let mut xp = x0;
+        xp[c] = h;
+        let mut xm = x0;
+        xm[c] = -h;
+        let (pp, pm) = (f(&xp), f(&xm));
+        let dr = (pp.rotation * pm.rotation.inverse()).normalize();
+        let drv = Pose::new(dr, DVec3::ZERO).rotation_vector() / (2.0 * h);
+        let dt = (pp.translation_m - pm.translation_m) / (2.0 * h);
+        for (r, v) in [drv.x, drv.y, drv.z, dt.x, dt.y, dt.z].iter().enumerate() {
+            jac[(r, c)] = *v;
+        }
+    }
+    let out = &jac * sigma_in * jac.transpose();
+    PoseWithCov {
+        pose: p0,
+        covariance: out.transpose().as_slice().to_vec(),
+        rms_px: frame.rms_px,
+        targets_used: frame.targets_used.len(),
+        source: "estimated".into(),
+    }
+}
+
+struct Detected {
+    dets: Vec<Detection>,
+    detect_ms: f64,
+    error: Option<String>,
+}
+
+/// Estimates every pose of the session from its images.
+pub fn estimate_session(session: &Session, cfg: &PoseConfig) -> Result<SessionPoses, PoseError> {
+    let t0 = Instant::now();
+    let file = &session.file;
+    let table = layout_table(session);
+    let mut skipped = Vec::new();
+    // 1. Detection in every image (parallel).
+    let detected: Vec<Detected> = (0..file.images.len())
+        .into_par_iter()
+        .map(|i| {
+            let t = Instant::now();
+            match load_grey(session, i) {
+                Ok(img) => {
+                    let (dets, _) = detect_with_stats(&img, &cfg.detector);
+                    Detected {
+                        dets,
+                        detect_ms: t.elapsed().as_secs_f64() * 1e3,
+                        error: None,
+                    }
+                }
+                Err(e) => Detected {
+                    dets: Vec::new(),
+                    detect_ms: t.elapsed().as_secs_f64() * 1e3,
+                    error: Some(e.to_string()),
+                },
+            }
+        })
+        .collect();
+    // 2. The camera: given, or calibrated from the reference field.
+    let (camera, calibration) = match (&file.camera, cfg.recalibrate) {
+        (CameraSpec::Calibrated(m), false) => {
+            skipped.push("camera calibration (camera is calibrated in session.toml)".into());
+            (*m, None)
+        }
+        (spec, _) => {
+            let (w, h) = spec.size_px();
+            let views: Vec<Vec<PointObs>> = detected
+                .iter()
+                .map(|d| points_for(&d.dets, &table, "reference"))
+                .filter(|v| v.len() >= 16)
+                .collect();
+            let init = match spec {
+                CameraSpec::Calibrated(m) => *m,
+                CameraSpec::ToBeCalibrated {
+                    focal_guess_px: Some(f),
+                    ..
+                } => CameraModel {
+                    fx_px: *f,
+                    fy_px: *f,
+                    ..CameraModel::from_fov(w, h, 1.0)
+                },
+                CameraSpec::ToBeCalibrated { .. } => guess_camera(w, h, &views),
+            };
+            let cal = calibrate(&init, &views, &cfg.calib)?;
+            (cal.camera, Some(cal))
+        }
+    };
+    // 3. Per-image poses (parallel).
+    let stationary = file.known.stationary_sample;
+    let flash_known =
+        file.known.world_from_flash.is_some() || file.known.light_position_m.is_some();
+    let standard_known = file.known.world_from_standard.is_some();
+    let images: Vec<ImagePoses> = file
+        .images
+        .par_iter()
+        .zip(detected.par_iter())
+        .map(|(entry, det)| {
+            let t = Instant::now();
+            let mut out = ImagePoses {
+                file: entry.file.clone(),
+                role: entry.role,
+                targets_found: HashMap::new(),
+                world_from_camera: None,
+                world_from_head: None,
+                world_from_flash: None,
+                world_from_standard: None,
+                detect_ms: det.detect_ms,
+                pose_ms: 0.0,
+                diagnostics: Vec::new(),
+                errors: det.error.iter().cloned().collect(),
+            };
+            for d in &det.dets {
+                let name = table.get(&d.id).map(|(l, _)| l.name()).unwrap_or("unknown");
+                *out.targets_found.entry(name.to_string()).or_insert(0) += 1;
+            }
+            // Camera.
+            if let Some(p) = entry.world_from_camera {
+                out.world_from_camera = Some(PoseWithCov::known(p));
+            } else {
+                let pts = points_for(&det.dets, &table, "reference");
+                match estimate_pose(&camera, &pts, None, &cfg.pnp) {
+                    Ok(e) => {
+                        out.diagnostics.extend(e.diagnostics.iter().cloned());
+                        out.world_from_camera = Some(PoseWithCov::from_estimate(&e));
+                    }
+                    Err(e) => out.errors.push(format!("camera pose: {e}")),
+                }
+            }
+            let Some(wc) = out.world_from_camera.clone() else {
+                out.pose_ms = t.elapsed().as_secs_f64() * 1e3;
+                return out;
+            };
+            let mut sub = |which: &str| -> Option<PoseWithCov> {
+                let pts = points_for(&det.dets, &table, which);
+                if pts.is_empty() {
+                    return None;
+                }
+                match estimate_pose(&camera, &pts, None, &cfg.pnp) {
+                    Ok(e) => {
+                        out.diagnostics.extend(e.diagnostics.iter().cloned());
+                        Some(compose(&wc, &e))
+                    }
+                    Err(e) => {
+                        out.errors.push(format!("{which} pose: {e}"));
+                        None
+                    }
+                }
+            };
+            // Head.
+            let head = if let Some(p) = entry.world_from_head {
+                Some(PoseWithCov::known(p))
+            } else if stationary {
+                None
+            } else {
+                sub("headdress")
+            };
+            let flash = if entry.role == ImageRole::LightPosition && !flash_known {
+                sub("flash")
+            } else {
+                None
+            };
+            let standard = if entry.role == ImageRole::StandardPosition && !standard_known {
+                sub("standard")
+            } else {
+                None
+            };
+            out.world_from_head = head;
+            out.world_from_flash = flash;
+            out.world_from_standard = standard;
+            out.pose_ms = t.elapsed().as_secs_f64() * 1e3;
+            out
+        })
+        .collect();
+    if stationary {
+        skipped.push("head tracking (known.stationary_sample)".into());
+    }
+    // 4. Flash: combine the light-position images.
+    let light_centre = file.flash.light_centre_m;
+    let (light_position_m, light_position_cov_m2, world_from_flash) =
+        if let Some(p) = file.known.world_from_flash {
+            skipped.push("flash location (known.world_from_flash)".into());
+            (
+                Some(p.transform_point(light_centre)),
+                Vec::new(),
+                Some(PoseWithCov::known(p)),
+            )
+        } else if let Some(l) = file.known.light_position_m {
+            skipped.push("flash location (known.light_position_m)".into());
+            (Some(l), Vec::new(), None)
+        } else {
+            let ests: Vec<&PoseWithCov> = images
+                .iter()
+                .filter_map(|i| i.world_from_flash.as_ref())
+                .collect();
+            let mut info = Matrix3::<f64>::zeros();
+            let mut acc = nalgebra::Vector3::<f64>::zeros();
+            for e in &ests {
+                let p = e.pose.transform_point(light_centre);
+                // Light point covariance: position block plus the lever arm through the rotation.
+                let c = |i: usize, j: usize| e.covariance[i * 6 + j];
+                let arm = e.pose.rotation * light_centre;
+                let skew = Matrix3::new(0.0, arm.z, -arm.y, -arm.z, 0.0, arm.x, arm.y, -arm.x, 0.0);
+                let crr = Matrix3::from_fn(c);
+                let ctt = Matrix3::from_fn(|i, j| c(3 + i, 3 + j));
+                let cov = ctt + skew * crr * skew.transpose();
+                if let Some(inv) = cov.try_inverse() {
+                    info += inv;
+                    acc += inv * nalgebra::Vector3::new(p.x, p.y, p.z);
+                }
+            }
+            match info.try_inverse() {
+                Some(cov) if !ests.is_empty() => {
+                    let m = cov * acc;
+                    (
+                        Some(DVec3::new(m[0], m[1], m[2])),
+                        cov.transpose().as_slice().to_vec(),
+                        ests.first().map(|e| (*e).clone()),
+                    )
+                }
+                _ => (None, Vec::new(), None),
+            }
+        };
+    let world_from_standard = if let Some(p) = file.known.world_from_standard {
+        skipped.push("standard location (known.world_from_standard)".into());
+        Some(PoseWithCov::known(p))
+    } else {
+        images
+            .iter()
+            .filter_map(|i| i.world_from_standard.clone())
+            .min_by(|a, b| a.position_sigma_m().total_cmp(&b.position_sigma_m()))
+    };
+    Ok(SessionPoses {
+        camera,
+        calibration,
+        images,
+        light_position_m,
+        light_position_cov_m2,
+        world_from_flash,
+        world_from_standard,
+        skipped,
+        total_ms: t0.elapsed().as_secs_f64() * 1e3,
+    })
+}
+
+/// Errors of the estimated poses against `truth.json`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TruthErrors {
+    /// Per image: camera position error, m (NaN when not estimated).
+    pub camera_position_error_m: Vec<f64>,
+    /// Per image: camera orientation error, degrees.
+    pub camera_orientation_error_deg: Vec<f64>,
+    /// Per image: head position error (head origin), m.
+    pub head_position_error_m: Vec<f64>,
+    /// Per image: head orientation error, degrees.
+    pub head_orientation_error_deg: Vec<f64>,
+    /// Flash position error, m.
+    pub light_position_error_m: Option<f64>,
+    /// Standard position error, m.
+    pub standard_position_error_m: Option<f64>,
+    /// Standard orientation error, degrees.
+    pub standard_orientation_error_deg: Option<f64>,
+    /// Focal length error of the calibrated camera, pixels.
+    pub focal_error_px: Option<f64>,
+}
+
+/// Median of the finite values (NaN when none).
+pub fn median(v: &[f64]) -> f64 {
+    let mut f: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    if f.is_empty() {
+        return f64::NAN;
+    }
+    f.sort_by(f64::total_cmp);
+    f[f.len() / 2]
+}
+
+/// Compares the estimate with the truth.
+pub fn compare_truth(est: &SessionPoses, truth: &Truth) -> TruthErrors {
+    let mut e = TruthErrors::default();
+    for img in &est.images {
+        let t = truth.image(&img.file);
+        let pair = |p: &Option<PoseWithCov>, tp: Option<Pose>| -> (f64, f64) {
+            match (p.as_ref().filter(|p| p.source == "estimated"), tp) {
+                (Some(p), Some(tp)) => (
+                    p.pose.distance_to_m(&tp),
+                    p.pose.angle_to_rad(&tp).to_degrees(),
+                ),
+                _ => (f64::NAN, f64::NAN),
+            }
+        };
+        let (cp, co) = pair(&img.world_from_camera, t.map(|t| t.world_from_camera));
+        let (hp, ho) = pair(&img.world_from_head, t.map(|t| t.world_from_head));
+        e.camera_position_error_m.push(cp);
+        e.camera_orientation_error_deg.push(co);
+        e.head_position_error_m.push(hp);
+        e.head_orientation_error_deg.push(ho);
+    }
+    e.light_position_error_m = est
+        .light_position_m
+        .map(|l| l.distance(truth.light_position_m));
+    if let Some(s) = est
+        .world_from_standard
+        .as_ref()
+        .filter(|s| s.source == "estimated")
+    {
+        e.standard_position_error_m = Some(s.pose.distance_to_m(&truth.world_from_standard));
+        e.standard_orientation_error_deg =
+            Some(s.pose.angle_to_rad(&truth.world_from_standard).to_degrees());
+    }
+    if est.calibration.is_some() {
+        e.focal_error_px = Some((est.camera.fx_px - truth.camera.fx_px).abs());
+    }
+    e
+}
+
+/// Reprojects a session target through a camera pose (for overlays and checks).
+pub fn reproject_target(
+    cam: &CameraModel,
+    world_from_camera: &Pose,
+    corners_world: &[DVec3; 4],
+) -> Option<[DVec2; 4]> {
+    let inv = world_from_camera.inverse();
+    let mut out = [DVec2::ZERO; 4];
+    for (o, c) in out.iter_mut().zip(corners_world) {
+        *o = cam.project(inv.transform_point(*c))?;
+    }
+    Some(out)
+}
