@@ -193,20 +193,30 @@ impl ChannelModel for LafortuneFit {
                 .ln()
                 .clamp(-18.0, 3.0)
         };
-        // First lobe: forward (mirror) lobe of three widths. Further lobes: a broad retro lobe and
-        // a broad forward lobe, each a tenth of the diffuse level.
+        // First lobe: a forward (mirror) lobe of four widths. A second lobe starts either as a
+        // broad retro-reflective lobe or as a broad lobe about the normal (t = 0) that takes over
+        // the diffuse level and lets it fall off towards grazing; a third is a broad forward lobe.
         let mut starts = Vec::new();
-        for &n0 in &[8.0, 80.0, 800.0, 4000.0] {
-            let mut p = vec![(0.8 * diffuse * std::f64::consts::PI).min(MAX_ALBEDO)];
-            for k in 0..self.lobes.len() {
-                let (peak, t, n) = match k {
-                    0 => (spec, -1.0, n0),
-                    1 => (0.2 * diffuse, 1.0, 3.0),
-                    _ => (0.2 * diffuse, -0.8, 2.0),
-                };
-                p.extend([ln_a(peak, n), t, n.ln()]);
+        let variants: &[bool] = if self.lobes.len() >= 2 {
+            &[false, true]
+        } else {
+            &[false]
+        };
+        for &normal_lobe in variants {
+            for &n0 in &[8.0, 80.0, 800.0, 4000.0] {
+                let d0 = if normal_lobe { 0.1 } else { 0.8 };
+                let mut p = vec![(d0 * diffuse * std::f64::consts::PI).min(MAX_ALBEDO)];
+                for k in 0..self.lobes.len() {
+                    let (peak, t, n) = match k {
+                        0 => (spec, -1.0, n0),
+                        1 if normal_lobe => (0.9 * diffuse, 0.0, 1.5),
+                        1 => (0.2 * diffuse, 1.0, 3.0),
+                        _ => (0.2 * diffuse, -0.8, 2.0),
+                    };
+                    p.extend([ln_a(peak, n), t, n.ln()]);
+                }
+                starts.push(p);
             }
-            starts.push(p);
         }
         starts
     }

@@ -13,6 +13,14 @@
 //! value exactly, whatever the illuminant and the band truncation (the Cornell data stop at
 //! 400 and 700 nm); it is a von Kries-style adaptation in the sRGB primaries. The default
 //! illuminant is **D65** (the sRGB white); equal-energy (E) is available.
+//!
+//! **Gamut.** Saturated paints fall outside the sRGB gamut: some linear sRGB components come out
+//! negative (Cornell krylon_blue: red < 0 for about two thirds of the samples). Because BRDF
+//! models are non-negative, [`SpectrumToRgb::convert`] maps such colours into the gamut by
+//! desaturating towards the grey of equal luminance `Y` just enough that the smallest component
+//! is zero (`rgb' = Y + (rgb - Y) Y / (Y - min)`), which keeps luminance and hue;
+//! [`SpectrumToRgb::convert_unclipped`] gives the raw values.
+//!
 //! Tables: CIE 1931 2° colour matching functions and CIE D65 at 10 nm from 400 to 700 nm;
 //! other wavelengths inside that range are interpolated linearly.
 
@@ -145,8 +153,25 @@ impl SpectrumToRgb {
         })
     }
 
-    /// Converts one spectrum (same bands as at construction) to linear sRGB.
+    /// Converts one spectrum (same bands as at construction) to linear sRGB, mapped into the
+    /// gamut (see the module docs).
     pub fn convert(&self, spectrum: &[f64]) -> [f64; 3] {
+        let rgb = self.convert_unclipped(spectrum);
+        let min = rgb[0].min(rgb[1]).min(rgb[2]);
+        if min >= 0.0 {
+            return rgb;
+        }
+        // Luminance of linear sRGB (Rec. 709 weights); the white normalisation keeps Y unchanged.
+        let y = 0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2];
+        if y <= 0.0 {
+            return [0.0; 3];
+        }
+        let k = y / (y - min);
+        rgb.map(|v| (y + (v - y) * k).max(0.0))
+    }
+
+    /// Converts one spectrum to linear sRGB without gamut mapping (components may be negative).
+    pub fn convert_unclipped(&self, spectrum: &[f64]) -> [f64; 3] {
         std::array::from_fn(|c| {
             self.weights
                 .iter()
@@ -192,6 +217,32 @@ mod tests {
             .collect();
         let rgb = conv.convert(&blue);
         assert!(rgb[2] > 3.0 * rgb[0] && rgb[2] > rgb[1], "{rgb:?}");
+    }
+
+    #[test]
+    fn out_of_gamut_colours_are_desaturated_keeping_luminance() {
+        let conv =
+            SpectrumToRgb::new(&cornell_bands(), Illuminant::D65, Path::new("x")).expect("conv");
+        let narrow: Vec<f64> = cornell_bands()
+            .iter()
+            .map(|&l| {
+                if (500.0..=520.0).contains(&l) {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let raw = conv.convert_unclipped(&narrow);
+        assert!(raw.iter().any(|&v| v < 0.0), "{raw:?}");
+        let mapped = conv.convert(&narrow);
+        assert!(
+            mapped.iter().all(|&v| v >= 0.0) && mapped.iter().any(|&v| v < 1e-12),
+            "{mapped:?}"
+        );
+        let lum = |c: [f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+        assert!((lum(raw) - lum(mapped)).abs() < 1e-12);
+        assert!(mapped[1] > mapped[0] && mapped[1] > mapped[2]);
     }
 
     #[test]
