@@ -1,1 +1,406 @@
-//! End-to-end and conformance tests.
+//! End-to-end and conformance tests: one set of protocol and session cases, many devices.
+//!
+//! A [`Backend`] is something that speaks the controller protocol on a serial port:
+//!
+//! * [`BackendKind::Sim`]: the firmware simulator (`skinbrdf-sim`) on a pseudo-terminal, fifty
+//!   times faster than real time. Always runs.
+//! * [`BackendKind::Emulator`]: the real firmware image in rp2040js via `tests/emulator/harness.js`
+//!   (engineer h2's harness), as fast as the emulator goes. Runs when `SKINBRDF_EMULATOR=1`
+//!   (needs the ELF built by `firmware/rp2040/build.sh` and `npm ci` in `tests/emulator`).
+//! * [`BackendKind::Hil`]: a real board on the port named by `SKINBRDF_HIL_PORT`, with a camera
+//!   and flash attached (or their stand-ins, see `docs/capture.md`).
+//!
+//! Each case in `tests/conformance.rs` asks [`start`] for a device with a [`Scenario`] (fault
+//! injection); a backend that cannot produce the scenario (a board cannot be told to misfire)
+//! or is not enabled returns `None` after printing why, and the case passes as skipped.
+
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use skinbrdf_capture::transport::{SerialTransport, Transport, TransportError};
+use skinbrdf_capture::CaptureOptions;
+use skinbrdf_session::capture::{CapturePlan, FlashMode, ImageRole, ShotGroup};
+
+/// Environment variable that enables the emulator backend.
+pub const EMULATOR_ENV: &str = "SKINBRDF_EMULATOR";
+/// Environment variable naming a real board's serial port.
+pub const HIL_PORT_ENV: &str = "SKINBRDF_HIL_PORT";
+/// Simulated seconds per wall second for the simulator backend.
+pub const SIM_TIME_SCALE: f64 = 50.0;
+/// Device start time of the simulator: beyond 2^32 us, so every test exercises the u64 clock.
+pub const SIM_START_US: u64 = (1 << 32) + 123_456_789;
+
+/// Which device a case runs against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BackendKind {
+    /// The firmware simulator.
+    Sim,
+    /// The firmware image in rp2040js.
+    Emulator,
+    /// A real board.
+    Hil,
+}
+
+/// Fault injection a case needs.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Scenario {
+    /// The flash never reports ready.
+    pub flash_never_ready: bool,
+    /// The camera never fires.
+    pub camera_not_firing: bool,
+    /// Silence the link once this many records exist, for this long (device us).
+    pub link_silence: Option<(u32, u64)>,
+}
+
+impl Scenario {
+    /// True when the scenario needs fault injection.
+    pub fn injects_faults(&self) -> bool {
+        *self != Self::default()
+    }
+}
+
+/// A running device.
+pub trait Backend: Send {
+    /// Which kind.
+    fn kind(&self) -> BackendKind;
+    /// The `DeviceInfo.kind` the device reports ("simulator", "emulator", "board").
+    fn device_kind(&self) -> &'static str;
+    /// Serial port path.
+    fn port(&self) -> String;
+    /// Opens a fresh link (again after a disconnect).
+    fn connect(&self) -> Result<Box<dyn Transport>, TransportError> {
+        Ok(Box::new(SerialTransport::open(&self.port())?))
+    }
+    /// Capture options suited to this device's speed.
+    fn options(&self) -> CaptureOptions;
+    /// True when the camera/flash are models with known timing (sim, emulator).
+    fn modelled_hardware(&self) -> bool;
+}
+
+/// Serialises cases on devices that exist once (the board) or are heavy (the emulator).
+static EXCLUSIVE: Mutex<()> = Mutex::new(());
+
+/// A started backend plus the lock that keeps other cases off a shared device.
+pub struct Started {
+    /// The device.
+    pub backend: Box<dyn Backend>,
+    _guard: Option<MutexGuard<'static, ()>>,
+}
+
+impl std::fmt::Debug for Started {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Started({})", self.backend.port())
+    }
+}
+
+impl std::ops::Deref for Started {
+    type Target = dyn Backend;
+    fn deref(&self) -> &Self::Target {
+        &*self.backend
+    }
+}
+
+/// Starts `kind` for `scenario`, or prints why not and returns `None` (the case is skipped).
+pub fn start(kind: BackendKind, case: &str, scenario: Scenario) -> Option<Started> {
+    match kind {
+        BackendKind::Sim => Some(Started {
+            backend: Box::new(SimBackend::start(scenario).expect("start the simulator")),
+            _guard: None,
+        }),
+        BackendKind::Emulator => {
+            if std::env::var(EMULATOR_ENV).as_deref() != Ok("1") {
+                eprintln!("skipped {case} on the emulator: set {EMULATOR_ENV}=1 to run it");
+                return None;
+            }
+            if scenario.link_silence.is_some() {
+                eprintln!("skipped {case} on the emulator: it cannot silence its link");
+                return None;
+            }
+            let guard = EXCLUSIVE.lock().unwrap_or_else(|p| p.into_inner());
+            let backend = EmulatorBackend::start(scenario).expect("start the emulator harness");
+            Some(Started {
+                backend: Box::new(backend),
+                _guard: Some(guard),
+            })
+        }
+        BackendKind::Hil => {
+            let Ok(port) = std::env::var(HIL_PORT_ENV) else {
+                eprintln!("skipped {case} on a board: set {HIL_PORT_ENV}=/dev/ttyACM0 to run it");
+                return None;
+            };
+            if scenario.injects_faults() {
+                eprintln!("skipped {case} on a board: it needs fault injection");
+                return None;
+            }
+            let guard = EXCLUSIVE.lock().unwrap_or_else(|p| p.into_inner());
+            Some(Started {
+                backend: Box::new(HilBackend { port }),
+                _guard: Some(guard),
+            })
+        }
+    }
+}
+
+/// The simulator on a pseudo-terminal.
+#[derive(Debug)]
+pub struct SimBackend {
+    /// The running simulator (tests may inspect its device).
+    pub handle: skinbrdf_sim::SimHandle,
+    path: String,
+}
+
+impl SimBackend {
+    /// Starts a simulator for `scenario`.
+    pub fn start(scenario: Scenario) -> Result<Self, skinbrdf_sim::SimError> {
+        let mut cfg = skinbrdf_sim::SimConfig {
+            time_scale: SIM_TIME_SCALE,
+            start_us: SIM_START_US,
+            ..Default::default()
+        };
+        cfg.faults.flash_never_ready = scenario.flash_never_ready;
+        cfg.faults.camera_not_firing = scenario.camera_not_firing;
+        cfg.faults.link_drop =
+            scenario
+                .link_silence
+                .map(|(after_records, duration_us)| skinbrdf_sim::LinkDrop {
+                    after_records,
+                    duration_us,
+                });
+        let (handle, path) = skinbrdf_sim::spawn_pty(cfg)?;
+        Ok(Self { handle, path })
+    }
+}
+
+impl Backend for SimBackend {
+    fn kind(&self) -> BackendKind {
+        BackendKind::Sim
+    }
+    fn device_kind(&self) -> &'static str {
+        "simulator"
+    }
+    fn port(&self) -> String {
+        self.path.clone()
+    }
+    fn options(&self) -> CaptureOptions {
+        CaptureOptions {
+            // 20 ms wall = 1 s device: the keep-alive stays well inside the watchdog.
+            keepalive: Duration::from_millis(20),
+            // 300 s of device time = 6 s of wall time: a loaded CI machine never trips it.
+            watchdog_us: Some(300_000_000),
+            request_timeout: Duration::from_millis(500),
+            initial_clock_reads: 8,
+            reconnect_window: Duration::from_secs(10),
+            reconnect_pause: Duration::from_millis(10),
+            ..CaptureOptions::default()
+        }
+    }
+    fn modelled_hardware(&self) -> bool {
+        true
+    }
+}
+
+/// The firmware image in rp2040js (`tests/emulator/harness.js`).
+#[derive(Debug)]
+pub struct EmulatorBackend {
+    child: Child,
+    stdin: Mutex<ChildStdin>,
+    path: String,
+}
+
+impl EmulatorBackend {
+    /// Starts the harness and configures its camera/flash models for `scenario`.
+    pub fn start(scenario: Scenario) -> std::io::Result<Self> {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("emulator");
+        let mut child = Command::new("node")
+            .arg(dir.join("harness.js"))
+            .args(["--speed", "0", "--recycle-us", "300000"])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()?;
+        let stdout = child
+            .stdout
+            .take()
+            .ok_or_else(|| std::io::Error::other("no stdout"))?;
+        let stdin = child
+            .stdin
+            .take()
+            .ok_or_else(|| std::io::Error::other("no stdin"))?;
+        let mut lines = BufReader::new(stdout).lines();
+        let path = loop {
+            match lines.next() {
+                Some(Ok(line)) => {
+                    if let Some(p) = line.strip_prefix("PORT ") {
+                        break p.trim().to_string();
+                    }
+                }
+                _ => {
+                    let _ = child.kill();
+                    return Err(std::io::Error::other(
+                        "the emulator harness exited before printing its port",
+                    ));
+                }
+            }
+        };
+        // Keep draining its event lines so the harness never blocks on a full pipe.
+        std::thread::spawn(move || for _ in lines.by_ref() {});
+        let me = Self {
+            child,
+            stdin: Mutex::new(stdin),
+            path,
+        };
+        if scenario.flash_never_ready {
+            me.command(r#"{"cmd":"configure","flash":{"neverReady":true}}"#)?;
+        }
+        if scenario.camera_not_firing {
+            me.command(r#"{"cmd":"configure","camera":{"enabled":false}}"#)?;
+        }
+        Ok(me)
+    }
+
+    /// Sends one JSON command line to the harness.
+    pub fn command(&self, json: &str) -> std::io::Result<()> {
+        let mut stdin = self.stdin.lock().unwrap_or_else(|p| p.into_inner());
+        writeln!(stdin, "{json}")?;
+        stdin.flush()
+    }
+}
+
+impl Drop for EmulatorBackend {
+    fn drop(&mut self) {
+        let _ = self.command(r#"{"cmd":"quit"}"#);
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Backend for EmulatorBackend {
+    fn kind(&self) -> BackendKind {
+        BackendKind::Emulator
+    }
+    fn device_kind(&self) -> &'static str {
+        "emulator"
+    }
+    fn port(&self) -> String {
+        self.path.clone()
+    }
+    fn options(&self) -> CaptureOptions {
+        CaptureOptions {
+            keepalive: Duration::from_millis(50),
+            // The emulator's clock runs at an unknown multiple of wall time: no watchdog.
+            watchdog_us: Some(0),
+            request_timeout: Duration::from_secs(3),
+            initial_clock_reads: 4,
+            reconnect_window: Duration::from_secs(20),
+            ..CaptureOptions::default()
+        }
+    }
+    fn modelled_hardware(&self) -> bool {
+        true
+    }
+}
+
+/// A real board.
+#[derive(Debug)]
+pub struct HilBackend {
+    port: String,
+}
+
+impl Backend for HilBackend {
+    fn kind(&self) -> BackendKind {
+        BackendKind::Hil
+    }
+    fn device_kind(&self) -> &'static str {
+        "board"
+    }
+    fn port(&self) -> String {
+        self.port.clone()
+    }
+    fn options(&self) -> CaptureOptions {
+        CaptureOptions {
+            watchdog_us: Some(10_000_000),
+            ..CaptureOptions::default()
+        }
+    }
+    fn modelled_hardware(&self) -> bool {
+        false
+    }
+}
+
+/// A transport the test can cut, as if the cable were pulled.
+pub struct Cuttable {
+    inner: Option<Box<dyn Transport>>,
+    cut: Arc<AtomicBool>,
+    name: String,
+}
+
+impl Cuttable {
+    /// Wraps `inner`; setting `cut` disconnects it.
+    pub fn new(inner: Box<dyn Transport>, cut: Arc<AtomicBool>) -> Self {
+        let name = inner.name();
+        Self {
+            inner: Some(inner),
+            cut,
+            name,
+        }
+    }
+
+    fn live(&mut self) -> Result<&mut Box<dyn Transport>, TransportError> {
+        if self.cut.load(Ordering::SeqCst) {
+            self.inner = None;
+        }
+        self.inner.as_mut().ok_or(TransportError::Disconnected {
+            port: self.name.clone(),
+        })
+    }
+}
+
+impl std::fmt::Debug for Cuttable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Cuttable({})", self.name)
+    }
+}
+
+impl Transport for Cuttable {
+    fn read(&mut self, buf: &mut [u8], timeout: Duration) -> Result<usize, TransportError> {
+        self.live()?.read(buf, timeout)
+    }
+    fn write_all(&mut self, data: &[u8]) -> Result<(), TransportError> {
+        self.live()?.write_all(data)
+    }
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+}
+
+/// A short plan with the method's four groups; `interval_us` between shots.
+pub fn short_plan(counts: [u32; 4], interval_us: u64, max_retries: u32) -> CapturePlan {
+    let roles = [
+        ("measurement", ImageRole::Measurement),
+        ("light position", ImageRole::LightPosition),
+        ("reference standard", ImageRole::ReferenceStandard),
+        ("standard position", ImageRole::StandardPosition),
+    ];
+    CapturePlan {
+        groups: roles
+            .iter()
+            .zip(counts)
+            .filter(|(_, n)| *n > 0)
+            .map(|((label, role), count)| ShotGroup {
+                label: (*label).to_string(),
+                role: *role,
+                count,
+                min_interval_us: interval_us,
+                pre_focus_us: 20_000,
+                shutter_pulse_us: 30_000,
+                xsync_timeout_us: 400_000,
+                flash_ready_timeout_us: 5_000_000,
+                flash_mode: FlashMode::ControllerOnXsync,
+            })
+            .collect(),
+        max_retries,
+    }
+}

@@ -723,8 +723,14 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
 
     fn reconnect(&mut self, error: ClientError) -> Result<(), CaptureError> {
         self.observer.link_lost(&error);
-        // Close the old link first: a serial port is opened exclusively.
-        self.client = None;
+        // A silent link (timeouts) may come back on its own: handshake again on it first. A
+        // dead link is closed before reopening (a serial port is opened exclusively).
+        let mut keep = if matches!(error, ClientError::Timeout { .. }) {
+            self.client.take()
+        } else {
+            self.client = None;
+            None
+        };
         let deadline = Instant::now() + self.options.reconnect_window;
         let mut last_error = error.to_string();
         loop {
@@ -741,6 +747,22 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                     last_error,
                     shots_kept: self.shots(),
                 });
+            }
+            if let Some(mut c) = keep.take() {
+                match c.handshake() {
+                    Ok(_) => {
+                        self.client = Some(c);
+                        break;
+                    }
+                    Err(e @ ClientError::VersionMismatch { .. }) => return Err(e.into()),
+                    // The link is dead: fall through and reopen it.
+                    Err(ClientError::Transport(_)) => {}
+                    Err(e) => {
+                        last_error = e.to_string();
+                        keep = Some(c);
+                        continue;
+                    }
+                }
             }
             match self.connector.connect() {
                 Ok(t) => match Client::connect(t, self.options.request_timeout) {
