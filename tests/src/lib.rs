@@ -26,6 +26,9 @@ use skinbrdf_session::capture::{CapturePlan, FlashMode, ImageRole, ShotGroup};
 
 /// Environment variable that enables the emulator backend.
 pub const EMULATOR_ENV: &str = "SKINBRDF_EMULATOR";
+/// Environment variable naming the firmware ELF for the emulator (default: the harness's own
+/// default, `$CARGO_TARGET_DIR` or `firmware/rp2040/target`, release build).
+pub const EMULATOR_ELF_ENV: &str = "SKINBRDF_EMULATOR_ELF";
 /// Environment variable naming a real board's serial port.
 pub const HIL_PORT_ENV: &str = "SKINBRDF_HIL_PORT";
 /// Simulated seconds per wall second for the simulator backend.
@@ -214,9 +217,13 @@ impl EmulatorBackend {
     /// Starts the harness and configures its camera/flash models for `scenario`.
     pub fn start(scenario: Scenario) -> std::io::Result<Self> {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("emulator");
-        let mut child = Command::new("node")
-            .arg(dir.join("harness.js"))
-            .args(["--speed", "0", "--recycle-us", "300000"])
+        let mut cmd = Command::new("node");
+        cmd.arg(dir.join("harness.js"))
+            .args(["--speed", "0", "--recycle-us", "300000"]);
+        if let Ok(elf) = std::env::var(EMULATOR_ELF_ENV) {
+            cmd.args(["--elf", &elf]);
+        }
+        let mut child = cmd
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())

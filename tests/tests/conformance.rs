@@ -276,7 +276,9 @@ fn abort(kind: BackendKind) {
     let CaptureError::Aborted { shots_kept } = err else {
         panic!("expected an abort, got {err}");
     };
-    assert!((2..8).contains(&shots_kept), "kept {shots_kept}");
+    // The abort lands within group 0 (a fast device may have finished its 8 shots by then);
+    // later groups never start.
+    assert!((2..=8).contains(&shots_kept), "kept {shots_kept}");
     let kept = read_capture(&dir.path().join("capture.json")).expect("kept");
     assert_eq!(kept.exposures.len(), shots_kept);
     assert!(!kept.complete);
