@@ -49,6 +49,11 @@ use serde::{Deserialize, Serialize};
 /// (blur asymmetry, pixel response) that the fit's own scatter does not show.
 pub const SIGMA_FLOOR_PX: f64 = 0.02;
 
+/// Half the span of the central difference that measures the edge gradient, pixels (the
+/// reference library uses 1; wider is less sensitive to noise and JPEG ringing, narrower
+/// resolves closely spaced edges of tiny tags).
+pub const GRADIENT_HALF_SPAN_PX: f64 = 1.0;
+
 /// Strength of the Laplacian sharpening of the sampled cell grid for small tags (the reference
 /// library's default `decode_sharpening`).
 pub const DECODE_SHARPENING: f64 = 0.25;
@@ -669,8 +674,8 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
                 let step = 0.25;
                 let mut off = -range;
                 while off <= range + 1e-9 {
-                    let g1 = img.bilinear(p + outward * (off + 0.5));
-                    let g2 = img.bilinear(p + outward * (off - 0.5));
+                    let g1 = img.bilinear(p + outward * (off + GRADIENT_HALF_SPAN_PX));
+                    let g2 = img.bilinear(p + outward * (off - GRADIENT_HALF_SPAN_PX));
                     let g = g1 - g2;
                     if g > 0.0 {
                         let wgt = g * g;
@@ -1123,74 +1128,5 @@ mod tests {
             ..DetectorConfig::default()
         };
         assert!(detect(&img, &strict).is_empty());
-    }
-}
-
-#[cfg(test)]
-mod debug_real {
-    use super::*;
-
-    #[test]
-    #[ignore]
-    fn debug_misses() {
-        let dir =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/apriltag");
-        let cases = [
-            ("33369213973_9d9bb4cc96_c", 456.75, 340.5),
-            ("34085369442_304b6bafd9_c", 309.2, 400.1),
-            ("34085369442_304b6bafd9_c", 441.4, 342.7),
-            ("34085369442_304b6bafd9_c", 701.5, 114.0),
-        ];
-        let cfg = DetectorConfig::default();
-        for (stem, x, y) in cases {
-            let img = GrayF32::load(&dir.join(format!("{stem}.jpg"))).expect("load");
-            let dark = threshold(&img, &cfg);
-            let comps = components(&dark, img.width, img.height, &cfg);
-            let w = img.width;
-            // the label at a few pixels around the point
-            let mut labs = std::collections::BTreeSet::new();
-            for dy in -8i64..=8 {
-                for dx in -8i64..=8 {
-                    let (px, py) = ((x as i64 + dx) as usize, (y as i64 + dy) as usize);
-                    let l = dark.labels[py * w + px];
-                    if l != u32::MAX {
-                        labs.insert(l);
-                    }
-                }
-            }
-            eprintln!("== {stem} ({x},{y}): labels {labs:?}");
-            for comp in comps.iter().filter(|c| labs.contains(&c.root)) {
-                let contour =
-                    trace_contour(&comp.labels_view(&dark.labels), img.width, img.height, comp);
-                let (mut lo, mut hi) = (DVec2::splat(1e9), DVec2::splat(-1e9));
-                for p in &contour {
-                    lo = lo.min(*p);
-                    hi = hi.max(*p);
-                }
-                let quad = fit_quad(&contour, &cfg);
-                eprintln!(
-                    "  comp {} n={} contour={} bbox {lo}..{hi} quad={quad:?}",
-                    comp.root,
-                    comp.count,
-                    contour.len()
-                );
-                if let Some(q) = quad {
-                    let r = refine_quad(&img, q);
-                    eprintln!("   refined={:?}", r.as_ref().map(|r| r.corners));
-                    if let Some(r) = r {
-                        let d = decode(
-                            &img,
-                            &r,
-                            &DetectorConfig {
-                                max_hamming: 5,
-                                min_margin: 0.0,
-                                ..cfg
-                            },
-                        );
-                        eprintln!("   decode={d:?}");
-                    }
-                }
-            }
-        }
     }
 }
