@@ -183,6 +183,11 @@ async function main() {
         rig.drive(cmd.signal, !!cmd.asserted);
         break;
       }
+      case 'usb_reconnect':
+        // Unplug and replug: bus reset, re-enumeration (the firmware sees link down, then up).
+        board.reconnectUsb();
+        emit({ event: 'usb_reset', sim_ns: board.nanos });
+        break;
       case 'speed':
         opts.speed = Number(cmd.value);
         rebase();

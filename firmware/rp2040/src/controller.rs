@@ -248,8 +248,15 @@ fn flush<const N: usize>(seq: &mut Sequencer<N>, frame: &mut [u8; MAX_FRAME_LEN]
         };
         match skinbrdf_protocol::encode(&msg, frame) {
             Ok(bytes) => {
-                // Fits: checked above.
-                let _ = usb::TX.try_write(bytes);
+                // `try_write` stops at the end of the ring buffer: write in up to two pieces.
+                // It fits: the free capacity was checked above.
+                let mut rest: &[u8] = bytes;
+                while !rest.is_empty() {
+                    match usb::TX.try_write(rest) {
+                        Ok(n) => rest = &rest[n..],
+                        Err(_) => break,
+                    }
+                }
             }
             Err(_) => defmt::error!("message does not fit a frame (protocol limits violated)"),
         }

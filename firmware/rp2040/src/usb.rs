@@ -7,8 +7,9 @@
 //! * serial `SKB-` + the 16 hex digits of the flash chip's unique ID (`SKB-EMULATOR` when the
 //!   rp2040js harness runs the image, which cannot issue flash commands).
 //!
-//! Three tasks share the class: [`usb_task`] runs the device state machine, [`rx_task`] feeds
-//! received bytes to the protocol's frame decoder and hands whole requests to the controller,
+//! Three tasks share the class: [`usb_task`] runs the device state machine (whose callbacks
+//! report the link state in [`LINK`]), [`rx_task`] copies received bytes into [`RX`] for the
+//! controller's frame decoder,
 //! [`tx_task`] drains the controller's outgoing byte pipe into 64-byte packets (with a
 //! zero-length packet after a full one, so the host's read returns at once).
 
@@ -45,8 +46,28 @@ pub static TX: Pipe<CriticalSectionRawMutex, 2048> = Pipe::new();
 /// Bytes received from the host, in USB packet sized chunks.
 pub static RX: Pipe<CriticalSectionRawMutex, 512> = Pipe::new();
 
-/// USB link state changes (true: configured by a host, false: unplugged/reset).
+/// USB link state changes (true: configured by a host, false: unplugged, bus reset or
+/// deconfigured), from [`LinkHandler`].
 pub static LINK: Signal<CriticalSectionRawMutex, bool> = Signal::new();
+
+/// Turns embassy-usb's device state callbacks into [`LINK`] changes.
+struct LinkHandler;
+
+impl embassy_usb::Handler for LinkHandler {
+    fn enabled(&mut self, enabled: bool) {
+        if !enabled {
+            LINK.signal(false);
+        }
+    }
+
+    fn reset(&mut self) {
+        LINK.signal(false);
+    }
+
+    fn configured(&mut self, configured: bool) {
+        LINK.signal(configured);
+    }
+}
 
 /// Builds the device and the CDC-ACM class.
 pub fn build(
@@ -77,6 +98,8 @@ pub fn build(
         CONTROL_BUF.init([0; 64]),
     );
     let class = CdcAcmClass::new(&mut builder, STATE.init(State::new()), PACKET as u16);
+    static HANDLER: StaticCell<LinkHandler> = StaticCell::new();
+    builder.handler(HANDLER.init(LinkHandler));
     (builder.build(), class)
 }
 
@@ -92,11 +115,9 @@ pub async fn rx_task(mut rx: Receiver<'static, UsbDriver>) -> ! {
     let mut buf = [0u8; PACKET];
     loop {
         rx.wait_connection().await;
-        LINK.signal(true);
         while let Ok(n) = rx.read_packet(&mut buf).await {
             RX.write_all(&buf[..n]).await;
         }
-        LINK.signal(false);
     }
 }
 

@@ -200,6 +200,24 @@ class Board {
     }
   }
 
+  /**
+   * Simulates unplugging and replugging the USB cable: a bus reset (the firmware's USB device
+   * drops to its default state, its link goes down), then the emulated host enumerates and
+   * configures it again (link up). Bytes in flight either way are lost, as on a real cable.
+   */
+  reconnectUsb() {
+    const cdc = this.cdc;
+    cdc.initialized = false;
+    cdc.descriptorsSize = null;
+    cdc.descriptors = [];
+    cdc.inEndpoint = -1;
+    cdc.outEndpoint = -1;
+    this.connected = false;
+    this.pendingOutRead = null;
+    this.hostToDevice = [];
+    this.mcu.usbCtrl.resetDevice();
+  }
+
   /** Calls `listener(Buffer)` with every packet the firmware sends to the host. */
   onSerialData(listener) {
     this.serialListeners.push(listener);
