@@ -206,3 +206,13 @@ test('USB link drop mid-session: the session goes on, no record lost after recon
   for (const r of live) assert.deepEqual(r, fetched[r.index], 'a live record differs from its fetched copy');
   assert.equal(dev.request({ type: 'AckRecords', next_index: 4 }).ok.unacked, 0);
 });
+
+test('sustained traffic: 500 requests in a row, every one answered (TX ring wrap)', { skip }, () => {
+  const dev = ready();
+  for (let i = 0; i < 500; i++) {
+    const body = i % 2 ? { type: 'Ping' } : { type: 'GetStatus' };
+    const resp = dev.request(body, 100_000);
+    assert.ok(resp.ok, `request ${i} (${body.type}) failed: ${JSON.stringify(resp)}`);
+  }
+  assert.equal(dev.request({ type: 'GetStatus' }).ok.bad_frames, 0);
+});
