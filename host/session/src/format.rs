@@ -168,9 +168,10 @@ impl Target {
         outward: DVec3,
         up: DVec3,
     ) -> Option<Self> {
+        // The tag frame is the camera frame of a viewer facing the tag: x right, y down,
+        // z into the tag (right-handed).
         let z_in = -outward.try_normalize()?;
-        let x = up.cross(z_in).try_normalize()?;
-        // Choose x so that y (down) = z × x points against `up`.
+        let x = z_in.cross(up).try_normalize()?;
         let y = z_in.cross(x);
         let h = 0.5 * size_m;
         let c = |sx: f64, sy: f64| centre_m + x * (sx * h) + y * (sy * h);

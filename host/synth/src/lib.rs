@@ -1,1 +1,25 @@
-//! Synthetic measurement sessions with ground truth: scenes, procedural head, physically based image formation.
+//! Synthetic measurement sessions with ground truth: scenes, procedural head, physically based
+//! image formation.
+//!
+//! * [`scene`]: scene files (TOML, built-ins embedded from the repository's `scenes/`),
+//!   [`Scene::load`] by name or path.
+//! * [`shape`]: the true surface (procedural head with a brow ridge, sphere, cylinder) with
+//!   analytic normals, tessellation and an independent analytic ray intersection.
+//! * [`layout`]: the set-up (reference structure, headdress, flash, standard), the shot list
+//!   (30 measurement + 6 extra images, or one per exposure of a `capture.json`) and head motion.
+//! * [`render`]: ray casting (obvhs through `skinbrdf-mesh`, rayon over rows) and shading.
+//! * [`generate`]: writes a session directory that `skinbrdf_session::Session::load` accepts,
+//!   with `truth.json` and truth masks. Entry point: [`generate::generate`].
+//!
+//! The radiometric convention (what `C` means) is in `docs/session-format.md`: a skin point
+//! renders to `V = rho cos(theta_i) / (C D²)`, so the method's equation 2 inverts the renderer
+//! exactly (tested at sampled pixels in `tests/forward_model.rs`).
+
+pub mod generate;
+pub mod layout;
+pub mod render;
+pub mod scene;
+pub mod shape;
+
+pub use generate::{generate, SynthError, SynthOptions, SynthSummary};
+pub use scene::{Scene, SceneError, BUILTIN_SCENES};

@@ -1,0 +1,489 @@
+//! Writing a whole synthetic session: images, scan, `session.toml`, `capture.json`,
+//! `truth.json` and the truth masks.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::{DVec2, DVec3};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+use skinbrdf_core::{CameraModel, TriMesh};
+use skinbrdf_session::capture::CaptureRecord;
+use skinbrdf_session::write::{write_exr_rgb32f, write_png_rgb16, write_png_rgb8};
+use skinbrdf_session::{
+    CameraSpec, FlashSpec, GeometrySpec, ImageEntry, ImageTruth, KnownQuantities, Linearization,
+    RegionOfInterest, RenderTruth, SessionFile, StandardSpec, StoredFormat, SurfaceTruth,
+    TargetLayouts, TargetTruth, ToneCurve, Truth, SESSION_FORMAT_VERSION, TAG_FAMILY, TRUTH_FILE,
+    TRUTH_FORMAT_VERSION,
+};
+
+use crate::layout::{build_rig, plan_shots, shots_from_capture, Rig, Shot};
+use crate::render::{Layout, Rendered, Renderer};
+use crate::scene::{CurveScene, Encoding, GeometryKind, Scene};
+use crate::shape::Shape;
+
+/// Errors of the generator.
+#[derive(Debug, thiserror::Error)]
+pub enum SynthError {
+    /// Writing a file failed.
+    #[error(transparent)]
+    File(#[from] skinbrdf_session::FileError),
+    /// Building or writing a mesh failed.
+    #[error("mesh: {0}")]
+    Mesh(#[from] skinbrdf_mesh::MeshError),
+    /// An option is out of range.
+    #[error("{field}: {problem}")]
+    Invalid {
+        /// The option.
+        field: &'static str,
+        /// What is wrong.
+        problem: String,
+    },
+}
+
+/// Generator options (beyond the scene).
+#[derive(Debug, Clone, Default)]
+pub struct SynthOptions {
+    /// Overrides the scene's image size (the field of view is kept).
+    pub resolution: Option<(u32, u32)>,
+    /// Render one image per usable exposure of this record and copy it into the session.
+    pub capture: Option<CaptureRecord>,
+    /// No sensor noise and no scanner noise (quantisation remains).
+    pub noise_free: bool,
+    /// Overrides the scene's rays per pixel.
+    pub samples_per_pixel: Option<u32>,
+}
+
+/// What was generated and what it cost.
+#[derive(Debug, Clone)]
+pub struct SynthSummary {
+    /// Session directory.
+    pub dir: PathBuf,
+    /// Images written.
+    pub images: usize,
+    /// Image size.
+    pub resolution: (u32, u32),
+    /// Primary rays traced.
+    pub rays: u64,
+    /// Skin triangles of the render mesh.
+    pub render_triangles: usize,
+    /// Scan vertices (0 for ideal shapes).
+    pub scan_vertices: usize,
+    /// Seconds building the rig and BVHs.
+    pub setup_s: f64,
+    /// Seconds rendering (ray casting and shading).
+    pub render_s: f64,
+    /// Seconds adding noise, encoding and writing.
+    pub write_s: f64,
+    /// Total seconds.
+    pub total_s: f64,
+}
+
+/// Applies the options to a scene (resolution, samples).
+pub fn apply_options(scene: &Scene, opts: &SynthOptions) -> Result<Scene, SynthError> {
+    let mut s = scene.clone();
+    if let Some((w, h)) = opts.resolution {
+        if w < 16 || h < 16 || w > 20000 || h > 20000 {
+            return Err(SynthError::Invalid {
+                field: "resolution",
+                problem: format!("{w}x{h} is outside 16..20000 pixels per side"),
+            });
+        }
+        s.camera.width_px = w;
+        s.camera.height_px = h;
+    }
+    if let Some(n) = opts.samples_per_pixel {
+        s.sensor.samples_per_pixel = n.max(1);
+    }
+    if opts.noise_free {
+        s.geometry.scan_noise_m = 0.0;
+    }
+    Ok(s)
+}
+
+fn linearization(scene: &Scene) -> (Linearization, StoredFormat) {
+    let se = &scene.sensor;
+    match se.encoding {
+        Encoding::Exr => (Linearization::LINEAR, StoredFormat::F32),
+        enc => {
+            let (curve, gamma) = match se.curve {
+                CurveScene::Linear => (ToneCurve::Linear, None),
+                CurveScene::Srgb => (ToneCurve::Srgb, None),
+                CurveScene::Gamma => (ToneCurve::Gamma, Some(se.gamma)),
+            };
+            let lin = Linearization {
+                curve,
+                gamma,
+                response: None,
+                black_level: se.black_level,
+                white_level: Some(se.white_level),
+                saturation_level: Some(se.white_level),
+            };
+            (
+                lin,
+                if enc == Encoding::Png8 {
+                    StoredFormat::U8
+                } else {
+                    StoredFormat::U16
+                },
+            )
+        }
+    }
+}
+
+/// Adds shot and read noise (unless `noise_free`), clips at the white level, applies the tone
+/// curve and quantises. Returns the stored values, row-major RGB.
+pub fn encode_image(r: &Rendered, scene: &Scene, noise_free: bool, seed: u64) -> Vec<f32> {
+    let (lin, fmt) = linearization(scene);
+    let w = r.width as usize;
+    let full_well = scene.sensor.full_well_e;
+    let read = scene.sensor.read_noise;
+    let white = lin.white_for(fmt);
+    let max_code = fmt.max_code();
+    let mut out = vec![0.0f32; 3 * r.v.len()];
+    out.par_chunks_mut(3 * w).enumerate().for_each(|(y, row)| {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ ((y as u64) << 20) ^ 0x0bad_5eed);
+        for (x, px) in row.chunks_mut(3).enumerate() {
+            let v = r.v[y * w + x];
+            for k in 0..3 {
+                let mut val = f64::from(v[k]);
+                if !noise_free {
+                    let sigma = (val.max(0.0) / full_well + read * read).sqrt();
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    val += sigma * z;
+                }
+                px[k] = match max_code {
+                    Some(max) => {
+                        let raw = lin.encode(val.min(1.0), fmt).round();
+                        raw.clamp(0.0, white.min(max)) as f32
+                    }
+                    None => val as f32,
+                };
+            }
+        }
+    });
+    out
+}
+
+fn write_image(path: &Path, r: &Rendered, stored: &[f32], scene: &Scene) -> Result<(), SynthError> {
+    match scene.sensor.encoding {
+        Encoding::Png16 => {
+            let v: Vec<u16> = stored.iter().map(|&c| c as u16).collect();
+            write_png_rgb16(path, r.width, r.height, &v)?
+        }
+        Encoding::Png8 => {
+            let v: Vec<u8> = stored.iter().map(|&c| c as u8).collect();
+            write_png_rgb8(path, r.width, r.height, &v)?
+        }
+        Encoding::Exr => write_exr_rgb32f(path, r.width, r.height, stored)?,
+    }
+    Ok(())
+}
+
+/// The head scan: the true surface's front part, tessellated at `scan_spacing_m`, with
+/// Gaussian noise on every vertex coordinate, in the scan's units.
+pub fn make_scan(shape: &Shape, scene: &Scene, rng: &mut ChaCha8Rng) -> TriMesh {
+    let g = &scene.geometry;
+    let mut mesh = shape.tessellate(
+        g.scan_spacing_m,
+        (-80f64.to_radians(), 80f64.to_radians()),
+        (-35f64.to_radians(), 75f64.to_radians()),
+    );
+    let scale = 1.0 / g.scan_units.to_m();
+    for p in &mut mesh.positions {
+        let mut q = p.as_dvec3();
+        if g.scan_noise_m > 0.0 {
+            let n: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(rng));
+            q += DVec3::from_array(n) * g.scan_noise_m;
+        }
+        *p = (q * scale).as_vec3();
+    }
+    mesh
+}
+
+fn target_truths(
+    renderer: &Renderer,
+    rig: &Rig,
+    shot: &Shot,
+    cam: &CameraModel,
+) -> Vec<TargetTruth> {
+    let camera_from_world = shot.world_from_camera.inverse();
+    let eye = shot.world_from_camera.translation_m;
+    let mut groups: Vec<(Layout, &Vec<skinbrdf_session::Target>, skinbrdf_core::Pose)> = vec![
+        (
+            Layout::Reference,
+            &rig.reference,
+            skinbrdf_core::Pose::IDENTITY,
+        ),
+        (Layout::Headdress, &rig.headdress, shot.world_from_head),
+        (Layout::Flash, &rig.flash_targets, rig.world_from_flash),
+    ];
+    if shot.standard_present {
+        groups.push((
+            Layout::Standard,
+            &rig.standard_targets,
+            rig.world_from_standard,
+        ));
+    }
+    let mut out = Vec::new();
+    for (layout, list, frame) in groups {
+        for t in list {
+            let centre = frame.transform_point(t.centre());
+            let out_n = frame.transform_vector(t.outward_normal());
+            if out_n.dot(eye - centre) <= 0.0 {
+                continue;
+            }
+            let Some(centre_px) = cam.project(camera_from_world.transform_point(centre)) else {
+                continue;
+            };
+            if !cam.contains(centre_px) {
+                continue;
+            }
+            let corners_w = t.corners_m.map(|c| frame.transform_point(c));
+            let corners_px: Vec<Option<DVec2>> = corners_w
+                .iter()
+                .map(|c| cam.project(camera_from_world.transform_point(*c)))
+                .collect();
+            let Some(corners_px) = corners_px.iter().copied().collect::<Option<Vec<_>>>() else {
+                continue;
+            };
+            let unoccluded = corners_w.iter().all(|c| {
+                // Aim slightly inside the tag so the corner's own edge does not count.
+                let p = *c + (centre - *c) * 0.02;
+                let d = p - eye;
+                let dist = d.length();
+                renderer
+                    .first_hit_m(shot, rig, eye, d / dist)
+                    .is_none_or(|t| t >= dist - 1e-3)
+            });
+            let fully_visible = unoccluded
+                && corners_px.iter().all(|p| cam.contains(*p))
+                && renderer.target_lit(shot, centre, out_n);
+            out.push(TargetTruth {
+                layout: layout.name().to_string(),
+                id: t.id,
+                corners_px: [corners_px[0], corners_px[1], corners_px[2], corners_px[3]],
+                centre_px,
+                fully_visible,
+            });
+        }
+    }
+    out
+}
+
+/// Generates a session into `dir` (created if needed; existing files are overwritten).
+pub fn generate(
+    scene: &Scene,
+    opts: &SynthOptions,
+    dir: &Path,
+) -> Result<SynthSummary, SynthError> {
+    let t_start = Instant::now();
+    let scene = apply_options(scene, opts)?;
+    let rig = build_rig(&scene);
+    let shots = match &opts.capture {
+        Some(rec) => shots_from_capture(&scene, &rig, rec),
+        None => plan_shots(&scene, &rig),
+    };
+    if shots.is_empty() {
+        return Err(SynthError::Invalid {
+            field: "capture",
+            problem: "the capture record has no usable exposure".into(),
+        });
+    }
+    let renderer = Renderer::new(&scene, &rig)?;
+    std::fs::create_dir_all(dir).map_err(|source| skinbrdf_session::FileError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+
+    let mut rng = ChaCha8Rng::seed_from_u64(scene.seed ^ 0x5ca7);
+    let (geometry, scan_vertices, scan_spacing) = match scene.geometry.kind {
+        GeometryKind::Head => {
+            let scan = make_scan(&rig.shape, &scene, &mut rng);
+            skinbrdf_mesh::write_ply_binary(&dir.join("scan.ply"), &scan)?;
+            (
+                GeometrySpec::Scan {
+                    file: "scan.ply".into(),
+                    units: scene.geometry.scan_units,
+                },
+                scan.positions.len(),
+                scene.geometry.scan_spacing_m,
+            )
+        }
+        GeometryKind::Sphere => (
+            GeometrySpec::Sphere {
+                centre_m: DVec3::ZERO,
+                radius_m: scene.geometry.sphere_radius_m,
+            },
+            0,
+            0.0,
+        ),
+        GeometryKind::Cylinder => (
+            GeometrySpec::Cylinder {
+                centre_m: DVec3::ZERO,
+                axis: DVec3::Z,
+                radius_m: scene.geometry.cylinder_radius_m,
+                length_m: scene.geometry.cylinder_length_m,
+            },
+            0,
+            0.0,
+        ),
+    };
+    let setup_s = t_start.elapsed().as_secs_f64();
+
+    let mut render_s = 0.0;
+    let mut write_s = 0.0;
+    let mut rays = 0;
+    let mut image_truths = Vec::new();
+    let mut entries = Vec::new();
+    for (i, shot) in shots.iter().enumerate() {
+        let t0 = Instant::now();
+        let r = renderer.render(
+            shot,
+            &rig,
+            scene.seed.wrapping_mul(1000).wrapping_add(i as u64),
+            true,
+        );
+        rays += r.rays;
+        render_s += t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let stored = encode_image(
+            &r,
+            &scene,
+            opts.noise_free,
+            scene.seed ^ (i as u64).wrapping_mul(0x1234_5678_9abc),
+        );
+        write_image(&dir.join(&shot.file), &r, &stored, &scene)?;
+        let stem = Path::new(&shot.file)
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| format!("img{i}"));
+        let mask = |name: &str, m: &[bool]| -> Result<Option<String>, SynthError> {
+            if !m.iter().any(|&b| b) {
+                return Ok(None);
+            }
+            let rel = format!("truth/{stem}_{name}.png");
+            skinbrdf_session::write_mask_png(&dir.join(&rel), r.width, r.height, m)?;
+            Ok(Some(rel))
+        };
+        let forehead_mask = mask("forehead", &r.forehead)?;
+        let targets_mask = mask("targets", &r.targets)?;
+        let standard_mask = mask("standard", &r.standard)?;
+        image_truths.push(ImageTruth {
+            file: shot.file.clone(),
+            role: shot.role,
+            exposure_us: shot.exposure_us,
+            world_from_camera: shot.world_from_camera,
+            world_from_head: shot.world_from_head,
+            forehead_mask,
+            targets_mask,
+            standard_mask,
+            targets: target_truths(&renderer, &rig, shot, &rig.camera),
+        });
+        entries.push(ImageEntry {
+            file: shot.file.clone(),
+            role: shot.role,
+            exposure_index: shot.exposure_index,
+            linearization: None,
+            mask: None,
+            world_from_camera: None,
+            world_from_head: None,
+        });
+        write_s += t1.elapsed().as_secs_f64();
+    }
+
+    let t2 = Instant::now();
+    let capture_file = match &opts.capture {
+        Some(rec) => {
+            let mut rec = rec.clone();
+            for e in &mut rec.exposures {
+                if let Some(s) = shots.iter().find(|s| s.exposure_index == Some(e.index)) {
+                    e.image = Some(s.file.clone());
+                }
+            }
+            skinbrdf_session::write_json_atomic(&dir.join("capture.json"), &rec)?;
+            Some("capture.json".to_string())
+        }
+        None => None,
+    };
+    let (lin, _) = linearization(&scene);
+    let session = SessionFile {
+        format_version: SESSION_FORMAT_VERSION,
+        description: format!(
+            "synthetic session, scene `{}`: {}",
+            scene.name, scene.description
+        ),
+        capture: capture_file,
+        camera: CameraSpec::Calibrated(rig.camera),
+        linearization: lin,
+        images: entries,
+        targets: TargetLayouts {
+            family: TAG_FAMILY.into(),
+            reference: rig.reference.clone(),
+            headdress: rig.headdress.clone(),
+        },
+        flash: FlashSpec {
+            diameter_m: scene.session.flash_diameter_m,
+            light_centre_m: DVec3::ZERO,
+            targets: rig.flash_targets.clone(),
+        },
+        standard: Some(StandardSpec {
+            brdf: scene.standard.brdf.clone(),
+            size_m: [scene.standard.size_m; 2],
+            targets: rig.standard_targets.clone(),
+        }),
+        geometry,
+        roi: Some(RegionOfInterest {
+            centre_m: rig.roi_centre_head,
+            radius_m: scene.geometry.roi_radius_m,
+        }),
+        known: KnownQuantities::default(),
+    };
+    skinbrdf_session::Session::write_file(dir, &session)?;
+    let truth = Truth {
+        format_version: TRUTH_FORMAT_VERSION,
+        scene: scene.name.clone(),
+        seed: scene.seed,
+        camera: rig.camera,
+        brdf: scene.skin.clone(),
+        standard_brdf: scene.standard.brdf.clone(),
+        calibration_c: scene.radiometry.calibration_c,
+        light_position_m: rig.light_position_m(),
+        world_from_flash: rig.world_from_flash,
+        world_from_standard: rig.world_from_standard,
+        surface: SurfaceTruth {
+            shape: rig.shape.describe(),
+            scan_noise_m: if scene.geometry.kind == GeometryKind::Head {
+                scene.geometry.scan_noise_m
+            } else {
+                0.0
+            },
+            scan_spacing_m: scan_spacing,
+            scan_vertices,
+        },
+        images: image_truths,
+        render: RenderTruth {
+            samples_per_pixel: renderer.samples_per_pixel(),
+            sensor_noise: !opts.noise_free,
+            read_noise: scene.sensor.read_noise,
+            full_well_e: scene.sensor.full_well_e,
+            render_seconds: render_s,
+        },
+    };
+    truth.write(&dir.join(TRUTH_FILE))?;
+    write_s += t2.elapsed().as_secs_f64();
+    Ok(SynthSummary {
+        dir: dir.to_path_buf(),
+        images: shots.len(),
+        resolution: (rig.camera.width_px, rig.camera.height_px),
+        rays,
+        render_triangles: renderer.skin_triangles,
+        scan_vertices,
+        setup_s,
+        render_s,
+        write_s,
+        total_s: t_start.elapsed().as_secs_f64(),
+    })
+}

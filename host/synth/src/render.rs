@@ -1,0 +1,838 @@
+//! Image formation.
+//!
+//! For every pixel, `n x n` stratified jittered rays (n = ceil(sqrt(samples_per_pixel)); one ray
+//! through the pixel centre when n = 1) are traced through the true camera (pinhole + Brown-
+//! Conrady distortion, [`CameraModel::pixel_ray`]) against three obvhs BVHs ([`MeshBvh`]): the
+//! skin and the headdress targets (head frame, moved by the head pose), the reference and flash
+//! targets and the flash diffuser (world frame), and the reflectance standard (its own frame,
+//! present only in the standard images). The pixel's value is the mean of the rays' values `V`:
+//!
+//! * **skin**: `V = rho(w_i, w_e) cos(theta_i) / (C D²)` per channel (`rho` the true BRDF in the
+//!   local frame of the analytic normal at the hit, `D` the distance to the flash's emitting
+//!   point, `C` the calibration constant) when the flash fired and a shadow ray towards it (against
+//!   the skin) is free; plus `ambient * albedo_d` when the room light is on;
+//! * **printed targets**: Lambertian paper or ink (tag36h11 cells, white margin) lit the same way
+//!   (targets cast and receive no shadows);
+//! * **standard**: its BRDF, lit the same way;
+//! * **flash diffuser**: an emitter well above white when it fires, white plastic otherwise;
+//! * **background**: black (0).
+//!
+//! Only pixels whose block (16 x 16) is touched by the projection of some object's bounds are
+//! traced; the rest are background (exactly what tracing them would give, and tested so).
+
+use std::sync::Arc;
+
+use glam::{DVec2, DVec3, Vec3};
+use rayon::prelude::*;
+use skinbrdf_brdf::BrdfModel;
+use skinbrdf_core::{CameraModel, Pose, ShadingFrame, TriMesh};
+use skinbrdf_mesh::{BuildQuality, MeshBvh};
+use skinbrdf_session::Target;
+
+use crate::layout::{Rig, Shot};
+use crate::scene::Scene;
+
+/// Value of the flash diffuser when it fires (far above white: it saturates).
+pub const FLASH_EMITTER_V: f32 = 8.0;
+/// Albedo of the diffuser when it does not fire.
+pub const DIFFUSER_ALBEDO: f64 = 0.9;
+/// Shadow-ray start offset along the normal, metres: above the tessellation's sagitta (a few
+/// µm at 1.5 mm spacing) and far below a pixel's footprint (~1 mm).
+pub const SHADOW_OFFSET_M: f64 = 2e-5;
+/// Culling block size, pixels.
+const BLOCK_PX: u32 = 16;
+/// Half extent of a printed target's paper in tag units (the black border is at ±1, the tag's
+/// white ring ends at ±1.25; a quarter cell more of paper around it).
+pub const PAPER_HALF_EXTENT: f64 = 1.5;
+
+/// Which frame a target lives in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layout {
+    /// Reference structure (world frame).
+    Reference,
+    /// Headdress (head frame).
+    Headdress,
+    /// Flash (flash frame).
+    Flash,
+    /// Standard (standard frame).
+    Standard,
+}
+
+impl Layout {
+    /// Name used in `truth.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Reference => "reference",
+            Self::Headdress => "headdress",
+            Self::Flash => "flash",
+            Self::Standard => "standard",
+        }
+    }
+}
+
+/// A printed target ready for shading, in its BVH's frame.
+#[derive(Debug, Clone)]
+struct PrintedTag {
+    centre: DVec3,
+    x: DVec3,
+    y: DVec3,
+    out: DVec3,
+    half_m: f64,
+    bits: [[bool; 10]; 10],
+}
+
+impl PrintedTag {
+    fn new(t: &Target, frame: &Pose) -> Self {
+        let c = t.corners_m.map(|p| frame.transform_point(p));
+        let centre = frame.transform_point(t.centre());
+        let x = (c[1] - c[0]).normalize();
+        let y = (c[0] - c[3]).normalize();
+        let out = -(x.cross(y)).normalize();
+        let bits = skinbrdf_targets::tag36h11::tag_bits(t.id as usize).unwrap_or([[true; 10]; 10]);
+        Self {
+            centre,
+            x,
+            y,
+            out,
+            half_m: 0.5 * t.size_m,
+            bits,
+        }
+    }
+
+    fn corner(&self, u: f64, v: f64) -> DVec3 {
+        self.centre + self.x * (u * self.half_m) + self.y * (v * self.half_m)
+    }
+
+    /// Whether the paper is white at a point (tag units: black border at ±1).
+    fn white_at(&self, p: DVec3) -> bool {
+        let d = p - self.centre;
+        let u = d.dot(self.x) / self.half_m;
+        let v = d.dot(self.y) / self.half_m;
+        let cw = 0.25;
+        let col = ((u + 1.0) / cw + 1.0).floor();
+        let row = ((v + 1.0) / cw + 1.0).floor();
+        if !(0.0..10.0).contains(&col) || !(0.0..10.0).contains(&row) {
+            return true;
+        }
+        self.bits[row as usize][col as usize]
+    }
+
+    fn push_quad(&self, mesh: &mut TriMesh) {
+        let e = PAPER_HALF_EXTENT;
+        let base = mesh.positions.len() as u32;
+        for (u, v) in [(-e, e), (e, e), (e, -e), (-e, -e)] {
+            mesh.positions.push(self.corner(u, v).as_vec3());
+        }
+        mesh.indices.push([base, base + 1, base + 2]);
+        mesh.indices.push([base, base + 2, base + 3]);
+    }
+}
+
+/// What a BVH triangle belongs to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Surface {
+    Skin,
+    Tag(Layout, u32),
+    Diffuser,
+    Standard,
+}
+
+#[derive(Debug)]
+struct Group {
+    bvh: MeshBvh,
+    kinds: Vec<Surface>,
+    lo: DVec3,
+    hi: DVec3,
+}
+
+impl Group {
+    fn build(mesh: &TriMesh, kinds: Vec<Surface>) -> Result<Self, skinbrdf_mesh::MeshError> {
+        let (lo, hi) = mesh.bounds().unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        Ok(Self {
+            bvh: MeshBvh::build(mesh, BuildQuality::Medium)?,
+            kinds,
+            lo: lo.as_dvec3(),
+            hi: hi.as_dvec3(),
+        })
+    }
+}
+
+/// Everything needed to render any shot of a session: built once, shared by all images.
+#[derive(Debug)]
+pub struct Renderer {
+    camera: CameraModel,
+    skin: Group,
+    head_tags: Group,
+    world: Group,
+    standard: Group,
+    tags_head: Vec<PrintedTag>,
+    tags_world: Vec<(Layout, PrintedTag)>,
+    tags_standard: Vec<PrintedTag>,
+    target_ids: Vec<(Layout, u32)>,
+    light_world: DVec3,
+    flash_out_world: DVec3,
+    skin_brdf: BrdfModel,
+    standard_brdf: BrdfModel,
+    c: [f64; 3],
+    ambient: f64,
+    paper: f64,
+    ink: f64,
+    spp_side: u32,
+    roi_centre_head: DVec3,
+    roi_radius_m: f64,
+    shape: crate::shape::Shape,
+    /// Triangles in the render mesh of the skin.
+    pub skin_triangles: usize,
+}
+
+/// One rendered image before sensor noise.
+#[derive(Debug, Clone)]
+pub struct Rendered {
+    /// Width.
+    pub width: u32,
+    /// Height.
+    pub height: u32,
+    /// Noise-free linear values per pixel.
+    pub v: Vec<[f32; 3]>,
+    /// Pixels entirely on the skin's region of interest.
+    pub forehead: Vec<bool>,
+    /// Pixels touching any printed target.
+    pub targets: Vec<bool>,
+    /// Pixels entirely on the standard's reflecting area.
+    pub standard: Vec<bool>,
+    /// Rays traced (primary).
+    pub rays: u64,
+}
+
+/// Per-shot frame data.
+struct View {
+    world_from_camera: Pose,
+    head_from_world: Pose,
+    standard_from_world: Pose,
+    light_head: DVec3,
+    light_std: DVec3,
+    fired: bool,
+    ambient: bool,
+    standard_present: bool,
+}
+
+/// SplitMix64 step mapped to `[0, 1)`.
+fn unit(state: &mut u64) -> f64 {
+    *state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^= z >> 31;
+    (z >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// One rendered row: values, forehead/target/standard masks, rays traced.
+type RowOut = (Vec<[f32; 3]>, Vec<bool>, Vec<bool>, Vec<bool>, u64);
+
+enum Bounds {
+    Nowhere,
+    Anywhere,
+    Rect(DVec2, DVec2),
+}
+
+struct Sample {
+    v: [f64; 3],
+    skin_roi: bool,
+    target: bool,
+    standard: bool,
+}
+
+impl Renderer {
+    /// Builds the BVHs for a scene's rig.
+    pub fn new(scene: &Scene, rig: &Rig) -> Result<Self, skinbrdf_mesh::MeshError> {
+        use std::f64::consts::{FRAC_PI_2, PI};
+        let skin_mesh = rig.shape.tessellate(
+            scene.geometry.render_spacing_m,
+            (-PI, PI),
+            (-FRAC_PI_2, FRAC_PI_2),
+        );
+        let skin_triangles = skin_mesh.indices.len();
+        let skin = Group::build(&skin_mesh, vec![Surface::Skin; skin_triangles])?;
+
+        let tags_head: Vec<PrintedTag> = rig
+            .headdress
+            .iter()
+            .map(|t| PrintedTag::new(t, &Pose::IDENTITY))
+            .collect();
+        let mut m = TriMesh::default();
+        let mut kinds = Vec::new();
+        for (i, t) in tags_head.iter().enumerate() {
+            t.push_quad(&mut m);
+            kinds.extend([Surface::Tag(Layout::Headdress, i as u32); 2]);
+        }
+        let head_tags = Group::build(&m, kinds)?;
+
+        let mut tags_world = Vec::new();
+        for t in &rig.reference {
+            tags_world.push((Layout::Reference, PrintedTag::new(t, &Pose::IDENTITY)));
+        }
+        for t in &rig.flash_targets {
+            tags_world.push((Layout::Flash, PrintedTag::new(t, &rig.world_from_flash)));
+        }
+        let mut m = TriMesh::default();
+        let mut kinds = Vec::new();
+        for (i, (_, t)) in tags_world.iter().enumerate() {
+            t.push_quad(&mut m);
+            kinds.extend([Surface::Tag(Layout::Reference, i as u32); 2]);
+        }
+        // The diffuser disc (a 32-gon fan, just in front of the flash plane).
+        let f = rig.world_from_flash;
+        let r = 0.5 * scene.session.flash_diameter_m;
+        let base = m.positions.len() as u32;
+        m.positions
+            .push(f.transform_point(DVec3::new(0.0, 0.0, 1e-3)).as_vec3());
+        for k in 0..32 {
+            let a = k as f64 * std::f64::consts::TAU / 32.0;
+            m.positions.push(
+                f.transform_point(DVec3::new(r * a.cos(), r * a.sin(), 1e-3))
+                    .as_vec3(),
+            );
+        }
+        for k in 0..32u32 {
+            m.indices
+                .push([base, base + 1 + k, base + 1 + (k + 1) % 32]);
+            kinds.push(Surface::Diffuser);
+        }
+        let world = Group::build(&m, kinds)?;
+
+        let tags_standard: Vec<PrintedTag> = rig
+            .standard_targets
+            .iter()
+            .map(|t| PrintedTag::new(t, &Pose::IDENTITY))
+            .collect();
+        let mut m = TriMesh::default();
+        let mut kinds = Vec::new();
+        let h = 0.5 * scene.standard.size_m;
+        m.positions.extend([
+            Vec3::new(-h as f32, -h as f32, 0.0),
+            Vec3::new(h as f32, -h as f32, 0.0),
+            Vec3::new(h as f32, h as f32, 0.0),
+            Vec3::new(-h as f32, h as f32, 0.0),
+        ]);
+        m.indices.extend([[0, 1, 2], [0, 2, 3]]);
+        kinds.extend([Surface::Standard; 2]);
+        for (i, t) in tags_standard.iter().enumerate() {
+            t.push_quad(&mut m);
+            kinds.extend([Surface::Tag(Layout::Standard, i as u32); 2]);
+        }
+        let standard = Group::build(&m, kinds)?;
+
+        let target_ids = tags_world
+            .iter()
+            .zip(rig.reference.iter().chain(&rig.flash_targets))
+            .map(|((l, _), t)| (*l, t.id))
+            .collect();
+        let spp_side = (scene.sensor.samples_per_pixel as f64)
+            .sqrt()
+            .ceil()
+            .max(1.0) as u32;
+        Ok(Self {
+            camera: rig.camera,
+            skin,
+            head_tags,
+            world,
+            standard,
+            tags_head,
+            tags_world,
+            tags_standard,
+            target_ids,
+            light_world: rig.light_position_m(),
+            flash_out_world: rig.world_from_flash.transform_vector(DVec3::Z),
+            skin_brdf: scene.skin.clone(),
+            standard_brdf: scene.standard.brdf.clone(),
+            c: scene.radiometry.calibration_c,
+            ambient: scene.radiometry.ambient,
+            paper: scene.targets.paper_albedo,
+            ink: scene.targets.ink_albedo,
+            spp_side,
+            roi_centre_head: rig.roi_centre_head,
+            roi_radius_m: scene.geometry.roi_radius_m,
+            shape: rig.shape.clone(),
+            skin_triangles,
+        })
+    }
+
+    /// Rays per pixel actually used (a square number).
+    pub fn samples_per_pixel(&self) -> u32 {
+        self.spp_side * self.spp_side
+    }
+
+    /// Overrides the rays per pixel (rounded up to a square).
+    pub fn set_samples_per_pixel(&mut self, spp: u32) {
+        self.spp_side = (spp.max(1) as f64).sqrt().ceil() as u32;
+    }
+
+    /// The tag36h11 ids of the world-frame targets (reference then flash), for tests.
+    pub fn world_target_ids(&self) -> &[(Layout, u32)] {
+        &self.target_ids
+    }
+
+    fn view(&self, shot: &Shot, rig: &Rig) -> View {
+        let head_from_world = shot.world_from_head.inverse();
+        let standard_from_world = rig.world_from_standard.inverse();
+        View {
+            world_from_camera: shot.world_from_camera,
+            light_head: head_from_world.transform_point(self.light_world),
+            light_std: standard_from_world.transform_point(self.light_world),
+            head_from_world,
+            standard_from_world,
+            fired: shot.flash_fired,
+            ambient: shot.ambient_on,
+            standard_present: shot.standard_present,
+        }
+    }
+
+    /// Lambertian-style lighting factor `cos(theta_i) / D²` from a light, zero behind.
+    fn lit(&self, p: DVec3, n: DVec3, light: DVec3) -> (f64, DVec3, f64) {
+        let to = light - p;
+        let d = to.length();
+        let wi = to / d;
+        (n.dot(wi), wi, d)
+    }
+
+    fn shade_paper(
+        &self,
+        albedo: f64,
+        p: DVec3,
+        n_out: DVec3,
+        ray_dir: DVec3,
+        light: DVec3,
+        view: &View,
+    ) -> [f64; 3] {
+        let n = if n_out.dot(ray_dir) < 0.0 {
+            n_out
+        } else {
+            -n_out
+        };
+        let mut v = [0.0; 3];
+        if view.fired {
+            let (cos_i, _, d) = self.lit(p, n, light);
+            if cos_i > 0.0 {
+                for (k, vk) in v.iter_mut().enumerate() {
+                    *vk += albedo * std::f64::consts::FRAC_1_PI * cos_i / (self.c[k] * d * d);
+                }
+            }
+        }
+        if view.ambient {
+            for vk in &mut v {
+                *vk += self.ambient * albedo;
+            }
+        }
+        v
+    }
+
+    /// The skin's value at a head-frame hit (exposed for the exactness tests).
+    pub fn skin_value(
+        &self,
+        p_head: DVec3,
+        cam_head: DVec3,
+        light_head: DVec3,
+        fired: bool,
+        ambient: bool,
+    ) -> [f64; 3] {
+        let n = self.shape.normal(p_head);
+        let mut v = [0.0; 3];
+        if fired {
+            let (cos_i, wi, d) = self.lit(p_head, n, light_head);
+            if cos_i > 0.0 {
+                let origin = p_head + n * SHADOW_OFFSET_M;
+                let t_max = (light_head - origin).length() as f32;
+                if !self
+                    .skin
+                    .bvh
+                    .occluded(origin.as_vec3(), wi.as_vec3(), t_max)
+                {
+                    let we = (cam_head - p_head).normalize();
+                    let frame = ShadingFrame::from_normal(n);
+                    let rho = self.skin_brdf.eval(frame.to_local(wi), frame.to_local(we));
+                    for k in 0..3 {
+                        v[k] = rho[k] * cos_i / (self.c[k] * d * d);
+                    }
+                }
+            }
+        }
+        if ambient {
+            let a = self.skin_brdf.diffuse_albedo();
+            for k in 0..3 {
+                v[k] += self.ambient * a[k];
+            }
+        }
+        v
+    }
+
+    fn trace(&self, o_w: DVec3, d_w: DVec3, view: &View) -> Sample {
+        let mut best = (f32::INFINITY, Surface::Skin, 0u8);
+        let (oh, dh) = (
+            view.head_from_world.transform_point(o_w),
+            view.head_from_world.transform_vector(d_w),
+        );
+        let (os, ds) = (
+            view.standard_from_world.transform_point(o_w),
+            view.standard_from_world.transform_vector(d_w),
+        );
+        let mut consider = |g: &Group, o: DVec3, d: DVec3, which: u8| {
+            if let Some(h) = g.bvh.intersect(o.as_vec3(), d.as_vec3(), best.0) {
+                if h.t_m < best.0 {
+                    best = (h.t_m, g.kinds[h.triangle as usize], which);
+                }
+            }
+        };
+        consider(&self.world, o_w, d_w, 0);
+        consider(&self.skin, oh, dh, 1);
+        consider(&self.head_tags, oh, dh, 1);
+        if view.standard_present {
+            consider(&self.standard, os, ds, 2);
+        }
+        let (t, surf, which) = best;
+        let none = Sample {
+            v: [0.0; 3],
+            skin_roi: false,
+            target: false,
+            standard: false,
+        };
+        if !t.is_finite() {
+            return none;
+        }
+        let t = f64::from(t);
+        match surf {
+            Surface::Skin => {
+                let p = oh + dh * t;
+                // Refine onto the analytic surface along the ray (removes the tessellation's
+                // few-µm offset and the f32 hit's rounding): Newton on the implicit function.
+                let p = self.shape.refine_along(p, dh);
+                let v = self.skin_value(p, oh, view.light_head, view.fired, view.ambient);
+                Sample {
+                    v,
+                    skin_roi: p.distance(self.roi_centre_head) <= self.roi_radius_m,
+                    target: false,
+                    standard: false,
+                }
+            }
+            Surface::Tag(layout, i) => {
+                let (tag, o, d, light) = match (which, layout) {
+                    (1, _) => (&self.tags_head[i as usize], oh, dh, view.light_head),
+                    (2, _) => (&self.tags_standard[i as usize], os, ds, view.light_std),
+                    _ => (&self.tags_world[i as usize].1, o_w, d_w, self.light_world),
+                };
+                let p = o + d * t;
+                let albedo = if tag.white_at(p) {
+                    self.paper
+                } else {
+                    self.ink
+                };
+                Sample {
+                    v: self.shade_paper(albedo, p, tag.out, d, light, view),
+                    skin_roi: false,
+                    target: true,
+                    standard: false,
+                }
+            }
+            Surface::Diffuser => {
+                let front = d_w.dot(self.flash_out_world) < 0.0;
+                let v = if front && view.fired {
+                    [f64::from(FLASH_EMITTER_V); 3]
+                } else if front && view.ambient {
+                    [self.ambient * DIFFUSER_ALBEDO; 3]
+                } else {
+                    [0.0; 3]
+                };
+                Sample {
+                    v,
+                    skin_roi: false,
+                    target: false,
+                    standard: false,
+                }
+            }
+            Surface::Standard => {
+                let p = os + ds * t;
+                let mut v = [0.0; 3];
+                if ds.z < 0.0 {
+                    if view.fired {
+                        let (cos_i, wi, dist) = self.lit(p, DVec3::Z, view.light_std);
+                        if cos_i > 0.0 {
+                            let rho = self.standard_brdf.eval(wi, -ds);
+                            for k in 0..3 {
+                                v[k] = rho[k] * cos_i / (self.c[k] * dist * dist);
+                            }
+                        }
+                    }
+                    if view.ambient {
+                        let a = self.standard_brdf.diffuse_albedo();
+                        for k in 0..3 {
+                            v[k] += self.ambient * a[k];
+                        }
+                    }
+                }
+                Sample {
+                    v,
+                    skin_roi: false,
+                    target: false,
+                    standard: ds.z < 0.0,
+                }
+            }
+        }
+    }
+
+    /// Projects world points; returns their pixel bounding box, or `None` (= "could be
+    /// anywhere") when a point is behind the camera or far outside the field of view, where
+    /// the distortion polynomial is not trustworthy.
+    fn project_bounds(&self, camera_from_world: &Pose, pts: &[DVec3]) -> Bounds {
+        let cam = &self.camera;
+        // Beyond 1.3x the image's half extent the distortion polynomial may fold back; points
+        // out there are pulled radially onto that limit (their true images lie outside the
+        // image, so the pulled point still bounds the object's visible part on that side).
+        let lim_x = 1.3 * (cam.width_px as f64 / cam.fx_px);
+        let lim_y = 1.3 * (cam.height_px as f64 / cam.fy_px);
+        let mut lo = DVec2::splat(f64::INFINITY);
+        let mut hi = DVec2::splat(f64::NEG_INFINITY);
+        let mut behind = 0;
+        for p in pts {
+            let pc = camera_from_world.transform_point(*p);
+            if pc.z <= 0.01 {
+                behind += 1;
+                continue;
+            }
+            let mut n = DVec2::new(pc.x / pc.z, pc.y / pc.z);
+            let s = (n.x.abs() / lim_x).max(n.y.abs() / lim_y);
+            if s > 1.0 {
+                n /= s;
+            }
+            let px = cam.normalized_to_pixel(cam.distortion.distort(n));
+            lo = lo.min(px);
+            hi = hi.max(px);
+        }
+        if behind == pts.len() {
+            Bounds::Nowhere
+        } else if behind > 0 {
+            Bounds::Anywhere
+        } else {
+            Bounds::Rect(lo, hi)
+        }
+    }
+
+    fn box_points(lo: DVec3, hi: DVec3, frame: &Pose) -> Vec<DVec3> {
+        let mut out = Vec::with_capacity(27);
+        for i in 0..3 {
+            for j in 0..3 {
+                for k in 0..3 {
+                    let f = DVec3::new(i as f64, j as f64, k as f64) * 0.5;
+                    out.push(frame.transform_point(lo + (hi - lo) * f));
+                }
+            }
+        }
+        out
+    }
+
+    /// Which 16 x 16 blocks need rays.
+    fn coverage(&self, view: &View) -> (Vec<bool>, u32) {
+        let cam = &self.camera;
+        let bw = cam.width_px.div_ceil(BLOCK_PX);
+        let bh = cam.height_px.div_ceil(BLOCK_PX);
+        let mut blocks = vec![false; (bw * bh) as usize];
+        let camera_from_world = view.world_from_camera.inverse();
+        let world_from_head = view.head_from_world.inverse();
+        let world_from_std = view.standard_from_world.inverse();
+        let mut sets: Vec<Vec<DVec3>> = vec![
+            Self::box_points(self.skin.lo, self.skin.hi, &world_from_head),
+            Self::box_points(self.head_tags.lo, self.head_tags.hi, &world_from_head),
+        ];
+        // World group: one set per target (they spread over the room) plus the diffuser.
+        let e = PAPER_HALF_EXTENT;
+        for (_, t) in &self.tags_world {
+            sets.push(
+                [
+                    (-e, -e),
+                    (0.0, -e),
+                    (e, -e),
+                    (-e, 0.0),
+                    (0.0, 0.0),
+                    (e, 0.0),
+                    (-e, e),
+                    (0.0, e),
+                    (e, e),
+                ]
+                .iter()
+                .map(|&(u, v)| t.corner(u, v))
+                .collect(),
+            );
+        }
+        let r = 0.06;
+        let f = self.light_world;
+        sets.push(
+            (0..27)
+                .map(|i| {
+                    f + DVec3::new(
+                        (i % 3) as f64 - 1.0,
+                        ((i / 3) % 3) as f64 - 1.0,
+                        (i / 9) as f64 - 1.0,
+                    ) * r
+                })
+                .collect(),
+        );
+        if view.standard_present {
+            sets.push(Self::box_points(
+                self.standard.lo,
+                self.standard.hi,
+                &world_from_std,
+            ));
+        }
+        let margin = 3.0;
+        for pts in &sets {
+            match self.project_bounds(&camera_from_world, pts) {
+                Bounds::Nowhere => {}
+                Bounds::Anywhere => {
+                    blocks.iter_mut().for_each(|b| *b = true);
+                    break;
+                }
+                Bounds::Rect(lo, hi) => {
+                    if hi.x < -margin
+                        || hi.y < -margin
+                        || lo.x > cam.width_px as f64 + margin
+                        || lo.y > cam.height_px as f64 + margin
+                    {
+                        continue;
+                    }
+                    let x0 = ((lo.x - margin).max(0.0) / BLOCK_PX as f64) as i64;
+                    let y0 = ((lo.y - margin).max(0.0) / BLOCK_PX as f64) as i64;
+                    let x1 = ((hi.x + margin) / BLOCK_PX as f64).min(bw as f64 - 1.0) as i64;
+                    let y1 = ((hi.y + margin) / BLOCK_PX as f64).min(bh as f64 - 1.0) as i64;
+                    for by in y0.max(0)..=y1 {
+                        for bx in x0.max(0)..=x1 {
+                            blocks[(by as u32 * bw + bx as u32) as usize] = true;
+                        }
+                    }
+                }
+            }
+        }
+        (blocks, bw)
+    }
+
+    /// Renders one shot (noise-free). `seed` makes the jitter reproducible; `cull = false`
+    /// traces every pixel (for tests of the culling).
+    pub fn render(&self, shot: &Shot, rig: &Rig, seed: u64, cull: bool) -> Rendered {
+        let view = self.view(shot, rig);
+        let (w, h) = (self.camera.width_px, self.camera.height_px);
+        let (blocks, bw) = if cull {
+            self.coverage(&view)
+        } else {
+            let bw = w.div_ceil(BLOCK_PX);
+            (vec![true; (bw * h.div_ceil(BLOCK_PX)) as usize], bw)
+        };
+        let blocks = Arc::new(blocks);
+        let n = self.spp_side;
+        let inv = 1.0 / f64::from(n * n);
+        let origin = view.world_from_camera.translation_m;
+        let rows: Vec<RowOut> = (0..h)
+            .into_par_iter()
+            .map(|y| {
+                let mut v = vec![[0.0f32; 3]; w as usize];
+                let mut fh = vec![false; w as usize];
+                let mut tg = vec![false; w as usize];
+                let mut st = vec![false; w as usize];
+                let mut rays = 0u64;
+                for x in 0..w {
+                    if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
+                        continue;
+                    }
+                    // Jitter from a per-pixel hash: independent of which pixels are traced and of
+                    // the thread schedule.
+                    let mut state = seed
+                        ^ (u64::from(y) << 32 | u64::from(x)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+                    let mut acc = [0.0f64; 3];
+                    let (mut all_roi, mut any_tag, mut all_std) = (true, false, true);
+                    for sy in 0..n {
+                        for sx in 0..n {
+                            let (jx, jy) = if n == 1 {
+                                (0.0, 0.0)
+                            } else {
+                                (
+                                    (f64::from(sx) + unit(&mut state)) / f64::from(n) - 0.5,
+                                    (f64::from(sy) + unit(&mut state)) / f64::from(n) - 0.5,
+                                )
+                            };
+                            let px = DVec2::new(f64::from(x) + jx, f64::from(y) + jy);
+                            let Some(dir_c) = self.camera.pixel_ray(px) else {
+                                all_roi = false;
+                                all_std = false;
+                                continue;
+                            };
+                            rays += 1;
+                            let d = view.world_from_camera.transform_vector(dir_c);
+                            let s = self.trace(origin, d, &view);
+                            for (a, sv) in acc.iter_mut().zip(s.v) {
+                                *a += sv;
+                            }
+                            all_roi &= s.skin_roi;
+                            any_tag |= s.target;
+                            all_std &= s.standard;
+                        }
+                    }
+                    v[x as usize] = acc.map(|a| (a * inv) as f32);
+                    fh[x as usize] = all_roi;
+                    tg[x as usize] = any_tag;
+                    st[x as usize] = all_std;
+                }
+                (v, fh, tg, st, rays)
+            })
+            .collect();
+        let mut out = Rendered {
+            width: w,
+            height: h,
+            v: Vec::with_capacity((w * h) as usize),
+            forehead: Vec::with_capacity((w * h) as usize),
+            targets: Vec::with_capacity((w * h) as usize),
+            standard: Vec::with_capacity((w * h) as usize),
+            rays: 0,
+        };
+        for (v, fh, tg, st, rays) in rows {
+            out.v.extend(v);
+            out.forehead.extend(fh);
+            out.targets.extend(tg);
+            out.standard.extend(st);
+            out.rays += rays;
+        }
+        out
+    }
+
+    /// The closest hit distance along a world ray (any object present in the shot), for
+    /// visibility checks of target corners.
+    pub fn first_hit_m(&self, shot: &Shot, rig: &Rig, o_w: DVec3, d_w: DVec3) -> Option<f64> {
+        let view = self.view(shot, rig);
+        let mut best = f32::INFINITY;
+        let (oh, dh) = (
+            view.head_from_world.transform_point(o_w),
+            view.head_from_world.transform_vector(d_w),
+        );
+        let (os, ds) = (
+            view.standard_from_world.transform_point(o_w),
+            view.standard_from_world.transform_vector(d_w),
+        );
+        let mut groups: Vec<(&Group, DVec3, DVec3)> = vec![
+            (&self.world, o_w, d_w),
+            (&self.skin, oh, dh),
+            (&self.head_tags, oh, dh),
+        ];
+        if view.standard_present {
+            groups.push((&self.standard, os, ds));
+        }
+        for (g, o, d) in groups {
+            if let Some(hh) = g.bvh.intersect(o.as_vec3(), d.as_vec3(), best) {
+                best = best.min(hh.t_m);
+            }
+        }
+        best.is_finite().then_some(f64::from(best))
+    }
+
+    /// Irradiance factor on a target's face from the flash (`cos / D²`, 0 when unlit) plus
+    /// whether the room light is on: a target is detectable only when lit.
+    pub fn target_lit(&self, shot: &Shot, centre_w: DVec3, out_w: DVec3) -> bool {
+        let lit_by_flash =
+            shot.flash_fired && out_w.dot((self.light_world - centre_w).normalize()) > 0.05;
+        lit_by_flash || shot.ambient_on
+    }
+}
