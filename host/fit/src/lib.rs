@@ -6,6 +6,7 @@
 
 pub mod fit;
 pub mod lm;
+pub mod loess;
 
 pub use fit::{fit_data, fit_rgb, ChannelFit, ErrorMetrics, FitConfig, FitData, FitError, RgbFit};
 pub use lm::{LmConfig, LmStatus, ResidualKind};
