@@ -13,11 +13,12 @@
 //! status and fetches every record from the next expected index on: the device holds all
 //! unacknowledged records in its ring buffer, so nothing taken during the outage is lost.
 //!
-//! **Keep-alive and clock.** While waiting for events the host sends `GetStatus` every
+//! **Keep-alive and clock.** Throughout the session the host sends `GetStatus` every
 //! [`CaptureOptions::keepalive`]: it feeds the device's host watchdog, detects a run that ended
-//! while its events were lost, and each answer is also a round-trip clock read. The clock model
-//! is refitted over all reads before every write, and every exposure's `host_time_us` is mapped
-//! through the latest model.
+//! while its events were lost, and each answer is also a round-trip clock read, so the drift fit
+//! has a baseline as long as the session (plus a few reads at the start and the end). The clock
+//! model is refitted over all reads before every write, and every exposure's `host_time_us` is
+//! mapped through the latest model.
 //!
 //! **Abort.** When [`CaptureOptions::abort`] is set (Ctrl-C) or the observer declines a group,
 //! the host sends `Abort` (the device releases every output), collects the records taken so
@@ -330,7 +331,7 @@ struct Runner<'a, C: Connector, O: CaptureObserver> {
     reads: Vec<ClockRead>,
     run_end: Option<RunEnd>,
     last_fault: Option<Fault>,
-    last_request: Instant,
+    last_status: Instant,
     aborting: bool,
 }
 
@@ -384,7 +385,7 @@ pub fn run_capture<C: Connector, O: CaptureObserver>(
         reads: Vec::new(),
         run_end: None,
         last_fault: None,
-        last_request: Instant::now(),
+        last_status: Instant::now(),
         aborting: false,
     };
     runner.run(&proto_plan)
@@ -400,10 +401,8 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
     }
 
     fn request(&mut self, body: RequestBody) -> Result<ResponseBody, ClientError> {
-        self.last_request = Instant::now();
-        let response = self.client()?.request(body);
-        // Events that arrived while waiting are handled by the caller's event loop.
-        response
+        // Events that arrive while waiting are queued and handled by the caller's event loop.
+        self.client()?.request(body)
     }
 
     fn shots(&self) -> usize {
@@ -465,6 +464,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             }
         }
         self.record.complete = true;
+        self.final_clock_reads();
         self.refit_and_write()?;
         Ok(self.record.clone())
     }
@@ -512,6 +512,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
     }
 
     fn status(&mut self) -> Result<Status, ClientError> {
+        self.last_status = Instant::now();
         let host_send_us = host_now_us();
         match self.request(RequestBody::GetStatus)? {
             ResponseBody::Status(s) => {
@@ -572,7 +573,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
 
     /// One wait for an event, or a keep-alive when due.
     fn step(&mut self) -> Result<(), CaptureError> {
-        let since = self.last_request.elapsed();
+        let since = self.last_status.elapsed();
         if since >= self.options.keepalive {
             return self.keepalive();
         }
@@ -688,6 +689,16 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                 Ok(())
             }
             Err(e) => Err(e.into()),
+        }
+    }
+
+    /// A few clock reads at the end give the drift fit its longest baseline (best effort).
+    fn final_clock_reads(&mut self) {
+        for _ in 0..self.options.initial_clock_reads.min(8) {
+            match self.client.as_mut().map(Client::read_clock) {
+                Some(Ok(read)) => self.reads.push(read),
+                _ => break,
+            }
         }
     }
 
@@ -813,6 +824,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
     }
 
     fn session_failed(&mut self, outcome: SessionOutcome) -> Result<CaptureRecord, CaptureError> {
+        self.final_clock_reads();
         self.refit_and_write()?;
         let detail = match (outcome, self.last_fault) {
             (_, Some(f)) => format!(

@@ -145,13 +145,24 @@ struct CliObserver {
     groups: usize,
 }
 
+impl CliObserver {
+    /// A line above the bar (plain stdout when the bar is hidden, e.g. output to a file).
+    fn line(&self, text: String) {
+        if self.bar.is_hidden() {
+            println!("{text}");
+        } else {
+            self.bar.println(text);
+        }
+    }
+}
+
 fn ms(us: u64) -> f64 {
     us as f64 / 1000.0
 }
 
 impl CaptureObserver for CliObserver {
     fn connected(&mut self, record: &CaptureRecord) {
-        self.bar.println(format!(
+        self.line(format!(
             "connected: {} (firmware {}, serial {}, protocol {})",
             record.device.kind,
             record.device.firmware_version,
@@ -171,11 +182,14 @@ impl CaptureObserver for CliObserver {
             group.role
         );
         if !self.prompt {
-            self.bar.println(line);
+            self.line(line);
             return GroupDecision::Continue;
         }
         self.bar.suspend(|| {
             print!("{line}: set up, then press Enter to shoot (q + Enter aborts; {shots} taken) ");
+            if !std::io::IsTerminal::is_terminal(&std::io::stdin()) {
+                println!();
+            }
             let _ = std::io::stdout().flush();
             AT_PROMPT.store(true, Ordering::SeqCst);
             let mut answer = String::new();
@@ -207,7 +221,7 @@ impl CaptureObserver for CliObserver {
             ShotOutcome::Ok => "ok".to_string(),
             other => format!("FAULT {other:?}"),
         };
-        self.bar.println(format!(
+        self.line(format!(
             "#{:<3} g{} shot {:<2} try {}  {lag}  {flash}  {recycle}  {outcome}",
             e.index, r.group, r.shot, r.attempt
         ));
@@ -220,7 +234,7 @@ impl CaptureObserver for CliObserver {
     }
 
     fn fault(&mut self, fault: &Fault) {
-        self.bar.println(format!(
+        self.line(format!(
             "  fault: {}{}",
             fault_text(fault.kind),
             fault
@@ -239,19 +253,18 @@ impl CaptureObserver for CliObserver {
 
     fn log(&mut self, level: LogLevel, text: &str) {
         match level {
-            LogLevel::Warn | LogLevel::Error => self.bar.println(format!("  {level:?}: {text}")),
+            LogLevel::Warn | LogLevel::Error => self.line(format!("  {level:?}: {text}")),
             LogLevel::Info => tracing::info!("device: {text}"),
             LogLevel::Debug => tracing::debug!("device: {text}"),
         }
     }
 
     fn link_lost(&mut self, error: &ClientError) {
-        self.bar
-            .println(format!("  link lost ({error}); reconnecting ..."));
+        self.line(format!("  link lost ({error}); reconnecting ..."));
     }
 
     fn reconnected(&mut self, fetched: u32) {
-        self.bar.println(format!(
+        self.line(format!(
             "  reconnected; recovered {fetched} record{} taken meanwhile",
             if fetched == 1 { "" } else { "s" }
         ));
