@@ -138,7 +138,9 @@ fn standard_pixels(
                     continue;
                 }
                 let v = s.image.rgb[idx];
-                if v.iter().any(|&c| c.is_nan() || (c as f64) < cfg.noise_floor) {
+                if v.iter()
+                    .any(|&c| c.is_nan() || (c as f64) < cfg.noise_floor)
+                {
                     continue;
                 }
                 let rho = brdf.eval(wi, we);

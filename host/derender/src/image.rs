@@ -270,7 +270,9 @@ pub fn derender_image(
                     continue;
                 }
                 let v = m.image.rgb[idx];
-                if v.iter().any(|&ch| ch.is_nan() || (ch as f64) < cfg.noise_floor) {
+                if v.iter()
+                    .any(|&ch| ch.is_nan() || (ch as f64) < cfg.noise_floor)
+                {
                     c.below_noise_floor += 1;
                     continue;
                 }

@@ -13,21 +13,23 @@
 //!   the convexity test that decides whether shadow rays are needed at all.
 //! * [`image`]: one image to samples ([`derender_image`]), every dropped pixel counted by reason.
 //! * [`calibrate`]: C from the standard's pixels, robust average with its spread.
-//! * [`session`]: the whole session ([`derender_session`]) from a `skinbrdf-session` directory,
-//!   with poses as plain data ([`PoseSource`]), timings per stage and, with `truth.json`, the
-//!   samples' error against the true BRDF.
-//! * [`figures`]: coverage figures (pixels used per image; exitant hemisphere for one θ_i).
+//! * [`session`]: the whole derender from plain data ([`derender_with_loader`]: poses per
+//!   image, light, C or the standard, images loaded one at a time), timings per stage.
+//! * [`from_session`]: the same from a `skinbrdf-session` directory ([`derender_session`]),
+//!   with, when `truth.json` is present, the samples' error against the true BRDF.
 //!
 //! The API takes poses as plain data (`world_from_camera`, `world_from_head` per image, the
 //! light position in the world), so it works from known poses before pose estimation exists.
 
 pub mod calibrate;
+pub mod from_session;
 pub mod geometry;
 pub mod image;
 pub mod session;
 pub mod stats;
 
 pub use calibrate::{calibrate_c, CEstimator, Calibration, StandardImage};
+pub use from_session::{derender_session, PoseChoice, SessionOptions, SessionRun};
 pub use geometry::{Geometry, Roi};
 pub use image::{derender_image, FilterCounts, ImageSamples, ImageView, Measurement};
 pub use session::{

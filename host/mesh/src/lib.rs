@@ -7,12 +7,14 @@
 //! * [`ply`]: the PLY reader and the atomic binary writer [`write_ply_binary`].
 //! * [`normals`]: shading normals by a local planar fit over a radius (given or estimated from
 //!   the scan's noise) or vertex normals; interpolated at ray hits.
+//! * [`shapes`]: tessellated spheres and cylinders.
 //! * [`bvh`]: [`MeshBvh`], build once and trace many (closest hit, occlusion, batched rays).
 
 pub mod bvh;
 pub mod load;
 pub mod normals;
 pub mod ply;
+pub mod shapes;
 pub mod validate;
 
 pub use bvh::{BuildQuality, Hit, MeshBvh, MeshRay};

@@ -1,9 +1,197 @@
-//! `skinbrdf derender`.
+//! `skinbrdf derender`: a session's images to calibrated BRDF samples.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use skinbrdf_derender::{
+    derender_session, CEstimator, DerenderConfig, PoseChoice, SessionOptions, ShadowMode,
+};
+use skinbrdf_mesh::NormalMethod;
 
 /// Flags of `skinbrdf derender`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The session directory.
+    pub session: PathBuf,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+    /// Use every N-th pixel in x and y.
+    #[arg(long, default_value_t = 1)]
+    pub stride: u32,
+    /// Drop samples with theta_i or theta_e beyond this (degrees, < 90).
+    #[arg(long, default_value_t = DerenderConfig::DEFAULT.grazing_limit_deg)]
+    pub grazing_limit_deg: f64,
+    /// Drop samples with a linear channel value below this (1.0 = white).
+    #[arg(long, default_value_t = DerenderConfig::DEFAULT.noise_floor)]
+    pub noise_floor: f64,
+    /// Shadow rays: auto (only if the geometry can shadow the region), always, never.
+    #[arg(long, default_value = "auto")]
+    pub shadows: String,
+    /// Normals: auto (planar fit, radius from the scan's noise), fit (needs --normal-radius-mm),
+    /// vertex.
+    #[arg(long, default_value = "auto")]
+    pub normals: String,
+    /// Planar-fit radius in millimetres (implies --normals fit).
+    #[arg(long)]
+    pub normal_radius_mm: Option<f64>,
+    /// Average of C over the standard: median or trimmed.
+    #[arg(long, default_value = "median")]
+    pub c_estimator: String,
+    /// Poses: auto (session.toml, else truth.json), session, truth.
+    #[arg(long, default_value = "auto")]
+    pub poses: String,
+    /// Do not mask the projected printed targets.
+    #[arg(long)]
+    pub no_target_mask: bool,
+    /// Output directory (default SESSION/out): samples.skbs, derender.json.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also write samples.csv.
+    #[arg(long)]
+    pub csv: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`skinbrdf derender` is not built yet")
+fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
+    let shadows = match args.shadows.as_str() {
+        "auto" => ShadowMode::Auto,
+        "always" => ShadowMode::Always,
+        "never" => ShadowMode::Never,
+        o => anyhow::bail!("--shadows: `{o}` is not one of auto, always, never"),
+    };
+    let normals = match (args.normals.as_str(), args.normal_radius_mm) {
+        (_, Some(r)) => NormalMethod::PlanarFit {
+            radius_m: r * 1e-3,
+        },
+        ("auto", None) => NormalMethod::PlanarFitAuto,
+        ("vertex", None) => NormalMethod::Vertex,
+        ("fit", None) => anyhow::bail!("--normals fit needs --normal-radius-mm"),
+        (o, None) => anyhow::bail!("--normals: `{o}` is not one of auto, fit, vertex"),
+    };
+    let c_estimator = match args.c_estimator.as_str() {
+        "median" => CEstimator::Median,
+        "trimmed" => CEstimator::TrimmedMean,
+        o => anyhow::bail!("--c-estimator: `{o}` is not one of median, trimmed"),
+    };
+    let poses = match args.poses.as_str() {
+        "auto" => PoseChoice::Auto,
+        "session" => PoseChoice::Session,
+        "truth" => PoseChoice::Truth,
+        o => anyhow::bail!("--poses: `{o}` is not one of auto, session, truth"),
+    };
+    let cfg = DerenderConfig {
+        stride: args.stride,
+        grazing_limit_deg: args.grazing_limit_deg,
+        noise_floor: args.noise_floor,
+        shadows,
+        normals,
+        c_estimator,
+    };
+    cfg.validate()?;
+    Ok((
+        cfg,
+        SessionOptions {
+            poses,
+            skip_target_mask: args.no_target_mask,
+        },
+    ))
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let (cfg, opts) = config(&args)?;
+    let session = skinbrdf_session::Session::load(&args.session)
+        .map_err(|e| anyhow::anyhow!("{e}"))
+        .with_context(|| format!("loading session {}", args.session.display()))?;
+    let run = derender_session(&session, &opts, &cfg)?;
+    let out = args.out.clone().unwrap_or_else(|| args.session.join("out"));
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let csv = args.csv.then(|| out.join("samples.csv"));
+    skinbrdf_derender::from_session::write_samples(
+        &out.join("samples.skbs"),
+        csv.as_deref(),
+        &run,
+        &session,
+    )?;
+    let json = serde_json::to_string_pretty(&run)?;
+    skinbrdf_session::write_atomic(&out.join("derender.json"), json.as_bytes())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    if args.json {
+        println!("{json}");
+        return Ok(());
+    }
+    let r = &run.report;
+    let c = &r.counts;
+    println!(
+        "derender {}: {} measurement images, {} triangles, poses from {:?}",
+        args.session.display(),
+        r.images.len(),
+        run.triangles,
+        r.pose_source
+    );
+    if let Some(m) = &run.mesh_report {
+        println!("  scan: {}", m.summary());
+    }
+    println!(
+        "  samples kept {} of {} pixels considered ({} primary rays)",
+        c.kept, c.considered, r.primary_rays
+    );
+    for (reason, n) in c.reasons() {
+        if n > 0 {
+            println!("    dropped {reason:<18} {n}");
+        }
+    }
+    println!(
+        "  grazing bound: theta_i, theta_e < {}° (1/cos theta <= {:.2})",
+        cfg.grazing_limit_deg,
+        1.0 / cfg.grazing_limit_deg.to_radians().cos()
+    );
+    println!(
+        "  shadow rays: {} ({})",
+        if r.shadow_rays { "cast" } else { "skipped" },
+        if r.region_can_self_shadow {
+            format!("geometry can shadow the region; {} rays", r.shadow_rays_cast)
+        } else {
+            "region is convex: nothing can shadow it".to_string()
+        }
+    );
+    println!("  normals: {:?}, radius {:.2} mm", cfg.normals, r.normal_radius_m * 1e3);
+    match &r.calibration {
+        Some(cal) => println!(
+            "  C = [{:.5}, {:.5}, {:.5}] from {} standard pixels ({:?}); relative spread (MAD sigma) [{:.2}%, {:.2}%, {:.2}%]",
+            cal.c[0],
+            cal.c[1],
+            cal.c[2],
+            cal.pixels,
+            cal.estimator,
+            cal.rel_spread[0] * 100.0,
+            cal.rel_spread[1] * 100.0,
+            cal.rel_spread[2] * 100.0
+        ),
+        None => println!("  C = {:?} ({})", r.c, run.c_source),
+    }
+    let t = &r.times;
+    println!(
+        "  time: mesh {:.3} s, bvh {:.3} s, normals {:.3} s, convexity {:.3} s, images {:.3} s, C {:.3} s, rays+samples {:.3} s, total {:.3} s",
+        t.mesh_load_s, t.bvh_s, t.normals_s, t.convexity_s, t.image_load_s, t.calibration_s, t.derender_s, t.total_s
+    );
+    if t.derender_s > 0.0 {
+        println!(
+            "  throughput: {:.2} M primary rays/s",
+            r.primary_rays as f64 / t.derender_s / 1e6
+        );
+    }
+    if let Some(e) = &r.truth_error {
+        println!(
+            "  vs truth: median relative error {:.3}% (p90 {:.3}%, bias {:+.3}%, RGB [{:.3}%, {:.3}%, {:.3}%]) over {} samples",
+            e.median_rel_error * 100.0,
+            e.p90_rel_error * 100.0,
+            e.median_signed_rel_error * 100.0,
+            e.median_rel_error_rgb[0] * 100.0,
+            e.median_rel_error_rgb[1] * 100.0,
+            e.median_rel_error_rgb[2] * 100.0,
+            e.samples
+        );
+    }
+    println!("  wrote {}", out.join("samples.skbs").display());
+    Ok(())
 }

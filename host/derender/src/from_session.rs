@@ -1,0 +1,452 @@
+//! Derendering a `skinbrdf-session` directory: [`derender_session`].
+//!
+//! Inputs are resolved in this order, and the report says where each came from:
+//!
+//! * **camera**: `[camera]` when calibrated, else `truth.json`'s camera (synthetic sessions);
+//! * **poses**: per image `world_from_camera` / `world_from_head` from `session.toml` (a
+//!   stationary sample reuses the first head pose), else `truth.json` ([`PoseChoice`]); the
+//!   pose stage's output enters through [`DerenderInputs`] directly;
+//! * **light**: `known.light_position_m`, else `known.world_from_flash` applied to the flash's
+//!   emitting point, else truth;
+//! * **C**: `known.calibration_c`, else from the `reference-standard` images (the standard's
+//!   pose from `known.world_from_standard`, else truth);
+//! * **geometry**: the scan (units from `session.toml`, validated and repaired), or a
+//!   tessellated sphere/cylinder at about [`SHAPE_EDGE_M`] edge length;
+//! * **masks**: a per-image user mask (`images[].mask`), and the printed targets of the
+//!   headdress, the reference structure and the flash projected into each image (each tag's
+//!   square grown by [`TARGET_MASK_GROWTH`] to cover its white border).
+
+use std::path::Path;
+use std::time::Instant;
+
+use glam::DVec2;
+use serde::Serialize;
+use skinbrdf_core::{CameraModel, Pose};
+use skinbrdf_mesh::{load_mesh, LengthUnit, LoadOptions, MeshReport};
+use skinbrdf_session::{GeometrySpec, ImageRole, Session, Target, Truth};
+
+use crate::geometry::{Geometry, Roi};
+use crate::session::{
+    derender_with_loader, CalibrationInput, DerenderInputs, DerenderReport, ImagePoses, OwnedImage,
+    PoseSource,
+};
+use crate::{truth_error, DerenderConfig, DerenderError};
+
+/// Edge length of tessellated ideal shapes (1 mm: the sagitta error on an 8 cm sphere is
+/// 1.6 µm, far below any effect on D or the normal).
+pub const SHAPE_EDGE_M: f64 = 0.001;
+/// A tag36h11 tag's printed white border adds one cell of eight each side: 10/8 = 1.25; 1.4
+/// leaves a margin for pose error.
+pub const TARGET_MASK_GROWTH: f64 = 1.4;
+
+/// Which poses to use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub enum PoseChoice {
+    /// `session.toml` where every measurement image has them, else `truth.json`.
+    #[default]
+    Auto,
+    /// Only `session.toml`.
+    Session,
+    /// Only `truth.json`.
+    Truth,
+}
+
+/// Options of [`derender_session`] besides the [`DerenderConfig`].
+#[derive(Debug, Clone, Default)]
+pub struct SessionOptions {
+    /// Pose source.
+    pub poses: PoseChoice,
+    /// Mask the printed targets (default on).
+    pub skip_target_mask: bool,
+}
+
+/// What [`derender_session`] returns besides the report.
+#[derive(Debug, Clone, Serialize)]
+pub struct SessionRun {
+    /// The derender report (samples inside).
+    pub report: DerenderReport,
+    /// The scan's validation/repair (scans only).
+    pub mesh_report: Option<MeshReport>,
+    /// Triangles of the geometry.
+    pub triangles: usize,
+    /// Where the camera model came from.
+    pub camera_source: &'static str,
+    /// Where the light position came from.
+    pub light_source: &'static str,
+    /// Where C came from.
+    pub c_source: &'static str,
+}
+
+fn input<T>(v: Option<T>, what: &str) -> Result<T, DerenderError> {
+    v.ok_or_else(|| DerenderError::Input(what.to_string()))
+}
+
+/// Loads the session's geometry as a mesh in metres (head frame).
+pub fn session_geometry(
+    session: &Session,
+    cfg: &DerenderConfig,
+) -> Result<(Geometry, Option<MeshReport>, f64), DerenderError> {
+    let t = Instant::now();
+    let (mesh, report) = match &session.file.geometry {
+        GeometrySpec::Scan { file, units } => {
+            let l = load_mesh(
+                &session.path(file),
+                &LoadOptions {
+                    unit: LengthUnit::Custom(units.to_m()),
+                    ..Default::default()
+                },
+            )?;
+            (l.mesh, Some(l.report))
+        }
+        GeometrySpec::Sphere { centre_m, radius_m } => {
+            let n_lon =
+                ((std::f64::consts::TAU * radius_m / SHAPE_EDGE_M).ceil() as u32).clamp(16, 4096);
+            (
+                skinbrdf_mesh::shapes::uv_sphere(*centre_m, *radius_m, n_lon / 2, n_lon),
+                None,
+            )
+        }
+        GeometrySpec::Cylinder {
+            centre_m,
+            axis,
+            radius_m,
+            length_m,
+        } => {
+            let n_around =
+                ((std::f64::consts::TAU * radius_m / SHAPE_EDGE_M).ceil() as u32).clamp(16, 4096);
+            let n_len = ((length_m / SHAPE_EDGE_M).ceil() as u32).clamp(1, 4096);
+            (
+                skinbrdf_mesh::shapes::cylinder(
+                    *centre_m, *axis, *radius_m, *length_m, n_len, n_around,
+                ),
+                None,
+            )
+        }
+    };
+    let load_s = t.elapsed().as_secs_f64();
+    let roi = session.file.roi.map(|r| Roi {
+        centre_m: r.centre_m,
+        radius_m: r.radius_m,
+    });
+    Ok((Geometry::new(mesh, cfg.normals, roi)?, report, load_s))
+}
+
+/// Rasterizes the projected target squares into a mask (true = on a target).
+fn target_mask(
+    camera: &CameraModel,
+    quads: &[(Pose, &Target)],
+    width: u32,
+    height: u32,
+) -> Vec<bool> {
+    let mut mask = vec![false; width as usize * height as usize];
+    for (cam_from_layout, t) in quads {
+        let c = t.centre();
+        let pts: Option<Vec<DVec2>> = t
+            .corners_m
+            .iter()
+            .map(|p| {
+                camera.project(cam_from_layout.transform_point(c + (*p - c) * TARGET_MASK_GROWTH))
+            })
+            .collect();
+        let Some(pts) = pts else { continue };
+        let lo = pts
+            .iter()
+            .fold(DVec2::splat(f64::INFINITY), |a, p| a.min(*p));
+        let hi = pts
+            .iter()
+            .fold(DVec2::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
+        let x0 = lo.x.floor().max(0.0) as u32;
+        let y0 = lo.y.floor().max(0.0) as u32;
+        let x1 = (hi.x.ceil().min(width as f64 - 1.0)).max(-1.0);
+        let y1 = (hi.y.ceil().min(height as f64 - 1.0)).max(-1.0);
+        if x1 < 0.0 || y1 < 0.0 {
+            continue;
+        }
+        let inside = |q: DVec2| {
+            let mut sign = 0.0f64;
+            for k in 0..4 {
+                let a = pts[k];
+                let b = pts[(k + 1) % 4];
+                let cr = (b - a).perp_dot(q - a);
+                if cr != 0.0 {
+                    if sign != 0.0 && cr.signum() != sign {
+                        return false;
+                    }
+                    sign = cr.signum();
+                }
+            }
+            true
+        };
+        for y in y0..=y1 as u32 {
+            for x in x0..=x1 as u32 {
+                if inside(DVec2::new(x as f64, y as f64)) {
+                    mask[(y * width + x) as usize] = true;
+                }
+            }
+        }
+    }
+    mask
+}
+
+/// Resolves every input from the session (and `truth.json` where allowed).
+pub fn session_inputs(
+    session: &Session,
+    truth: Option<&Truth>,
+    opts: &SessionOptions,
+) -> Result<(DerenderInputs, [&'static str; 3]), DerenderError> {
+    let f = &session.file;
+    let use_truth = opts.poses != PoseChoice::Session;
+    let truth_ok = truth.filter(|_| use_truth);
+    let (camera, camera_source) = match (f.camera.model(), truth_ok) {
+        (Some(m), _) => (*m, "session"),
+        (None, Some(t)) => (t.camera, "truth"),
+        (None, None) => {
+            return Err(DerenderError::Input(
+                "the camera is not calibrated in session.toml and there is no truth.json".into(),
+            ))
+        }
+    };
+    let meas: Vec<usize> = session
+        .images_with_role(ImageRole::Measurement)
+        .map(|(i, _)| i)
+        .collect();
+    if meas.is_empty() {
+        return Err(DerenderError::Input(
+            "the session has no measurement images".into(),
+        ));
+    }
+    let first_head = meas
+        .iter()
+        .find_map(|&i| f.images[i].world_from_head)
+        .unwrap_or(Pose::IDENTITY);
+    let session_pose = |i: usize| -> Option<ImagePoses> {
+        let e = &f.images[i];
+        let head = e
+            .world_from_head
+            .or(f.known.stationary_sample.then_some(first_head))?;
+        Some(ImagePoses {
+            world_from_camera: e.world_from_camera?,
+            world_from_head: head,
+        })
+    };
+    let truth_pose = |i: usize| -> Option<ImagePoses> {
+        let t = truth_ok?.image(&f.images[i].file)?;
+        Some(ImagePoses {
+            world_from_camera: t.world_from_camera,
+            world_from_head: t.world_from_head,
+        })
+    };
+    let all_session = meas.iter().all(|&i| session_pose(i).is_some());
+    let (measurements, pose_source) = match opts.poses {
+        PoseChoice::Session | PoseChoice::Auto if all_session => (
+            meas.iter()
+                .filter_map(|&i| Some((i, session_pose(i)?)))
+                .collect::<Vec<_>>(),
+            PoseSource::Session,
+        ),
+        PoseChoice::Session => {
+            return Err(DerenderError::Input(
+                "some measurement images have no world_from_camera/world_from_head in session.toml (run the pose stage)".into(),
+            ))
+        }
+        _ => {
+            let mut v = Vec::new();
+            for &i in &meas {
+                let p = input(
+                    truth_pose(i),
+                    &format!(
+                        "image {i} ({}): no poses in session.toml or truth.json (run the pose stage)",
+                        f.images[i].file
+                    ),
+                )?;
+                v.push((i, p));
+            }
+            (v, PoseSource::Truth)
+        }
+    };
+    let (light_position_m, light_source) = if let Some(l) = f.known.light_position_m {
+        (l, "session known.light_position_m")
+    } else if let Some(wff) = f.known.world_from_flash {
+        (
+            wff.transform_point(f.flash.light_centre_m),
+            "session known.world_from_flash",
+        )
+    } else {
+        (
+            input(
+                truth_ok.map(|t| t.light_position_m),
+                "no light position (known.light_position_m / world_from_flash) and no truth.json",
+            )?,
+            "truth",
+        )
+    };
+    let (calibration, c_source) = if let Some(c) = f.known.calibration_c {
+        (CalibrationInput::Known(c), "session known.calibration_c")
+    } else {
+        let std = input(
+            f.standard.as_ref(),
+            "no known.calibration_c and no [standard] to calibrate from",
+        )?;
+        let world_from_standard = match f.known.world_from_standard {
+            Some(p) => p,
+            None => input(
+                truth_ok.map(|t| t.world_from_standard),
+                "no known.world_from_standard and no truth.json",
+            )?,
+        };
+        let mut images = Vec::new();
+        for (i, e) in session.images_with_role(ImageRole::ReferenceStandard) {
+            let wfc = match e.world_from_camera {
+                Some(p) => p,
+                None => input(
+                    truth_ok
+                        .and_then(|t| t.image(&e.file))
+                        .map(|t| t.world_from_camera),
+                    &format!("standard image {i} ({}): no camera pose", e.file),
+                )?,
+            };
+            images.push((i, wfc));
+        }
+        if images.is_empty() {
+            return Err(DerenderError::Input(
+                "no reference-standard images and no known.calibration_c".into(),
+            ));
+        }
+        (
+            CalibrationInput::Standard {
+                brdf: std.brdf.clone(),
+                size_m: std.size_m,
+                world_from_standard,
+                images,
+            },
+            "reference standard (equation 3)",
+        )
+    };
+    Ok((
+        DerenderInputs {
+            camera,
+            light_position_m,
+            calibration,
+            measurements,
+            pose_source,
+        },
+        [camera_source, light_source, c_source],
+    ))
+}
+
+/// Derenders a session end to end (see the module docs).
+pub fn derender_session(
+    session: &Session,
+    opts: &SessionOptions,
+    cfg: &DerenderConfig,
+) -> Result<SessionRun, DerenderError> {
+    cfg.validate()?;
+    let start = Instant::now();
+    let truth = match session.load_truth() {
+        None => None,
+        Some(r) => Some(r.map_err(|e| DerenderError::Input(e.to_string()))?),
+    };
+    let (inputs, [camera_source, light_source, c_source]) =
+        session_inputs(session, truth.as_ref(), opts)?;
+    let (geom, mesh_report, mesh_load_s) = session_geometry(session, cfg)?;
+    let f = &session.file;
+    let world_from_flash = f
+        .known
+        .world_from_flash
+        .or(truth.as_ref().map(|t| t.world_from_flash));
+    let poses_of = |i: usize| {
+        inputs
+            .measurements
+            .iter()
+            .find(|(k, _)| *k == i)
+            .map(|(_, p)| *p)
+    };
+    let loader = |i: usize| -> Result<OwnedImage, DerenderError> {
+        let img = session
+            .load_image(i)
+            .map_err(|e| DerenderError::Input(e.to_string()))?;
+        let e = &f.images[i];
+        let mask = match &e.mask {
+            Some(m) => {
+                let mk = skinbrdf_session::load_mask(&session.path(m))
+                    .map_err(|e| DerenderError::Input(e.to_string()))?;
+                if (mk.width, mk.height) != (img.width, img.height) {
+                    return Err(DerenderError::Input(format!(
+                        "{m}: mask is {}x{} but the image is {}x{}",
+                        mk.width, mk.height, img.width, img.height
+                    )));
+                }
+                Some(mk.data)
+            }
+            None => None,
+        };
+        let targets = match poses_of(i) {
+            Some(p) if !opts.skip_target_mask => {
+                let cam_from_world = p.world_from_camera.inverse();
+                let mut quads: Vec<(Pose, &Target)> = Vec::new();
+                let cfh = cam_from_world * p.world_from_head;
+                quads.extend(f.targets.headdress.iter().map(|t| (cfh, t)));
+                quads.extend(f.targets.reference.iter().map(|t| (cam_from_world, t)));
+                if let Some(wff) = world_from_flash {
+                    quads.extend(f.flash.targets.iter().map(|t| (cam_from_world * wff, t)));
+                }
+                Some(target_mask(&inputs.camera, &quads, img.width, img.height))
+            }
+            _ => None,
+        };
+        Ok(OwnedImage {
+            width: img.width,
+            height: img.height,
+            rgb: img.rgb,
+            saturated: img.saturated,
+            mask,
+            targets,
+        })
+    };
+    let mut report = derender_with_loader(&geom, &inputs, cfg, loader)?;
+    report.times.mesh_load_s = mesh_load_s;
+    if let Some(t) = &truth {
+        report.truth_error = truth_error(&report.samples, &t.brdf);
+    }
+    report.times.total_s = start.elapsed().as_secs_f64();
+    Ok(SessionRun {
+        triangles: geom.mesh.indices.len(),
+        report,
+        mesh_report,
+        camera_source,
+        light_source,
+        c_source,
+    })
+}
+
+/// Writes the samples (binary `.skbs` and optionally CSV) atomically.
+pub fn write_samples(
+    path: &Path,
+    csv: Option<&Path>,
+    run: &SessionRun,
+    session: &Session,
+) -> Result<(), DerenderError> {
+    let out = |e: skinbrdf_samples::SamplesError, p: &Path| DerenderError::Output {
+        path: p.to_path_buf(),
+        reason: e.to_string(),
+    };
+    let mut header = skinbrdf_samples::SampleHeader::new(
+        &format!("skinbrdf derender {}", session.dir.display()),
+        &format!(
+            "C = {:?}, grazing limit {}°, noise floor {}, poses from {:?}",
+            run.report.c,
+            run.report.config.grazing_limit_deg,
+            run.report.config.noise_floor,
+            run.report.pose_source
+        ),
+    );
+    header.image_count = Some(session.file.images.len() as u32);
+    header.calibration_c = Some(run.report.c);
+    header.extra = serde_json::to_value(&run.report).unwrap_or(serde_json::Value::Null);
+    skinbrdf_samples::write_samples(path, &header, &run.report.samples)
+        .map_err(|e| out(e, path))?;
+    if let Some(c) = csv {
+        skinbrdf_samples::write_csv(c, &run.report.samples).map_err(|e| out(e, c))?;
+    }
+    Ok(())
+}
