@@ -81,6 +81,11 @@ pub trait Backend: Send {
     fn options(&self) -> CaptureOptions;
     /// True when the camera/flash are models with known timing (sim, emulator).
     fn modelled_hardware(&self) -> bool;
+    /// Device times (us, fractional) at which the hardware model asserted input `signal`
+    /// (`xsync`, `photodiode`), when the backend knows them independently of the firmware.
+    fn input_edges_us(&self, _signal: &str) -> Option<Vec<f64>> {
+        None
+    }
 }
 
 /// Serialises cases on devices that exist once (the board) or are heavy (the emulator).
@@ -211,6 +216,19 @@ pub struct EmulatorBackend {
     child: Child,
     stdin: Mutex<ChildStdin>,
     path: String,
+    /// Input assertions the harness reported: (signal, sim time in us).
+    edges: Arc<Mutex<Vec<(String, f64)>>>,
+}
+
+/// Parses a harness line like `{"event":"xsync","asserted":true,"sim_ns":1,"sim_us":0.001}`.
+fn parse_edge(line: &str) -> Option<(String, f64)> {
+    let v: serde_json::Value = serde_json::from_str(line).ok()?;
+    let event = v.get("event")?.as_str()?;
+    if !matches!(event, "xsync" | "photodiode") || v.get("asserted")?.as_bool() != Some(true) {
+        return None;
+    }
+    let ns = v.get("sim_ns")?.as_f64()?;
+    Some((event.to_string(), ns / 1000.0))
 }
 
 impl EmulatorBackend {
@@ -252,12 +270,22 @@ impl EmulatorBackend {
                 }
             }
         };
-        // Keep draining its event lines so the harness never blocks on a full pipe.
-        std::thread::spawn(move || for _ in lines.by_ref() {});
+        // Keep draining its event lines (so the harness never blocks on a full pipe) and keep
+        // the input edges: they are the reference for the timestamp-accuracy case.
+        let edges = Arc::new(Mutex::new(Vec::new()));
+        let sink = edges.clone();
+        std::thread::spawn(move || {
+            for line in lines.map_while(Result::ok) {
+                if let Some(edge) = parse_edge(&line) {
+                    sink.lock().unwrap_or_else(|p| p.into_inner()).push(edge);
+                }
+            }
+        });
         let me = Self {
             child,
             stdin: Mutex::new(stdin),
             path,
+            edges,
         };
         if scenario.flash_never_ready {
             me.command(r#"{"cmd":"configure","flash":{"neverReady":true}}"#)?;
@@ -293,6 +321,16 @@ impl Backend for EmulatorBackend {
     }
     fn port(&self) -> String {
         self.path.clone()
+    }
+    fn input_edges_us(&self, signal: &str) -> Option<Vec<f64>> {
+        let edges = self.edges.lock().unwrap_or_else(|p| p.into_inner());
+        Some(
+            edges
+                .iter()
+                .filter(|(s, _)| s == signal)
+                .map(|(_, t)| *t)
+                .collect(),
+        )
     }
     fn options(&self) -> CaptureOptions {
         CaptureOptions {

@@ -43,6 +43,7 @@ backends!(
     link_silence_and_recovery,
     garbage_on_the_line,
     oversized_frames,
+    timestamp_accuracy,
 );
 
 fn connect(dev: &Started) -> Client<Box<dyn Transport>> {
@@ -458,4 +459,57 @@ fn oversized_frames(kind: BackendKind) {
     still_answers(&mut c, &edge);
     let after = status(&mut c).bad_frames;
     assert!(after >= before + 2, "bad frames {before} -> {after}");
+}
+
+/// Edge timestamps against the hardware model's own record of when it drove the pins (target:
+/// within 1 us). Needs a backend that knows the edges independently (the emulator harness).
+fn timestamp_accuracy(kind: BackendKind) {
+    let Some(dev) = start(kind, "timestamp_accuracy", Scenario::default()) else {
+        return;
+    };
+    if dev.input_edges_us("xsync").is_none() {
+        eprintln!(
+            "skipped timestamp_accuracy on {kind:?}: no independent record of the input edges \
+             (the simulator hands the sequencer exact times by construction)"
+        );
+        return;
+    }
+    let plan = short_plan([5, 0, 0, 0], 100_000, 0);
+    let connector = SerialConnector { path: dev.port() };
+    let record = run_capture(connector, &plan, &dev.options(), &mut Unattended).expect("capture");
+    let xsync = dev.input_edges_us("xsync").unwrap_or_default();
+    let light = dev.input_edges_us("photodiode").unwrap_or_default();
+    let nearest = |edges: &[f64], t: u64| -> f64 {
+        edges
+            .iter()
+            .map(|e| t as f64 - e)
+            .min_by(|a, b| a.abs().total_cmp(&b.abs()))
+            .expect("the harness reported edges")
+    };
+    let (mut worst_x, mut worst_f) = (0.0f64, 0.0f64);
+    for e in &record.exposures {
+        let dx = nearest(&xsync, e.xsync_us.expect("x-sync"));
+        let df = nearest(&light, e.flash_fired_us.expect("flash"));
+        worst_x = if dx.abs() > worst_x.abs() {
+            dx
+        } else {
+            worst_x
+        };
+        worst_f = if df.abs() > worst_f.abs() {
+            df
+        } else {
+            worst_f
+        };
+    }
+    eprintln!(
+        "{kind:?}: timestamp error over {} shots: X-sync worst {worst_x:+.3} us, \
+         photodiode worst {worst_f:+.3} us",
+        record.exposures.len()
+    );
+    // Target 1 us; the RP2040's PIO capture quantises to 1 us ticks, hence the 0.5 us margin.
+    assert!(worst_x.abs() <= 1.5, "X-sync timestamp off by {worst_x} us");
+    assert!(
+        worst_f.abs() <= 1.5,
+        "photodiode timestamp off by {worst_f} us"
+    );
 }
