@@ -1,0 +1,609 @@
+//! Figures (PNG and SVG through plotters): polar plots of the incidence plane (the method's
+//! Fig. 6), raw samples with the smoothed curve and its band (Fig. 11), and overlays of several
+//! sessions (Figs. 8, 9) with a test of whether two sessions differ beyond their bands.
+//!
+//! A figure is described as data ([`Figure`], [`Panel`], [`Series`]) and drawn twice, once per
+//! backend, by [`write_figure`]. Text uses plotters' `ttf` feature (fontconfig finds a system
+//! sans-serif font; DejaVu on Debian).
+
+use std::path::{Path, PathBuf};
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use serde::{Deserialize, Serialize};
+use skinbrdf_core::BrdfSample;
+
+use crate::loess::{Loess, LoessPoint};
+
+/// Errors of figure drawing.
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {problem}", path = path.display())]
+pub struct PlotError {
+    /// The output file.
+    pub path: PathBuf,
+    /// What went wrong.
+    pub problem: String,
+}
+
+/// What one series draws.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SeriesKind {
+    /// A polyline.
+    Line(Vec<(f64, f64)>),
+    /// Dots.
+    Points(Vec<(f64, f64)>),
+    /// A shaded band `(x, lower, upper)`.
+    Band(Vec<(f64, f64, f64)>),
+}
+
+/// One labelled series; `color` indexes a fixed palette (negative = light grey guides).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Series {
+    /// Legend label (empty = no legend entry).
+    pub label: String,
+    /// Palette index.
+    pub color: i32,
+    /// The data.
+    pub kind: SeriesKind,
+}
+
+/// One plot area.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Panel {
+    /// Caption.
+    pub title: String,
+    /// Axis labels.
+    pub x_label: String,
+    /// Axis labels.
+    pub y_label: String,
+    /// Ranges (`None` = from the data).
+    pub x_range: Option<(f64, f64)>,
+    /// Ranges (`None` = from the data).
+    pub y_range: Option<(f64, f64)>,
+    /// Draw axes and mesh (off for polar plots, which draw their own guides).
+    pub axes: bool,
+    /// The series.
+    pub series: Vec<Series>,
+}
+
+/// Panels side by side.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Figure {
+    /// The panels, left to right.
+    pub panels: Vec<Panel>,
+    /// Pixel size of one panel.
+    pub panel_px: (u32, u32),
+}
+
+fn palette(i: i32) -> RGBColor {
+    const P: [RGBColor; 6] = [
+        RGBColor(31, 119, 180),
+        RGBColor(214, 39, 40),
+        RGBColor(44, 160, 44),
+        RGBColor(255, 127, 14),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+    ];
+    if i < 0 {
+        RGBColor(200, 200, 200)
+    } else {
+        P[i as usize % P.len()]
+    }
+}
+
+fn data_range(panel: &Panel) -> ((f64, f64), (f64, f64)) {
+    let mut xs = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut ys = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut add = |x: f64, y: f64| {
+        if x.is_finite() && y.is_finite() {
+            xs = (xs.0.min(x), xs.1.max(x));
+            ys = (ys.0.min(y), ys.1.max(y));
+        }
+    };
+    for s in &panel.series {
+        match &s.kind {
+            SeriesKind::Line(v) | SeriesKind::Points(v) => v.iter().for_each(|&(x, y)| add(x, y)),
+            SeriesKind::Band(v) => v.iter().for_each(|&(x, lo, hi)| {
+                add(x, lo);
+                add(x, hi)
+            }),
+        }
+    }
+    let fix = |r: (f64, f64)| {
+        if r.0 < r.1 {
+            r
+        } else if r.0.is_finite() {
+            (r.0 - 1.0, r.0 + 1.0)
+        } else {
+            (0.0, 1.0)
+        }
+    };
+    (
+        panel.x_range.unwrap_or(fix(xs)),
+        panel.y_range.unwrap_or(fix(ys)),
+    )
+}
+
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    panel: &Panel,
+) -> Result<(), String> {
+    let ((x0, x1), (y0, y1)) = data_range(panel);
+    let mut chart = ChartBuilder::on(area)
+        .caption(&panel.title, ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(if panel.axes { 35 } else { 0 })
+        .y_label_area_size(if panel.axes { 55 } else { 0 })
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(|e| e.to_string())?;
+    if panel.axes {
+        chart
+            .configure_mesh()
+            .x_desc(panel.x_label.as_str())
+            .y_desc(panel.y_label.as_str())
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    let mut legend = false;
+    for s in &panel.series {
+        let col = palette(s.color);
+        match &s.kind {
+            SeriesKind::Band(v) => {
+                let mut poly: Vec<(f64, f64)> = v.iter().map(|&(x, _, hi)| (x, hi)).collect();
+                poly.extend(v.iter().rev().map(|&(x, lo, _)| (x, lo)));
+                let ann = chart
+                    .draw_series(std::iter::once(Polygon::new(poly, col.mix(0.25).filled())))
+                    .map_err(|e| e.to_string())?;
+                if !s.label.is_empty() {
+                    legend = true;
+                    ann.label(s.label.as_str()).legend(move |(x, y)| {
+                        Rectangle::new([(x, y - 5), (x + 15, y + 5)], col.mix(0.25).filled())
+                    });
+                }
+            }
+            SeriesKind::Line(v) => {
+                let ann = chart
+                    .draw_series(LineSeries::new(
+                        v.iter().copied(),
+                        col.stroke_width(if s.color < 0 { 1 } else { 2 }),
+                    ))
+                    .map_err(|e| e.to_string())?;
+                if !s.label.is_empty() {
+                    legend = true;
+                    ann.label(s.label.as_str()).legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 15, y)], col.stroke_width(2))
+                    });
+                }
+            }
+            SeriesKind::Points(v) => {
+                let ann = chart
+                    .draw_series(
+                        v.iter()
+                            .map(|&(x, y)| Circle::new((x, y), 2, col.mix(0.5).filled())),
+                    )
+                    .map_err(|e| e.to_string())?;
+                if !s.label.is_empty() {
+                    legend = true;
+                    ann.label(s.label.as_str())
+                        .legend(move |(x, y)| Circle::new((x + 7, y), 3, col.filled()));
+                }
+            }
+        }
+    }
+    if legend {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn draw_figure<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    fig: &Figure,
+) -> Result<(), String> {
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let areas = root.split_evenly((1, fig.panels.len().max(1)));
+    for (a, p) in areas.iter().zip(&fig.panels) {
+        draw_panel(a, p)?;
+    }
+    root.present().map_err(|e| e.to_string())
+}
+
+/// Writes `stem.png` and `stem.svg`; returns their paths. The PNG is written to a temporary
+/// name and renamed (atomic); the SVG is rendered to memory and written atomically.
+pub fn write_figure(stem: &Path, fig: &Figure) -> Result<Vec<PathBuf>, PlotError> {
+    let w = fig.panel_px.0 * fig.panels.len().max(1) as u32;
+    let h = fig.panel_px.1;
+    let png = stem.with_extension("png");
+    let svg = stem.with_extension("svg");
+    let err = |path: &Path, problem: String| PlotError {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let tmp_png = stem.with_extension("tmp.png");
+    draw_figure(
+        BitMapBackend::new(&tmp_png, (w, h)).into_drawing_area(),
+        fig,
+    )
+    .map_err(|e| err(&png, e))?;
+    std::fs::rename(&tmp_png, &png).map_err(|e| err(&png, e.to_string()))?;
+    let mut text = String::new();
+    draw_figure(
+        SVGBackend::with_string(&mut text, (w, h)).into_drawing_area(),
+        fig,
+    )
+    .map_err(|e| err(&svg, e))?;
+    skinbrdf_samples::write_atomic(&svg, |out| out.write_all(text.as_bytes()))
+        .map_err(|e| err(&svg, e.to_string()))?;
+    Ok(vec![png, svg])
+}
+
+/// A curve of the incidence plane: `(signed theta_e in degrees, value, optional band)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlaneCurve {
+    /// Label.
+    pub label: String,
+    /// Incident angle, degrees.
+    pub theta_i_deg: f64,
+    /// `(signed theta_e deg, value, lower, upper)`; negative angles on the light's side.
+    pub points: Vec<(f64, f64, f64, f64)>,
+}
+
+/// Signed exitant angles of the incidence plane, degrees.
+pub fn plane_angles_deg(step_deg: f64) -> Vec<f64> {
+    let n = (178.0 / step_deg).round() as usize;
+    (0..=n).map(|k| -89.0 + k as f64 * step_deg).collect()
+}
+
+/// `(theta_i, theta_e, phi_d)` in radians of a signed incidence-plane angle.
+pub fn plane_point(theta_i_deg: f64, signed_theta_e_deg: f64) -> [f64; 3] {
+    let phi = if signed_theta_e_deg >= 0.0 {
+        std::f64::consts::PI
+    } else {
+        0.0
+    };
+    [
+        theta_i_deg.to_radians(),
+        signed_theta_e_deg.abs().to_radians(),
+        phi,
+    ]
+}
+
+/// A model's incidence-plane curve (one channel, or the channel mean with `channel = 3`).
+pub fn model_curve(
+    label: &str,
+    f: impl Fn([f64; 3]) -> [f64; 3],
+    theta_i_deg: f64,
+    channel: usize,
+) -> PlaneCurve {
+    let points = plane_angles_deg(1.0)
+        .into_iter()
+        .map(|t| {
+            let v = f(plane_point(theta_i_deg, t));
+            let y = if channel < 3 {
+                v[channel]
+            } else {
+                (v[0] + v[1] + v[2]) / 3.0
+            };
+            (t, y, y, y)
+        })
+        .collect();
+    PlaneCurve {
+        label: label.into(),
+        theta_i_deg,
+        points,
+    }
+}
+
+/// A smoothed incidence-plane curve with its band (3-predictor smoother on
+/// `(theta_i, theta_e, phi_d)` in radians).
+pub fn loess_curve(label: &str, l: &Loess, theta_i_deg: f64) -> PlaneCurve {
+    let xs: Vec<Vec<f64>> = plane_angles_deg(2.0)
+        .into_iter()
+        .map(|t| plane_point(theta_i_deg, t).to_vec())
+        .collect();
+    let preds = l.predict_many(&xs);
+    let points = plane_angles_deg(2.0)
+        .into_iter()
+        .zip(preds)
+        .filter_map(|(t, p): (f64, Option<LoessPoint>)| p.map(|p| (t, p.value, p.lower, p.upper)))
+        .collect();
+    PlaneCurve {
+        label: label.into(),
+        theta_i_deg,
+        points,
+    }
+}
+
+/// Polar plot of the incidence plane, one panel per incident angle (the method's Fig. 6):
+/// the value is the radius, the angle from the vertical is the signed exitant angle; the light
+/// direction is drawn as a grey ray.
+pub fn polar_figure(curves_per_angle: &[(f64, Vec<PlaneCurve>)], scale_label: &str) -> Figure {
+    let panels = curves_per_angle
+        .iter()
+        .map(|(ti, curves)| {
+            let rmax = curves
+                .iter()
+                .flat_map(|c| c.points.iter().map(|p| p.3.max(p.1)))
+                .filter(|v| v.is_finite())
+                .fold(1e-12, f64::max);
+            let mut series = Vec::new();
+            for k in 1..=4 {
+                let r = rmax * k as f64 / 4.0;
+                let circle: Vec<(f64, f64)> = (0..=90)
+                    .map(|a| {
+                        let t = (-90.0 + 2.0 * a as f64).to_radians();
+                        (r * t.sin(), r * t.cos())
+                    })
+                    .collect();
+                series.push(Series {
+                    label: String::new(),
+                    color: -1,
+                    kind: SeriesKind::Line(circle),
+                });
+            }
+            let li = (-ti).to_radians();
+            series.push(Series {
+                label: "light".into(),
+                color: -1,
+                kind: SeriesKind::Line(vec![
+                    (0.0, 0.0),
+                    (1.1 * rmax * li.sin(), 1.1 * rmax * li.cos()),
+                ]),
+            });
+            for (k, c) in curves.iter().enumerate() {
+                let to_xy = |t: f64, r: f64| {
+                    let a = t.to_radians();
+                    (r.max(0.0) * a.sin(), r.max(0.0) * a.cos())
+                };
+                if c.points.iter().any(|p| p.2 != p.3) {
+                    let band: Vec<(f64, f64)> = c
+                        .points
+                        .iter()
+                        .map(|p| to_xy(p.0, p.3))
+                        .chain(c.points.iter().rev().map(|p| to_xy(p.0, p.2)))
+                        .collect();
+                    // A polar band is a closed polygon: draw it as a line loop in the series colour.
+                    series.push(Series {
+                        label: String::new(),
+                        color: k as i32,
+                        kind: SeriesKind::Points(band),
+                    });
+                }
+                series.push(Series {
+                    label: c.label.clone(),
+                    color: k as i32,
+                    kind: SeriesKind::Line(c.points.iter().map(|p| to_xy(p.0, p.1)).collect()),
+                });
+            }
+            Panel {
+                title: format!(
+                    "theta_i = {ti:.0} deg ({scale_label}, ring = {:.3})",
+                    rmax / 4.0
+                ),
+                x_label: String::new(),
+                y_label: String::new(),
+                x_range: Some((-1.15 * rmax, 1.15 * rmax)),
+                y_range: Some((-0.05 * rmax, 1.15 * rmax)),
+                axes: false,
+                series,
+            }
+        })
+        .collect();
+    Figure {
+        panels,
+        panel_px: (520, 330),
+    }
+}
+
+/// Raw samples near the incidence plane at `theta_i_deg` with smoothed curves and bands
+/// (the method's Fig. 11), Cartesian: signed exitant angle against value.
+pub fn scatter_figure(
+    title: &str,
+    samples: &[(f64, f64)],
+    curves: &[PlaneCurve],
+    y_label: &str,
+) -> Figure {
+    let mut series = vec![Series {
+        label: "samples".into(),
+        color: 5,
+        kind: SeriesKind::Points(samples.to_vec()),
+    }];
+    for (k, c) in curves.iter().enumerate() {
+        if c.points.iter().any(|p| p.2 != p.3) {
+            series.push(Series {
+                label: format!("{} 95% band", c.label),
+                color: k as i32,
+                kind: SeriesKind::Band(c.points.iter().map(|p| (p.0, p.2, p.3)).collect()),
+            });
+        }
+        series.push(Series {
+            label: c.label.clone(),
+            color: k as i32,
+            kind: SeriesKind::Line(c.points.iter().map(|p| (p.0, p.1)).collect()),
+        });
+    }
+    Figure {
+        panels: vec![Panel {
+            title: title.into(),
+            x_label: "signed exitant angle (deg; < 0 light side)".into(),
+            y_label: y_label.into(),
+            x_range: Some((-90.0, 90.0)),
+            y_range: None,
+            axes: true,
+            series,
+        }],
+        panel_px: (760, 480),
+    }
+}
+
+/// Samples within `tol_deg` of `theta_i_deg` and of the incidence plane, as
+/// `(signed theta_e deg, channel mean)`.
+pub fn plane_samples(samples: &[BrdfSample], theta_i_deg: f64, tol_deg: f64) -> Vec<(f64, f64)> {
+    let tol = tol_deg.to_radians();
+    samples
+        .iter()
+        .filter(|s| (f64::from(s.theta_i_rad) - theta_i_deg.to_radians()).abs() <= tol)
+        .filter(|s| {
+            let pd = f64::from(s.phi_d_rad);
+            pd <= tol || pd >= std::f64::consts::PI - tol
+        })
+        .map(|s| {
+            let signed = s.angles().signed_theta_e_rad().to_degrees();
+            (signed, f64::from(s.rho[0] + s.rho[1] + s.rho[2]) / 3.0)
+        })
+        .collect()
+}
+
+/// Whether two smoothed curves differ beyond their confidence bands.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Difference {
+    /// Labels compared.
+    pub a: String,
+    /// Labels compared.
+    pub b: String,
+    /// Largest `|a - b| / sqrt(se_a^2 + se_b^2)` over the common angles.
+    pub max_z: f64,
+    /// Fraction of common angles where the 95% bands do not overlap.
+    pub fraction_disjoint: f64,
+    /// Verdict: the curves differ where `max_z` exceeds the Bonferroni-corrected two-sided 95%
+    /// normal quantile for the number of angles compared.
+    pub differ: bool,
+    /// The threshold used.
+    pub z_threshold: f64,
+}
+
+/// Compares two curves at their common angles (points matched by angle).
+pub fn compare_curves(a: &PlaneCurve, b: &PlaneCurve) -> Difference {
+    let mut max_z = 0.0f64;
+    let mut disjoint = 0usize;
+    let mut n = 0usize;
+    for pa in &a.points {
+        if let Some(pb) = b.points.iter().find(|pb| (pb.0 - pa.0).abs() < 1e-9) {
+            n += 1;
+            // Band half-width = 1.96 se.
+            let sa = (pa.3 - pa.2) / (2.0 * 1.959964);
+            let sb = (pb.3 - pb.2) / (2.0 * 1.959964);
+            let s = (sa * sa + sb * sb).sqrt();
+            if s > 0.0 {
+                max_z = max_z.max((pa.1 - pb.1).abs() / s);
+            }
+            if pa.2 > pb.3 || pb.2 > pa.3 {
+                disjoint += 1;
+            }
+        }
+    }
+    // Bonferroni: per-angle level 0.05 / n; the normal quantile of 1 - 0.025/n (approximation
+    // sqrt(2 ln(n/0.05)) is close; use the exact quantile through erfc bisection).
+    let p = 0.025 / n.max(1) as f64;
+    let z_threshold = {
+        let (mut lo, mut hi) = (0.0f64, 10.0f64);
+        for _ in 0..80 {
+            let mid = 0.5 * (lo + hi);
+            if 0.5 * erfc(mid / std::f64::consts::SQRT_2) > p {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    Difference {
+        a: a.label.clone(),
+        b: b.label.clone(),
+        max_z,
+        fraction_disjoint: if n > 0 {
+            disjoint as f64 / n as f64
+        } else {
+            0.0
+        },
+        differ: max_z > z_threshold,
+        z_threshold,
+    }
+}
+
+/// Complementary error function (Numerical Recipes' Chebyshev fit, relative error < 1.2e-7).
+fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let r = t
+        * (-z * z - 1.26551223
+            + t * (1.00002368
+                + t * (0.37409196
+                    + t * (0.09678418
+                        + t * (-0.18628806
+                            + t * (0.27886807
+                                + t * (-1.13520398
+                                    + t * (1.48851587 + t * (-0.82215223 + t * 0.17087277)))))))))
+            .exp();
+    if x >= 0.0 {
+        r
+    } else {
+        2.0 - r
+    }
+}
+
+/// Overlay of several sessions' curves with bands (the method's Figs. 8, 9).
+pub fn overlay_figure(title: &str, curves: &[PlaneCurve], y_label: &str) -> Figure {
+    scatter_figure(title, &[], curves, y_label)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn curve(label: &str, offset: f64, se: f64) -> PlaneCurve {
+        PlaneCurve {
+            label: label.into(),
+            theta_i_deg: 30.0,
+            points: plane_angles_deg(2.0)
+                .into_iter()
+                .map(|t| {
+                    let v = 0.3 + offset + 0.1 * (t / 90.0);
+                    (t, v, v - 1.96 * se, v + 1.96 * se)
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn curves_differ_only_beyond_their_bands() {
+        let a = curve("a", 0.0, 0.01);
+        let same = curve("b", 0.005, 0.01);
+        let far = curve("c", 0.1, 0.01);
+        assert!(!compare_curves(&a, &same).differ);
+        let d = compare_curves(&a, &far);
+        assert!(d.differ && d.fraction_disjoint > 0.99, "{d:?}");
+        assert!(d.z_threshold > 2.5 && d.z_threshold < 4.0);
+    }
+
+    #[test]
+    fn figures_are_written_as_png_and_svg() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let fig = polar_figure(
+            &[
+                (0.0, vec![curve("a", 0.0, 0.01)]),
+                (30.0, vec![curve("a", 0.0, 0.0)]),
+            ],
+            "1/sr",
+        );
+        let files = write_figure(&dir.path().join("polar"), &fig).expect("write");
+        for f in &files {
+            assert!(std::fs::metadata(f).expect("exists").len() > 1000, "{f:?}");
+        }
+        let svg = std::fs::read_to_string(&files[1]).expect("svg");
+        assert!(svg.contains("theta_i = 30 deg"));
+        let fig = scatter_figure(
+            "s",
+            &[(0.0, 0.3), (10.0, 0.35)],
+            &[curve("smooth", 0.0, 0.01)],
+            "rho",
+        );
+        write_figure(&dir.path().join("scatter"), &fig).expect("write");
+    }
+}
