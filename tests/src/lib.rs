@@ -198,7 +198,8 @@ impl Backend for SimBackend {
             keepalive: Duration::from_millis(20),
             // 300 s of device time = 6 s of wall time: a loaded CI machine never trips it.
             watchdog_us: Some(300_000_000),
-            request_timeout: Duration::from_millis(500),
+            // Generous: a loaded CI machine may not schedule the simulator thread for a while.
+            request_timeout: Duration::from_secs(2),
             initial_clock_reads: 8,
             reconnect_window: Duration::from_secs(10),
             reconnect_pause: Duration::from_millis(10),

@@ -434,10 +434,13 @@ fn garbage_on_the_line(kind: BackendKind) {
     // Garbage glued in front of a good frame costs that frame only (the device cannot know
     // its seq, so it sends no response); the next request is answered.
     c.write_raw(b"\x05noise").expect("write");
+    let timeout = c.request_timeout;
+    c.request_timeout = Duration::from_millis(300);
     assert!(matches!(
         c.request(RequestBody::Ping),
         Err(ClientError::Timeout { .. }) | Ok(ResponseBody::Pong { .. })
     ));
+    c.request_timeout = timeout;
     still_answers(&mut c, &[]);
     let after = status(&mut c).bad_frames;
     assert!(after >= before + 3, "bad frames {before} -> {after}");
