@@ -15,7 +15,8 @@ const { loadPinmap } = require('./lib/pinmap');
 const USAGE = `usage: node harness.js [--elf PATH] [--pinmap PATH] [--pty | --tcp PORT] [--speed X]
                        [--seed N] [--lag-us MIN,MAX] [--recycle-us N] [--fires-on hotshoe|trigger|both]
                        [--log error|warn|info|debug] [--keep-running]
-  --elf       firmware ELF (default: $CARGO_TARGET_DIR or firmware/rp2040/target, release build)
+  --elf       firmware ELF (default: $SKINBRDF_FIRMWARE_ELF, else the release build under
+              $CARGO_TARGET_DIR or firmware/rp2040/target)
   --pty       bridge USB CDC to a new pseudo-terminal (default); prints "PORT /dev/pts/N"
   --tcp PORT  bridge USB CDC to a TCP server on 127.0.0.1:PORT (0 = any); prints "TCP 127.0.0.1:P"
   --speed X   simulated seconds per wall-clock second (default 1: real time; 0: as fast as possible)
@@ -25,7 +26,7 @@ function parseArgs(argv) {
   const repo = path.join(__dirname, '..', '..');
   const targetDir = process.env.CARGO_TARGET_DIR || path.join(repo, 'firmware', 'rp2040', 'target');
   const o = {
-    elf: path.join(targetDir, 'thumbv6m-none-eabi', 'release', 'skinbrdf-rp2040'),
+    elf: process.env.SKINBRDF_FIRMWARE_ELF || path.join(targetDir, 'thumbv6m-none-eabi', 'release', 'skinbrdf-rp2040'),
     pinmap: undefined,
     bridge: 'pty',
     tcpPort: 0,
