@@ -193,21 +193,26 @@ impl Backend for SimBackend {
         self.path.clone()
     }
     fn options(&self) -> CaptureOptions {
-        CaptureOptions {
-            // 20 ms wall = 1 s device: the keep-alive stays well inside the watchdog.
-            keepalive: Duration::from_millis(20),
-            // 300 s of device time = 6 s of wall time: a loaded CI machine never trips it.
-            watchdog_us: Some(300_000_000),
-            // Generous: a loaded CI machine may not schedule the simulator thread for a while.
-            request_timeout: Duration::from_secs(2),
-            initial_clock_reads: 8,
-            reconnect_window: Duration::from_secs(10),
-            reconnect_pause: Duration::from_millis(10),
-            ..CaptureOptions::default()
-        }
+        sim_options()
     }
     fn modelled_hardware(&self) -> bool {
         true
+    }
+}
+
+/// Capture options for the simulator at [`SIM_TIME_SCALE`].
+pub fn sim_options() -> CaptureOptions {
+    CaptureOptions {
+        // 20 ms wall = 1 s device: the keep-alive stays well inside the watchdog.
+        keepalive: Duration::from_millis(20),
+        // 300 s of device time = 6 s of wall time: a loaded CI machine never trips it.
+        watchdog_us: Some(300_000_000),
+        // Generous: a loaded CI machine may not schedule the simulator thread for a while.
+        request_timeout: Duration::from_secs(2),
+        initial_clock_reads: 8,
+        reconnect_window: Duration::from_secs(10),
+        reconnect_pause: Duration::from_millis(10),
+        ..CaptureOptions::default()
     }
 }
 
@@ -373,6 +378,34 @@ impl Backend for HilBackend {
     }
     fn modelled_hardware(&self) -> bool {
         false
+    }
+}
+
+/// The host end of the simulator's in-process link as a [`Transport`] (no pseudo-terminal).
+#[derive(Debug)]
+pub struct InProcess(pub skinbrdf_sim::HostLink);
+
+impl Transport for InProcess {
+    fn read(&mut self, buf: &mut [u8], timeout: Duration) -> Result<usize, TransportError> {
+        self.0
+            .read_timeout(buf, timeout)
+            .map_err(|e| match e.kind() {
+                std::io::ErrorKind::BrokenPipe => {
+                    TransportError::Disconnected { port: self.name() }
+                }
+                _ => TransportError::Io {
+                    port: self.name(),
+                    source: e,
+                },
+            })
+    }
+    fn write_all(&mut self, data: &[u8]) -> Result<(), TransportError> {
+        self.0
+            .send(data)
+            .map_err(|_| TransportError::Disconnected { port: self.name() })
+    }
+    fn name(&self) -> String {
+        "sim:in-process".into()
     }
 }
 

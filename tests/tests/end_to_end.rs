@@ -69,3 +69,25 @@ fn sim_pty_quick_plan_writes_capture_json() {
         record.clock.samples, record.clock.residual_rms_us
     );
 }
+
+#[test]
+fn sim_in_process_link_runs_the_same_capture() {
+    let plan = skinbrdf_tests::short_plan([3, 1, 1, 2], 200_000, 0);
+    let cfg = skinbrdf_sim::SimConfig {
+        time_scale: skinbrdf_tests::SIM_TIME_SCALE,
+        start_us: skinbrdf_tests::SIM_START_US,
+        ..Default::default()
+    };
+    let (handle, link) = skinbrdf_sim::spawn_in_process(cfg).expect("simulator");
+    let sim_options = skinbrdf_tests::sim_options();
+    let connector = skinbrdf_capture::OnceConnector::new(skinbrdf_tests::InProcess(link));
+    let record = run_capture(connector, &plan, &sim_options, &mut Unattended).expect("capture");
+    assert!(record.complete);
+    assert_eq!(record.exposures.len(), 7);
+    assert!(record
+        .exposures
+        .iter()
+        .all(|e| e.outcome == ShotOutcome::Ok));
+    let report = handle.stop().expect("simulator report");
+    assert!(report.device_time_us > record.exposures[6].shutter_command_us);
+}
