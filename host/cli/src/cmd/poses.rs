@@ -1,9 +1,177 @@
-//! `skinbrdf poses`.
+//! `skinbrdf poses SESSION_DIR [--json]`: detect the coded targets in every image, estimate the
+//! camera, head, flash and standard poses with covariances, write `out/poses.json` (atomically)
+//! and print per image the targets found, reprojection RMS and time. With `truth.json` present,
+//! errors against the truth are printed too.
+
+use anyhow::Context;
+use skinbrdf_poses::session::{compare_truth, median};
+use skinbrdf_poses::{estimate_session, PoseConfig};
+use skinbrdf_session::{write_json_atomic, Session};
+use std::path::PathBuf;
 
 /// Flags of `skinbrdf poses`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The session directory.
+    pub session: PathBuf,
+    /// Print a machine-readable summary instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Recalibrate the camera from the reference field even if session.toml calibrates it.
+    #[arg(long)]
+    pub recalibrate: bool,
+    /// Output file (default SESSION/out/poses.json).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`skinbrdf poses` is not built yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let session = Session::load(&args.session)
+        .map_err(|e| anyhow::anyhow!("{e}"))
+        .with_context(|| format!("loading session {}", args.session.display()))?;
+    let cfg = PoseConfig {
+        recalibrate: args.recalibrate,
+        ..PoseConfig::default()
+    };
+    let est = estimate_session(&session, &cfg).context("estimating poses")?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| args.session.join("out").join("poses.json"));
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    write_json_atomic(&out, &est).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let truth = session
+        .load_truth()
+        .transpose()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let errs = truth.as_ref().map(|t| compare_truth(&est, t));
+    if args.json {
+        let images: Vec<_> = est
+            .images
+            .iter()
+            .enumerate()
+            .map(|(i, im)| {
+                serde_json::json!({
+                    "file": im.file,
+                    "role": im.role,
+                    "targets_found": im.targets_found,
+                    "camera_rms_px": im.world_from_camera.as_ref().map(|p| p.rms_px),
+                    "camera_position_sigma_m": im.world_from_camera.as_ref().map(|p| p.position_sigma_m()),
+                    "detect_ms": im.detect_ms,
+                    "pose_ms": im.pose_ms,
+                    "camera_position_error_m": errs.as_ref().map(|e| e.camera_position_error_m[i]),
+                    "camera_orientation_error_deg": errs.as_ref().map(|e| e.camera_orientation_error_deg[i]),
+                    "head_position_error_m": errs.as_ref().map(|e| e.head_position_error_m[i]),
+                    "diagnostics": im.diagnostics,
+                    "errors": im.errors,
+                })
+            })
+            .collect();
+        let summary = serde_json::json!({
+            "poses_file": out,
+            "images": images,
+            "light_position_m": est.light_position_m,
+            "skipped": est.skipped,
+            "total_ms": est.total_ms,
+            "calibration": est.calibration.as_ref().map(|c| serde_json::json!({
+                "camera": c.camera, "sigma": c.sigma, "rms_px": c.rms_px})),
+            "errors_vs_truth": errs.as_ref().map(|e| serde_json::json!({
+                "camera_position_error_median_m": median(&e.camera_position_error_m),
+                "camera_orientation_error_median_deg": median(&e.camera_orientation_error_deg),
+                "head_position_error_median_m": median(&e.head_position_error_m),
+                "head_orientation_error_median_deg": median(&e.head_orientation_error_deg),
+                "light_position_error_m": e.light_position_error_m,
+                "standard_position_error_m": e.standard_position_error_m,
+                "focal_error_px": e.focal_error_px,
+            })),
+        });
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+        return Ok(());
+    }
+    println!(
+        "{:<28} {:<18} {:>4} {:>4} {:>4} {:>8} {:>8} {:>8} {:>9} {:>9} {:>9}",
+        "image",
+        "role",
+        "ref",
+        "head",
+        "fl",
+        "rms_px",
+        "det_ms",
+        "pose_ms",
+        "cam_mm",
+        "cam_deg",
+        "head_mm"
+    );
+    for (i, im) in est.images.iter().enumerate() {
+        let n = |k: &str| im.targets_found.get(k).copied().unwrap_or(0);
+        let fl = n("flash") + n("standard");
+        let rms = im
+            .world_from_camera
+            .as_ref()
+            .map(|p| format!("{:.3}", p.rms_px))
+            .unwrap_or_else(|| "-".into());
+        let e = |v: Option<f64>, s: f64, p: usize| match v {
+            Some(x) if x.is_finite() => format!("{:.*}", p, x * s),
+            _ => "-".into(),
+        };
+        println!(
+            "{:<28} {:<18} {:>4} {:>4} {:>4} {:>8} {:>8.1} {:>8.1} {:>9} {:>9} {:>9}",
+            im.file,
+            format!("{:?}", im.role),
+            n("reference"),
+            n("headdress"),
+            fl,
+            rms,
+            im.detect_ms,
+            im.pose_ms,
+            e(errs.as_ref().map(|e| e.camera_position_error_m[i]), 1e3, 3),
+            e(
+                errs.as_ref().map(|e| e.camera_orientation_error_deg[i]),
+                1.0,
+                4
+            ),
+            e(errs.as_ref().map(|e| e.head_position_error_m[i]), 1e3, 3),
+        );
+        for d in &im.diagnostics {
+            println!("    warning: {d:?}");
+        }
+        for d in &im.errors {
+            println!("    error: {d}");
+        }
+    }
+    if let Some(c) = &est.calibration {
+        println!(
+            "calibration: fx {:.2} ± {:.2} px, k1 {:.4} ± {:.4}, rms {:.3} px over {} points",
+            c.camera.fx_px, c.sigma[0], c.camera.distortion.k1, c.sigma[4], c.rms_px, c.points
+        );
+    }
+    if let Some(l) = est.light_position_m {
+        println!("flash position: {:.4} {:.4} {:.4} m", l.x, l.y, l.z);
+    }
+    for s in &est.skipped {
+        println!("skipped: {s}");
+    }
+    if let Some(e) = &errs {
+        println!(
+            "vs truth (median): camera position error {:.3} mm, orientation error {:.4} deg, head position error {:.3} mm, head orientation error {:.4} deg",
+            median(&e.camera_position_error_m) * 1e3,
+            median(&e.camera_orientation_error_deg),
+            median(&e.head_position_error_m) * 1e3,
+            median(&e.head_orientation_error_deg)
+        );
+        if let Some(l) = e.light_position_error_m {
+            println!("vs truth: flash position error {:.3} mm", l * 1e3);
+        }
+        if let Some(s) = e.standard_position_error_m {
+            println!("vs truth: standard position error {:.3} mm", s * 1e3);
+        }
+    }
+    println!(
+        "poses written to {} in {:.0} ms",
+        out.display(),
+        est.total_ms
+    );
+    Ok(())
 }
