@@ -300,6 +300,7 @@ struct CutAfter {
     cut: Arc<AtomicBool>,
     reconnected: u32,
     recovered: u32,
+    summary: Option<skinbrdf_capture::RunSummary>,
 }
 
 impl CaptureObserver for CutAfter {
@@ -311,6 +312,9 @@ impl CaptureObserver for CutAfter {
     fn reconnected(&mut self, fetched: u32) {
         self.reconnected += 1;
         self.recovered += fetched;
+    }
+    fn finished(&mut self, summary: &skinbrdf_capture::RunSummary) {
+        self.summary = Some(*summary);
     }
 }
 
@@ -330,6 +334,7 @@ fn disconnect_and_reconnect(kind: BackendKind) {
         cut: cut.clone(),
         reconnected: 0,
         recovered: 0,
+        summary: None,
     };
     let port = dev.port();
     let cut_c = cut.clone();
@@ -355,6 +360,9 @@ fn disconnect_and_reconnect(kind: BackendKind) {
         .iter()
         .all(|e| e.outcome == ShotOutcome::Ok));
     assert_eq!(observer.reconnected, 1);
+    let summary = observer.summary.expect("finished was called");
+    assert_eq!(summary.reconnects, 1);
+    assert_eq!(summary.exposures, 8);
     eprintln!(
         "{kind:?}: reconnected once, recovered {} records taken while disconnected",
         observer.recovered
@@ -380,6 +388,7 @@ fn link_silence_and_recovery(kind: BackendKind) {
         cut: Arc::new(AtomicBool::new(false)),
         reconnected: 0,
         recovered: 0,
+        summary: None,
     };
     let plan = short_plan([6, 0, 0, 1], 100_000, 0);
     let connector = SerialConnector { path: dev.port() };

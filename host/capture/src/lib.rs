@@ -28,5 +28,5 @@ pub mod session;
 pub use client::{Client, ClientError};
 pub use session::{
     run_capture, CaptureError, CaptureObserver, CaptureOptions, Connector, GroupDecision,
-    OnceConnector, SerialConnector, Unattended,
+    OnceConnector, RunSummary, SerialConnector, Unattended,
 };

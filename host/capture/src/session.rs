@@ -169,8 +169,29 @@ pub trait CaptureObserver {
     fn group_done(&mut self, index: usize) {}
     /// The link failed; reconnecting.
     fn link_lost(&mut self, error: &ClientError) {}
+    /// The run ended (completed, aborted or failed); what the link went through.
+    fn finished(&mut self, summary: &RunSummary) {}
     /// Reconnected; `fetched` records were recovered.
     fn reconnected(&mut self, fetched: u32) {}
+}
+
+/// What a run cost and what the link went through (for the operator and for reports).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RunSummary {
+    /// Wall time from connecting to the end, seconds.
+    pub elapsed_s: f64,
+    /// Exposures recorded.
+    pub exposures: usize,
+    /// Successful reconnects.
+    pub reconnects: u32,
+    /// Records the device resent on `FetchRecords` (missed live: link down, queue overflow).
+    pub fetched: u32,
+    /// Duplicate records dropped.
+    pub duplicates: u32,
+    /// Frames from the device rejected by the decoder (CRC, COBS, oversize).
+    pub bad_frames: u64,
+    /// Requests sent (handshakes and clock reads excluded).
+    pub requests: u64,
 }
 
 /// An observer that continues every group and reports nothing.
@@ -333,6 +354,9 @@ struct Runner<'a, C: Connector, O: CaptureObserver> {
     last_fault: Option<Fault>,
     last_status: Instant,
     aborting: bool,
+    summary: RunSummary,
+    started: Instant,
+    bad_frames_closed: u64,
 }
 
 /// Runs `plan` on the device behind `connector`, writing `capture.json` after every exposure
@@ -387,8 +411,14 @@ pub fn run_capture<C: Connector, O: CaptureObserver>(
         last_fault: None,
         last_status: Instant::now(),
         aborting: false,
+        summary: RunSummary::default(),
+        started: Instant::now(),
+        bad_frames_closed: 0,
     };
-    runner.run(&proto_plan)
+    let result = runner.run(&proto_plan);
+    let summary = runner.finish_summary();
+    runner.observer.finished(&summary);
+    result
 }
 
 impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
@@ -400,7 +430,25 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             }))
     }
 
+    /// Drops the client, keeping its counters.
+    fn close_client(&mut self) {
+        if let Some(c) = self.client.take() {
+            self.bad_frames_closed += c.stats().bad_frames;
+        }
+    }
+
+    fn finish_summary(&mut self) -> RunSummary {
+        RunSummary {
+            elapsed_s: self.started.elapsed().as_secs_f64(),
+            exposures: self.shots(),
+            bad_frames: self.bad_frames_closed
+                + self.client.as_ref().map_or(0, |c| c.stats().bad_frames),
+            ..self.summary
+        }
+    }
+
     fn request(&mut self, body: RequestBody) -> Result<ResponseBody, ClientError> {
+        self.summary.requests += 1;
         // Events that arrive while waiting are queued and handled by the caller's event loop.
         self.client()?.request(body)
     }
@@ -611,6 +659,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             match self.request(RequestBody::FetchRecords { from_index })? {
                 ResponseBody::Fetching { count } => {
                     tracing::debug!(from_index, count, "fetching records");
+                    self.summary.fetched += count;
                 }
                 other => return Err(self.unexpected("FetchRecords", &other).into()),
             }
@@ -653,6 +702,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         let next = self.next_index();
         if r.index < next {
             tracing::debug!(index = r.index, "duplicate record dropped");
+            self.summary.duplicates += 1;
             return Ok(());
         }
         if r.index > next {
@@ -739,7 +789,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         let mut keep = if matches!(error, ClientError::Timeout { .. }) {
             self.client.take()
         } else {
-            self.client = None;
+            self.close_client();
             None
         };
         let deadline = Instant::now() + self.options.reconnect_window;
@@ -795,6 +845,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         if self.run_end.is_none() && status.state != SessionState::Running {
             self.run_end = Some(run_end_from_status(&status));
         }
+        self.summary.reconnects += 1;
         self.observer.reconnected(self.next_index() - before);
         Ok(())
     }

@@ -12,7 +12,7 @@ use skinbrdf_capture::protocol::{ExposureRecord, Fault, LogLevel};
 use skinbrdf_capture::session::fault_text;
 use skinbrdf_capture::{
     load_plan, run_capture, CaptureError, CaptureObserver, CaptureOptions, ClientError,
-    GroupDecision, SerialConnector,
+    GroupDecision, RunSummary, SerialConnector,
 };
 use skinbrdf_session::capture::{CaptureRecord, Exposure, ShotGroup, ShotOutcome};
 
@@ -261,6 +261,14 @@ impl CaptureObserver for CliObserver {
 
     fn link_lost(&mut self, error: &ClientError) {
         self.line(format!("  link lost ({error}); reconnecting ..."));
+    }
+
+    fn finished(&mut self, s: &RunSummary) {
+        self.line(format!(
+            "run: {} exposures in {:.1} s; link: {} requests, {} reconnects, {} records refetched, \
+             {} duplicates dropped, {} bad frames",
+            s.exposures, s.elapsed_s, s.requests, s.reconnects, s.fetched, s.duplicates, s.bad_frames
+        ));
     }
 
     fn reconnected(&mut self, fetched: u32) {
