@@ -237,6 +237,13 @@ proptest! {
         let mut dec = FrameDecoder::<64>::new();
         let (mut ok, mut errs) = (vec![], vec![]);
         decode_all_small(&mut dec, &data, &mut ok, &mut errs);
+        // Anything accepted is canonical: it re-encodes and decodes to itself.
+        for m in &ok {
+            let again = encode_to_vec(m).expect("re-encodes");
+            let mut d = FrameDecoder::<MAX_FRAME_LEN>::new();
+            let (back, _) = d.feed::<DeviceMessage>(&again).expect("one frame");
+            prop_assert_eq!(&back.expect("decodes"), m);
+        }
         let mut dec2 = FrameDecoder::<MAX_FRAME_LEN>::new();
         let mut input: &[u8] = &data;
         while let Some((_r, rest)) = dec2.feed::<Request>(input) { input = rest; }
