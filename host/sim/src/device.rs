@@ -413,3 +413,85 @@ impl SimDevice {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Faults, FlashModel};
+    use skinbrdf_protocol::{encode_to_vec, RequestBody, PROTOCOL_VERSION};
+
+    fn hello_bytes(seq: u32) -> Vec<u8> {
+        let req = Request {
+            seq,
+            body: RequestBody::Hello {
+                protocol_version: PROTOCOL_VERSION,
+            },
+        };
+        encode_to_vec(&req).expect("encode").to_vec()
+    }
+
+    #[test]
+    fn nominal_recycle_spans_half_to_three_seconds() {
+        let f = |power| FlashModel {
+            power,
+            ..FlashModel::STUDIO_HALF_POWER
+        };
+        assert_eq!(f(0.0).nominal_recycle_us(), 500_000);
+        assert_eq!(f(0.5).nominal_recycle_us(), 1_750_000);
+        assert_eq!(f(1.0).nominal_recycle_us(), 3_000_000);
+    }
+
+    #[test]
+    fn slow_host_budget_limits_output_per_device_second() {
+        let cfg = SimConfig {
+            faults: Faults {
+                host_bytes_per_s: Some(10),
+                ..Faults::default()
+            },
+            ..SimConfig::default()
+        };
+        let mut dev = SimDevice::new(cfg).expect("config");
+        for seq in 0..5 {
+            dev.receive(&hello_bytes(seq));
+        }
+        let queued = dev.pending_output();
+        assert!(queued > 100, "five Hello responses queued: {queued}");
+        assert!(dev.take_output(usize::MAX).is_empty(), "no budget yet");
+        dev.advance_to(dev.now_us() + 2_000_000);
+        assert_eq!(dev.take_output(usize::MAX).len(), 20, "10 B/s for 2 s");
+        dev.advance_to(dev.now_us() + 1_000_000);
+        assert_eq!(
+            dev.take_output(3).len(),
+            3,
+            "the caller's limit applies too"
+        );
+        assert_eq!(
+            dev.take_output(usize::MAX).len(),
+            7,
+            "the rest of the budget"
+        );
+    }
+
+    #[test]
+    fn a_dropped_link_loses_bytes_both_ways_then_flushes_and_recovers() {
+        let mut dev = SimDevice::new(SimConfig::default()).expect("config");
+        dev.drop_link(1_000_000);
+        assert!(!dev.link_up());
+        dev.receive(&hello_bytes(1));
+        assert_eq!(dev.stats().requests, 0);
+        assert_eq!(dev.pending_output(), 0);
+        dev.advance_to(dev.now_us() + 1_000_000);
+        assert!(dev.link_up());
+        assert_eq!(
+            dev.take_output(usize::MAX),
+            vec![0],
+            "a lone delimiter on link-up"
+        );
+        dev.receive(&hello_bytes(2));
+        assert_eq!(dev.stats().requests, 1);
+        let mut decoder = FrameDecoder::<MAX_FRAME_LEN>::new();
+        let out = dev.take_output(usize::MAX);
+        let (msg, _) = decoder.feed::<DeviceMessage>(&out).expect("a frame");
+        assert!(matches!(msg, Ok(DeviceMessage::Response(r)) if r.seq == 2 && r.result.is_ok()));
+    }
+}
