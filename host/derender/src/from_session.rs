@@ -4,8 +4,8 @@
 //!
 //! * **camera**: `[camera]` when calibrated, else `truth.json`'s camera (synthetic sessions);
 //! * **poses**: per image `world_from_camera` / `world_from_head` from `session.toml` (a
-//!   stationary sample reuses the first head pose), else `truth.json` ([`PoseChoice`]); the
-//!   pose stage's output enters through [`DerenderInputs`] directly;
+//!   stationary sample reuses the first head pose), else `truth.json`, or the pose stage's
+//!   result (`PoseChoice::Estimated`, `out/poses.json`);
 //! * **light**: `known.light_position_m`, else `known.world_from_flash` applied to the flash's
 //!   emitting point, else truth;
 //! * **C**: `known.calibration_c`, else from the `reference-standard` images (the standard's
@@ -49,6 +49,10 @@ pub enum PoseChoice {
     Session,
     /// Only `truth.json`.
     Truth,
+    /// The pose stage's output ([`SessionOptions::estimated`]): camera, per-image poses,
+    /// light and standard; known quantities in `session.toml` still take precedence for the
+    /// light and the standard.
+    Estimated,
 }
 
 /// Options of [`derender_session`] besides the [`DerenderConfig`].
@@ -56,8 +60,11 @@ pub enum PoseChoice {
 pub struct SessionOptions {
     /// Pose source.
     pub poses: PoseChoice,
-    /// Mask the printed targets (default on).
+    /// Do not mask the printed targets.
     pub skip_target_mask: bool,
+    /// The pose stage's result (`skinbrdf_poses::estimate_session`, or `out/poses.json`),
+    /// used with [`PoseChoice::Estimated`].
+    pub estimated: Option<skinbrdf_poses::SessionPoses>,
 }
 
 /// What [`derender_session`] returns besides the report.
@@ -195,6 +202,9 @@ pub fn session_inputs(
     opts: &SessionOptions,
 ) -> Result<(DerenderInputs, [&'static str; 3]), DerenderError> {
     let f = &session.file;
+    if opts.poses == PoseChoice::Estimated {
+        return estimated_inputs(session, opts);
+    }
     let use_truth = opts.poses != PoseChoice::Session;
     let truth_ok = truth.filter(|_| use_truth);
     let (camera, camera_source) = match (f.camera.model(), truth_ok) {
@@ -334,6 +344,100 @@ pub fn session_inputs(
     ))
 }
 
+/// Inputs from the pose stage's result.
+fn estimated_inputs(
+    session: &Session,
+    opts: &SessionOptions,
+) -> Result<(DerenderInputs, [&'static str; 3]), DerenderError> {
+    let f = &session.file;
+    let est = input(
+        opts.estimated.as_ref(),
+        "--poses estimated needs the pose stage's result (out/poses.json)",
+    )?;
+    if est.images.len() != f.images.len() {
+        return Err(DerenderError::Input(format!(
+            "poses.json has {} images but the session has {}",
+            est.images.len(),
+            f.images.len()
+        )));
+    }
+    let mut measurements = Vec::new();
+    for (i, e) in session.images_with_role(ImageRole::Measurement) {
+        let p = &est.images[i];
+        match (&p.world_from_camera, &p.world_from_head) {
+            (Some(c), Some(h)) => measurements.push((
+                i,
+                ImagePoses {
+                    world_from_camera: c.pose,
+                    world_from_head: h.pose,
+                },
+            )),
+            // An image whose poses could not be estimated is skipped (the pose stage reports why).
+            _ => tracing_skip(i, &e.file),
+        }
+    }
+    if measurements.is_empty() {
+        return Err(DerenderError::Input(
+            "the pose stage found poses for no measurement image".into(),
+        ));
+    }
+    let (light_position_m, light_source) = match (f.known.light_position_m, est.light_position_m) {
+        (Some(l), _) => (l, "session known.light_position_m"),
+        (None, Some(l)) => (l, "pose stage"),
+        (None, None) => {
+            return Err(DerenderError::Input(
+                "no light position: neither known nor estimated".into(),
+            ))
+        }
+    };
+    let (calibration, c_source) = if let Some(c) = f.known.calibration_c {
+        (CalibrationInput::Known(c), "session known.calibration_c")
+    } else {
+        let std = input(
+            f.standard.as_ref(),
+            "no known.calibration_c and no [standard]",
+        )?;
+        let world_from_standard = input(
+            f.known
+                .world_from_standard
+                .or(est.world_from_standard.as_ref().map(|p| p.pose)),
+            "no world_from_standard: neither known nor estimated",
+        )?;
+        let images: Vec<(usize, Pose)> = session
+            .images_with_role(ImageRole::ReferenceStandard)
+            .filter_map(|(i, _)| Some((i, est.images[i].world_from_camera.as_ref()?.pose)))
+            .collect();
+        if images.is_empty() {
+            return Err(DerenderError::Input(
+                "no reference-standard image with an estimated camera pose".into(),
+            ));
+        }
+        (
+            CalibrationInput::Standard {
+                brdf: std.brdf.clone(),
+                size_m: std.size_m,
+                world_from_standard,
+                images,
+            },
+            "reference standard (equation 3)",
+        )
+    };
+    Ok((
+        DerenderInputs {
+            camera: est.camera,
+            light_position_m,
+            calibration,
+            measurements,
+            pose_source: PoseSource::Estimated,
+        },
+        ["pose stage", light_source, c_source],
+    ))
+}
+
+fn tracing_skip(index: usize, file: &str) {
+    tracing::warn!("image {index} ({file}) has no estimated poses; skipped");
+}
+
 /// Derenders a session end to end (see the module docs).
 pub fn derender_session(
     session: &Session,
@@ -353,6 +457,10 @@ pub fn derender_session(
     let world_from_flash = f
         .known
         .world_from_flash
+        .or(opts
+            .estimated
+            .as_ref()
+            .and_then(|e| e.world_from_flash.as_ref().map(|p| p.pose)))
         .or(truth.as_ref().map(|t| t.world_from_flash));
     let poses_of = |i: usize| {
         inputs

@@ -17,11 +17,14 @@
 //!   image, light, C or the standard, images loaded one at a time), timings per stage.
 //! * [`from_session`]: the same from a `skinbrdf-session` directory ([`derender_session`]),
 //!   with, when `truth.json` is present, the samples' error against the true BRDF.
+//! * [`figures`]: coverage figures (pixels used per image; the exitant hemisphere for one θ_i
+//!   with the reciprocal samples in another colour), PNG and SVG.
 //!
 //! The API takes poses as plain data (`world_from_camera`, `world_from_head` per image, the
 //! light position in the world), so it works from known poses before pose estimation exists.
 
 pub mod calibrate;
+pub mod figures;
 pub mod from_session;
 pub mod geometry;
 pub mod image;

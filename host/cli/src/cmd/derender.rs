@@ -38,9 +38,13 @@ pub struct Args {
     /// Average of C over the standard: median or trimmed.
     #[arg(long, default_value = "median")]
     pub c_estimator: String,
-    /// Poses: auto (session.toml, else truth.json), session, truth.
+    /// Poses: auto (session.toml, else truth.json), session, truth, estimated (the pose
+    /// stage's output, --poses-file or SESSION/out/poses.json).
     #[arg(long, default_value = "auto")]
     pub poses: String,
+    /// The pose stage's output (implies --poses estimated).
+    #[arg(long)]
+    pub poses_file: Option<PathBuf>,
     /// Do not mask the projected printed targets.
     #[arg(long)]
     pub no_target_mask: bool,
@@ -50,6 +54,60 @@ pub struct Args {
     /// Also write samples.csv.
     #[arg(long)]
     pub csv: bool,
+    /// Write coverage figures into OUT/figures: pixels used per image (PNG) and the exitant
+    /// hemisphere at --figure-theta-i-deg (PNG and SVG).
+    #[arg(long)]
+    pub figures: bool,
+    /// Incident angle of the hemisphere figure, degrees.
+    #[arg(long, default_value_t = 30.0)]
+    pub figure_theta_i_deg: f64,
+    /// Tolerance on the incident angle of the hemisphere figure, degrees.
+    #[arg(long, default_value_t = 2.0)]
+    pub figure_tol_deg: f64,
+}
+
+fn write_figures(
+    args: &Args,
+    out: &std::path::Path,
+    session: &skinbrdf_session::Session,
+    run: &skinbrdf_derender::SessionRun,
+) -> anyhow::Result<()> {
+    use skinbrdf_derender::figures;
+    let dir = out.join("figures");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let samples = &run.report.samples;
+    for im in &run.report.images {
+        let img = session
+            .load_image(im.image_index)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let view = skinbrdf_derender::ImageView {
+            width: img.width,
+            height: img.height,
+            rgb: &img.rgb,
+            saturated: None,
+        };
+        let rgb = figures::pixels_used_rgb8(&view, samples, im.image_index as u16);
+        let p = dir.join(format!("pixels_used_{:03}.png", im.image_index));
+        skinbrdf_session::write::write_png_rgb8(&p, img.width, img.height, &rgb)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+    }
+    let (ti, tol) = (args.figure_theta_i_deg, args.figure_tol_deg);
+    let svg = figures::hemisphere_svg(samples, ti, tol);
+    skinbrdf_session::write_atomic(
+        &dir.join(format!("hemisphere_theta_i_{ti}.svg")),
+        svg.as_bytes(),
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let size = 600;
+    let png = figures::hemisphere_rgb8(samples, ti, tol, size);
+    skinbrdf_session::write::write_png_rgb8(
+        &dir.join(format!("hemisphere_theta_i_{ti}.png")),
+        size,
+        size,
+        &png,
+    )
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    Ok(())
 }
 
 fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
@@ -60,9 +118,7 @@ fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
         o => anyhow::bail!("--shadows: `{o}` is not one of auto, always, never"),
     };
     let normals = match (args.normals.as_str(), args.normal_radius_mm) {
-        (_, Some(r)) => NormalMethod::PlanarFit {
-            radius_m: r * 1e-3,
-        },
+        (_, Some(r)) => NormalMethod::PlanarFit { radius_m: r * 1e-3 },
         ("auto", None) => NormalMethod::PlanarFitAuto,
         ("vertex", None) => NormalMethod::Vertex,
         ("fit", None) => anyhow::bail!("--normals fit needs --normal-radius-mm"),
@@ -74,10 +130,12 @@ fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
         o => anyhow::bail!("--c-estimator: `{o}` is not one of median, trimmed"),
     };
     let poses = match args.poses.as_str() {
+        _ if args.poses_file.is_some() => PoseChoice::Estimated,
+        "estimated" => PoseChoice::Estimated,
         "auto" => PoseChoice::Auto,
         "session" => PoseChoice::Session,
         "truth" => PoseChoice::Truth,
-        o => anyhow::bail!("--poses: `{o}` is not one of auto, session, truth"),
+        o => anyhow::bail!("--poses: `{o}` is not one of auto, session, truth, estimated"),
     };
     let cfg = DerenderConfig {
         stride: args.stride,
@@ -93,12 +151,23 @@ fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
         SessionOptions {
             poses,
             skip_target_mask: args.no_target_mask,
+            estimated: None,
         },
     ))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (cfg, opts) = config(&args)?;
+    let (cfg, mut opts) = config(&args)?;
+    if opts.poses == PoseChoice::Estimated {
+        let p = args
+            .poses_file
+            .clone()
+            .unwrap_or_else(|| args.session.join("out").join("poses.json"));
+        let text = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
+        opts.estimated = Some(
+            serde_json::from_slice(&text).with_context(|| format!("parsing {}", p.display()))?,
+        );
+    }
     let session = skinbrdf_session::Session::load(&args.session)
         .map_err(|e| anyhow::anyhow!("{e}"))
         .with_context(|| format!("loading session {}", args.session.display()))?;
@@ -112,6 +181,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &run,
         &session,
     )?;
+    if args.figures {
+        write_figures(&args, &out, &session, &run)?;
+    }
     let json = serde_json::to_string_pretty(&run)?;
     skinbrdf_session::write_atomic(&out.join("derender.json"), json.as_bytes())
         .map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -149,12 +221,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "  shadow rays: {} ({})",
         if r.shadow_rays { "cast" } else { "skipped" },
         if r.region_can_self_shadow {
-            format!("geometry can shadow the region; {} rays", r.shadow_rays_cast)
+            format!(
+                "geometry can shadow the region; {} rays",
+                r.shadow_rays_cast
+            )
         } else {
             "region is convex: nothing can shadow it".to_string()
         }
     );
-    println!("  normals: {:?}, radius {:.2} mm", cfg.normals, r.normal_radius_m * 1e3);
+    println!(
+        "  normals: {:?}, radius {:.2} mm",
+        cfg.normals,
+        r.normal_radius_m * 1e3
+    );
     match &r.calibration {
         Some(cal) => println!(
             "  C = [{:.5}, {:.5}, {:.5}] from {} standard pixels ({:?}); relative spread (MAD sigma) [{:.2}%, {:.2}%, {:.2}%]",
