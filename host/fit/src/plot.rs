@@ -301,8 +301,14 @@ pub fn model_curve(
 }
 
 /// A smoothed incidence-plane curve with its band (3-predictor smoother on
-/// `(theta_i, theta_e, phi_d)` in radians).
-pub fn loess_curve(label: &str, l: &Loess, theta_i_deg: f64) -> PlaneCurve {
+/// `(theta_i, theta_e, phi_d)` in radians); `back` maps the smoother's scale to the plotted one
+/// (e.g. `exp(v) - floor` for a smoother of `ln(rho + floor)`; monotone, so bands map to bands).
+pub fn loess_curve(
+    label: &str,
+    l: &Loess,
+    theta_i_deg: f64,
+    back: impl Fn(f64) -> f64,
+) -> PlaneCurve {
     let xs: Vec<Vec<f64>> = plane_angles_deg(2.0)
         .into_iter()
         .map(|t| plane_point(theta_i_deg, t).to_vec())
@@ -311,7 +317,9 @@ pub fn loess_curve(label: &str, l: &Loess, theta_i_deg: f64) -> PlaneCurve {
     let points = plane_angles_deg(2.0)
         .into_iter()
         .zip(preds)
-        .filter_map(|(t, p): (f64, Option<LoessPoint>)| p.map(|p| (t, p.value, p.lower, p.upper)))
+        .filter_map(|(t, p): (f64, Option<LoessPoint>)| {
+            p.map(|p| (t, back(p.value), back(p.lower), back(p.upper)))
+        })
         .collect();
     PlaneCurve {
         label: label.into(),

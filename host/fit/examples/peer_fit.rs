@@ -1,0 +1,68 @@
+//! Writes the 1M-sample benchmark data set as a sample file and times skinbrdf's fits on it, for
+//! the SciPy comparison in `scripts/peers/scipy_least_squares.py`.
+//!
+//! `cargo run --release -p skinbrdf-fit --example peer_fit -- OUT.skbs`
+
+use std::time::Instant;
+
+use skinbrdf_brdf::{ChannelModel, LafortuneFit, StartHint};
+use skinbrdf_fit::fit::auto_floor;
+use skinbrdf_fit::lm::{self, ChannelData, LmConfig, ResidualKind};
+use skinbrdf_fit::{fit_data, FitConfig, FitData};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let out = std::env::args()
+        .nth(1)
+        .unwrap_or_else(|| "bench_1m.skbs".into());
+    let n: usize = std::env::args()
+        .nth(2)
+        .map_or(Ok(1_000_000), |s| s.parse())?;
+    let (_, samples) = skinbrdf_fit::synthetic::lafortune2_samples(n, 0.05, 7);
+    skinbrdf_samples::write_samples(
+        &out,
+        &skinbrdf_samples::SampleHeader::new(
+            "synthetic",
+            "lafortune2 benchmark, 5% log-normal noise, seed 7",
+        ),
+        &samples,
+    )?;
+    let data = FitData::from_samples(&samples)?;
+    let model = LafortuneFit::standard(2);
+    let grey: Vec<f64> = (0..data.len())
+        .map(|i| (data.y[0][i] + data.y[1][i] + data.y[2][i]) / 3.0)
+        .collect();
+    let floor = auto_floor(&grey, skinbrdf_fit::fit::LOG_FLOOR_REL_MEDIAN);
+    let residual = ResidualKind::Log { floor_rho: floor };
+    let target = lm::transform_target(residual, &data.geom, &data.y[0]);
+    let cd = ChannelData {
+        geom: &data.geom,
+        target: &target,
+        sqrt_w: &data.sqrt_w,
+        residual,
+    };
+    let y = &data.y[0];
+    let mut sorted = y.clone();
+    sorted.sort_by(f64::total_cmp);
+    let hint = StartHint {
+        diffuse_rho: sorted[sorted.len() / 4],
+        peak_rho: sorted[(sorted.len() as f64 * 0.999) as usize],
+    };
+    let start = model.starting_points(&hint)[1].clone();
+    let t = Instant::now();
+    let o = lm::solve(&model, &start, &cd, &LmConfig::default()).ok_or("no finite cost")?;
+    let single = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let full = fit_data(&model, &data, &FitConfig::default())?;
+    let pipeline = t.elapsed().as_secs_f64();
+    println!(
+        "{}",
+        serde_json::json!({
+            "samples": n,
+            "floor": floor,
+            "start": start,
+            "single_start_red": {"seconds": single, "cost": o.cost, "iterations": o.iterations, "evaluations": o.evaluations, "params": o.params},
+            "pipeline_rgb": {"seconds": pipeline, "cost_red": full.channels[0].cost, "params_red": full.channels[0].params},
+        })
+    );
+    Ok(())
+}
