@@ -51,6 +51,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             e.standard_position_error_m.map(|x| x * 1e3),
             est.total_ms
         );
+        for (i, im) in est.images.iter().enumerate() {
+            println!(
+                "{:<24} camera {:.3} mm {:.4} deg  head {:.3} mm {:.4} deg (head targets {:?}, sigma {:.3} mm)",
+                im.file,
+                e.camera_position_error_m[i] * 1e3,
+                e.camera_orientation_error_deg[i],
+                e.head_position_error_m[i] * 1e3,
+                e.head_orientation_error_deg[i],
+                im.world_from_head.as_ref().map(|h| h.targets_used),
+                im.world_from_head.as_ref().map(|h| h.position_sigma_m() * 1e3).unwrap_or(f64::NAN),
+            );
+        }
         let max = |v: &[f64]| {
             v.iter()
                 .copied()

@@ -25,6 +25,10 @@ use skinbrdf_targets::{detect::detect_with_stats, Detection, DetectorConfig, Gra
 use std::collections::HashMap;
 use std::time::Instant;
 
+/// Minimum number of targets for a head, flash or standard pose (one small tag alone is
+/// ambiguous: its planar flip fits about as well).
+pub const MIN_TARGETS_COMPOSITE: usize = 2;
+
 /// Settings of [`estimate_session`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct PoseConfig {
@@ -396,7 +400,19 @@ pub fn estimate_session(session: &Session, cfg: &PoseConfig) -> Result<SessionPo
                 if pts.is_empty() {
                     return None;
                 }
-                match estimate_pose(&camera, &pts, None, &cfg.pnp) {
+                // A single small target's pose can be the planar flip: composite poses need two.
+                let sub_cfg = PnpConfig {
+                    min_targets: cfg.pnp.min_targets.max(MIN_TARGETS_COMPOSITE),
+                    ..cfg.pnp
+                };
+                match estimate_pose(&camera, &pts, None, &sub_cfg) {
+                    Ok(e) if e.targets_used.len() < MIN_TARGETS_COMPOSITE => {
+                        out.errors.push(format!(
+                            "{which} pose: only {} target(s) consistent, {MIN_TARGETS_COMPOSITE} needed",
+                            e.targets_used.len()
+                        ));
+                        None
+                    }
                     Ok(e) => {
                         out.diagnostics.extend(e.diagnostics.iter().cloned());
                         Some(compose(&wc, &e))
