@@ -244,8 +244,8 @@ pub fn solve(
     let mut p: Vec<f64> = p0.iter().zip(&bounds).map(|(v, b)| b.clamp(*v)).collect();
     let (mut f, mut a, mut g) = accumulate(model, &p, data)?;
     let mut evaluations = 1;
-    let max_diag = (0..n).map(|j| a[(j, j)]).fold(0.0f64, f64::max);
-    let mut mu = 1e-3 * max_diag.max(1e-300);
+    // Damping is relative to diag(J^T J) (Marquardt scaling), so mu is dimensionless.
+    let mut mu = 1e-3;
     let mut nu = 2.0;
     let mut status = LmStatus::MaxIterations;
     let mut iterations = 0;
@@ -309,7 +309,7 @@ pub fn solve(
             _ => {
                 mu *= nu;
                 nu *= 2.0;
-                if !mu.is_finite() || mu > 1e30 * max_diag {
+                if !mu.is_finite() || mu > 1e30 {
                     // The damped step is vanishingly small: no descent is possible from here.
                     status = LmStatus::StepConverged;
                     break;
