@@ -63,6 +63,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 im.world_from_head.as_ref().map(|h| h.position_sigma_m() * 1e3).unwrap_or(f64::NAN),
             );
         }
+        for im in &est.images {
+            if let (Some(h), Some(ti)) = (im.world_from_head.as_ref(), t.image(&im.file)) {
+                let d = h.pose.translation_m - ti.world_from_head.translation_m;
+                let dc = ti.world_from_camera.rotation.inverse() * d;
+                println!(
+                    "{:<24} head error in camera frame (mm): {:.3} {:.3} {:.3}",
+                    im.file,
+                    dc.x * 1e3,
+                    dc.y * 1e3,
+                    dc.z * 1e3
+                );
+            }
+        }
         let max = |v: &[f64]| {
             v.iter()
                 .copied()
