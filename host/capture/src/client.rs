@@ -27,6 +27,11 @@ use crate::transport::{Transport, TransportError};
 /// Default time a request waits for its response.
 pub const DEFAULT_REQUEST_TIMEOUT: Duration = Duration::from_millis(1500);
 
+/// Times a request is re-sent (same `seq`) when its response does not arrive in time; the
+/// device answers a repeated `seq` from its cache without executing the request again, so this
+/// is safe for every request (`docs/protocol.md`, section 3).
+pub const DEFAULT_RETRIES: u32 = 2;
+
 /// Handshake attempts before the device is declared silent (the first `Hello` may be lost
 /// while a USB device finishes enumerating).
 pub const HANDSHAKE_ATTEMPTS: u32 = 3;
@@ -163,8 +168,10 @@ pub struct Client<T: Transport> {
     info: Option<DeviceInfo>,
     stats: LinkStats,
     last_frame_error: Option<FrameError>,
-    /// How long a request waits for its response.
+    /// How long a request waits for its response (per attempt).
     pub request_timeout: Duration,
+    /// Re-sends of a request whose response is late (same `seq`).
+    pub retries: u32,
 }
 
 impl<T: Transport> std::fmt::Debug for Client<T> {
@@ -192,6 +199,7 @@ impl<T: Transport> Client<T> {
             stats: LinkStats::default(),
             last_frame_error: None,
             request_timeout: DEFAULT_REQUEST_TIMEOUT,
+            retries: DEFAULT_RETRIES,
         }
     }
 
@@ -231,7 +239,10 @@ impl<T: Transport> Client<T> {
             let body = RequestBody::Hello {
                 protocol_version: PROTOCOL_VERSION,
             };
-            match self.request(body) {
+            let retries = std::mem::replace(&mut self.retries, 0);
+            let answer = self.request(body);
+            self.retries = retries;
+            match answer {
                 Ok(ResponseBody::Hello(info)) => {
                     if info.protocol_version != PROTOCOL_VERSION {
                         return Err(self.mismatch(info.protocol_version));
@@ -297,16 +308,26 @@ impl<T: Transport> Client<T> {
             request: name,
             got: format!("cannot encode the request: {e}"),
         })?;
+        let mut attempt = 0;
         self.transport.write_all(&frame)?;
-        let deadline = Instant::now() + self.request_timeout;
+        let mut deadline = Instant::now() + self.request_timeout;
         loop {
             let now = Instant::now();
             if now >= deadline {
-                return Err(ClientError::Timeout {
-                    port: self.port.clone(),
-                    request: name,
-                    timeout_ms: self.request_timeout.as_millis(),
-                });
+                if attempt >= self.retries {
+                    return Err(ClientError::Timeout {
+                        port: self.port.clone(),
+                        request: name,
+                        timeout_ms: self.request_timeout.as_millis(),
+                    });
+                }
+                attempt += 1;
+                tracing::debug!(seq, attempt, request = name, "late response: re-sending");
+                // A lone delimiter first ends whatever partial frame the device holds.
+                self.transport.write_all(&[0])?;
+                self.transport.write_all(&frame)?;
+                deadline = Instant::now() + self.request_timeout;
+                continue;
             }
             match self.read_message(deadline - now)? {
                 Some(DeviceMessage::Response(r)) if r.seq == seq => {

@@ -462,11 +462,16 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
     }
 
     fn run(&mut self, plan: &proto::Plan) -> Result<CaptureRecord, CaptureError> {
-        self.prepare()?;
-        let total_shots = match self.request(RequestBody::LoadPlan(plan.clone()))? {
-            ResponseBody::PlanLoaded { total_shots } => total_shots,
-            other => return Err(self.unexpected("LoadPlan", &other).into()),
-        };
+        // Both steps are safe to repeat, so a link failure here is retried after a reconnect.
+        self.with_reconnect(|r| r.prepare())?;
+        let mut total_shots = 0;
+        self.with_reconnect(|r| {
+            match r.request(RequestBody::LoadPlan(plan.clone()))? {
+                ResponseBody::PlanLoaded { total_shots: n } => total_shots = n,
+                other => return Err(r.unexpected("LoadPlan", &other).into()),
+            }
+            Ok(())
+        })?;
         tracing::info!(total_shots, "plan loaded");
         self.refit_and_write()?;
         self.observer.connected(&self.record);
@@ -754,6 +759,10 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
 
     /// Refits the clock over all reads, remaps every exposure and writes `capture.json`.
     fn refit_and_write(&mut self) -> Result<(), CaptureError> {
+        if self.reads.is_empty() {
+            // The link failed before the first clock read: nothing to map yet.
+            return Ok(());
+        }
         let kept = select_reads(&self.reads);
         let clock = fit_clock(if kept.is_empty() { &self.reads } else { &kept })?;
         self.record.clock = clock;
@@ -786,7 +795,14 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         self.observer.link_lost(&error);
         // A silent link (timeouts) may come back on its own: handshake again on it first. A
         // dead link is closed before reopening (a serial port is opened exclusively).
-        let mut keep = if matches!(error, ClientError::Timeout { .. }) {
+        let mut keep = if matches!(
+            error,
+            ClientError::Timeout { .. }
+                | ClientError::Device {
+                    error: DeviceError::HandshakeRequired,
+                    ..
+                }
+        ) {
             self.client.take()
         } else {
             self.close_client();
@@ -919,6 +935,11 @@ fn is_link_failure(e: &ClientError) -> bool {
                 | TransportError::WriteTimeout { .. }
                 | TransportError::Io { .. }
         ) | ClientError::Timeout { .. }
+            // The device saw the link go down and up: it wants a new handshake.
+            | ClientError::Device {
+                error: DeviceError::HandshakeRequired,
+                ..
+            }
     )
 }
 
