@@ -56,6 +56,8 @@ pub struct Scenario {
     pub camera_not_firing: bool,
     /// Silence the link once this many records exist, for this long (device us).
     pub link_silence: Option<(u32, u64)>,
+    /// Probability that a device-to-host frame arrives with a flipped byte.
+    pub corrupt_to_host: f64,
 }
 
 impl Scenario {
@@ -123,8 +125,8 @@ pub fn start(kind: BackendKind, case: &str, scenario: Scenario) -> Option<Starte
                 eprintln!("skipped {case} on the emulator: set {EMULATOR_ENV}=1 to run it");
                 return None;
             }
-            if scenario.link_silence.is_some() {
-                eprintln!("skipped {case} on the emulator: it cannot silence its link");
+            if scenario.link_silence.is_some() || scenario.corrupt_to_host > 0.0 {
+                eprintln!("skipped {case} on the emulator: it cannot silence or corrupt its link");
                 return None;
             }
             let guard = EXCLUSIVE.lock().unwrap_or_else(|p| p.into_inner());
@@ -170,6 +172,7 @@ impl SimBackend {
         };
         cfg.faults.flash_never_ready = scenario.flash_never_ready;
         cfg.faults.camera_not_firing = scenario.camera_not_firing;
+        cfg.faults.corrupt_to_host_probability = scenario.corrupt_to_host;
         cfg.faults.link_drop =
             scenario
                 .link_silence

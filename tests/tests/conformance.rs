@@ -44,6 +44,7 @@ backends!(
     garbage_on_the_line,
     oversized_frames,
     timestamp_accuracy,
+    noisy_line,
 );
 
 fn connect(dev: &Started) -> Client<Box<dyn Transport>> {
@@ -524,4 +525,22 @@ fn timestamp_accuracy(kind: BackendKind) {
         worst_f.abs() <= 1.5,
         "photodiode timestamp off by {worst_f} us"
     );
+}
+
+/// One device-to-host frame in twenty arrives corrupted: lost responses are re-sent from the
+/// device's cache, lost records are fetched, and the session still completes exactly.
+fn noisy_line(kind: BackendKind) {
+    let scenario = Scenario {
+        corrupt_to_host: 0.05,
+        ..Scenario::default()
+    };
+    let Some(dev) = start(kind, "noisy_line", scenario) else {
+        return;
+    };
+    let plan = short_plan([6, 1, 0, 1], 100_000, 0);
+    let connector = SerialConnector { path: dev.port() };
+    let record = run_capture(connector, &plan, &dev.options(), &mut Unattended).expect("capture");
+    assert!(record.complete);
+    assert_eq!(record.exposures.len(), 8);
+    assert_contiguous(&record);
 }
