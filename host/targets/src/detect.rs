@@ -54,6 +54,9 @@ pub const SIGMA_FLOOR_PX: f64 = 0.02;
 /// resolves closely spaced edges of tiny tags).
 pub const GRADIENT_HALF_SPAN_PX: f64 = 1.0;
 
+/// Cells narrower than this (pixels) use half the gradient span.
+pub const SMALL_CELL_PX: f64 = 3.0;
+
 /// Strength of the Laplacian sharpening of the sampled cell grid for small tags (the reference
 /// library's default `decode_sharpening`).
 pub const DECODE_SHARPENING: f64 = 0.25;
@@ -651,7 +654,14 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
     // Search window half-width: the initial error is about a pixel; never wider than most of a
     // cell so the window stays inside the black border and white ring.
     let mut range = (0.8 * cell).clamp(1.0, 3.0);
-    for _pass in 0..3 {
+    // Small cells: the border's inner edge and the white ring's outer edge are within a cell of
+    // the edge we want; a narrower difference keeps their gradient lobes from biasing it.
+    let gspan = if cell < SMALL_CELL_PX {
+        0.5 * GRADIENT_HALF_SPAN_PX
+    } else {
+        GRADIENT_HALF_SPAN_PX
+    };
+    for pass in 0..3 {
         lines.clear();
         for k in 0..4 {
             let (a, b) = (corners[k], corners[(k + 1) % 4]);
@@ -674,8 +684,8 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
                 let step = 0.25;
                 let mut off = -range;
                 while off <= range + 1e-9 {
-                    let g1 = img.bilinear(p + outward * (off + GRADIENT_HALF_SPAN_PX));
-                    let g2 = img.bilinear(p + outward * (off - GRADIENT_HALF_SPAN_PX));
+                    let g1 = img.bilinear(p + outward * (off + gspan));
+                    let g2 = img.bilinear(p + outward * (off - gspan));
                     let g = g1 - g2;
                     if g > 0.0 {
                         let wgt = g * g;
@@ -710,7 +720,11 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
             return None;
         }
         corners = next;
-        range = (0.5 * cell).clamp(1.0, 2.0);
+        range = if pass == 0 {
+            (0.5 * cell).clamp(1.0, 2.0)
+        } else {
+            (0.4 * cell).clamp(0.75, 2.0)
+        };
     }
     let mut cov = [[0.0; 3]; 4];
     for k in 0..4 {
