@@ -5,6 +5,7 @@
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
+use rayon::prelude::*;
 use serde::Serialize;
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::{BrdfSample, CameraModel, Pose};
@@ -167,7 +168,7 @@ pub fn derender_with_loader(
     geom: &Geometry,
     inputs: &DerenderInputs,
     cfg: &DerenderConfig,
-    mut load: impl FnMut(usize) -> Result<OwnedImage, DerenderError>,
+    load: impl Fn(usize) -> Result<OwnedImage, DerenderError> + Sync,
 ) -> Result<DerenderReport, DerenderError> {
     cfg.validate()?;
     let start = Instant::now();
@@ -186,12 +187,12 @@ pub fn derender_with_loader(
             world_from_standard,
             images,
         } => {
-            let mut owned = Vec::new();
-            for (i, wfc) in images {
-                let t = Instant::now();
-                owned.push((load(*i)?, *wfc));
-                load_time += t.elapsed();
-            }
+            let t = Instant::now();
+            let owned: Vec<(OwnedImage, Pose)> = images
+                .par_iter()
+                .map(|(i, wfc)| Ok((load(*i)?, *wfc)))
+                .collect::<Result<_, DerenderError>>()?;
+            load_time += t.elapsed();
             let t = Instant::now();
             let views: Vec<StandardImage<'_>> = owned
                 .iter()
@@ -220,31 +221,39 @@ pub fn derender_with_loader(
     let mut images = Vec::new();
     let mut shadow_rays_cast = 0;
     let mut derender_time = Duration::ZERO;
-    for (i, poses) in &inputs.measurements {
+    // Decoding dominates on small regions: decode a batch of images in parallel (one per
+    // rayon thread, bounding memory to that many images), then trace them one by one (the
+    // tracing itself is parallel over rows).
+    let batch = rayon::current_num_threads().max(1);
+    for chunk in inputs.measurements.chunks(batch) {
         let t = Instant::now();
-        let img = load(*i)?;
+        let loaded: Vec<Result<OwnedImage, DerenderError>> =
+            chunk.par_iter().map(|(i, _)| load(*i)).collect();
         load_time += t.elapsed();
-        let t = Instant::now();
-        let index = u16::try_from(*i)
-            .map_err(|_| DerenderError::Input(format!("image index {i} exceeds 65535")))?;
-        let m = Measurement {
-            image_index: index,
-            image: img.view(),
-            world_from_camera: poses.world_from_camera,
-            world_from_head: poses.world_from_head,
-            mask: img.mask.as_deref(),
-            targets: img.targets.as_deref(),
-        };
-        let r = derender_image(geom, &inputs.camera, inputs.light_position_m, c, &m, cfg);
-        derender_time += t.elapsed();
-        counts.add(&r.counts);
-        shadow_rays_cast += r.shadow_rays;
-        images.push(ImageReport {
-            image_index: *i,
-            counts: r.counts,
-            bbox_px: r.bbox_px,
-        });
-        samples.extend(r.samples);
+        for ((i, poses), img) in chunk.iter().zip(loaded) {
+            let img = img?;
+            let t = Instant::now();
+            let index = u16::try_from(*i)
+                .map_err(|_| DerenderError::Input(format!("image index {i} exceeds 65535")))?;
+            let m = Measurement {
+                image_index: index,
+                image: img.view(),
+                world_from_camera: poses.world_from_camera,
+                world_from_head: poses.world_from_head,
+                mask: img.mask.as_deref(),
+                targets: img.targets.as_deref(),
+            };
+            let r = derender_image(geom, &inputs.camera, inputs.light_position_m, c, &m, cfg);
+            derender_time += t.elapsed();
+            counts.add(&r.counts);
+            shadow_rays_cast += r.shadow_rays;
+            images.push(ImageReport {
+                image_index: *i,
+                counts: r.counts,
+                bbox_px: r.bbox_px,
+            });
+            samples.extend(r.samples);
+        }
     }
     times.image_load_s = load_time.as_secs_f64();
     times.derender_s = derender_time.as_secs_f64();
