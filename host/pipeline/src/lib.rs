@@ -6,10 +6,14 @@
 //! whose inputs have not changed since the last run are reused (see [`ledger`]). Every stage
 //! that runs reports its accuracy and its cost (see [`report`]).
 
+pub mod bench;
+pub mod demo;
 pub mod ledger;
 pub mod plan;
+pub mod process;
 pub mod report;
 
 pub use ledger::{Fingerprint, Ledger, LedgerError};
 pub use plan::{Action, Geometry, Plan, PlanOptions, PlannedStage, SceneFacts, Stage};
+pub use process::{process, Event, ProcessConfig, ProcessError, ProcessOutput};
 pub use report::{Metric, RunReport, StageReport};

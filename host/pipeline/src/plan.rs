@@ -112,8 +112,9 @@ pub struct SceneFacts {
     pub calibration_known: bool,
     /// The sample's geometry.
     pub geometry: Geometry,
-    /// The region of interest is convex (known for ideal shapes; measured for scans).
-    pub region_convex: bool,
+    /// The region of interest is convex: known for ideal shapes, measured by scan preparation's
+    /// convexity test for scans (`None` until then: shadow rays are then decided by that test).
+    pub region_convex: Option<bool>,
 }
 
 /// What the user asked for.
@@ -153,6 +154,9 @@ pub struct PlannedStage {
 pub struct Plan {
     /// Every stage with its action.
     pub stages: Vec<PlannedStage>,
+    /// Shadow rays wait for the convexity test (a scan whose convexity is not yet known).
+    #[serde(default)]
+    pub convexity_pending: bool,
 }
 
 impl Plan {
@@ -170,7 +174,10 @@ impl Plan {
                 },
             })
             .collect();
-        Self { stages }
+        Self {
+            stages,
+            convexity_pending: facts.region_convex.is_none() && !options.force_shadow_rays,
+        }
     }
 
     /// True when the stage runs.
@@ -185,6 +192,11 @@ impl Plan {
         let mut out = String::from("plan:\n");
         for s in &self.stages {
             match &s.action {
+                Action::Run if s.stage == Stage::ShadowRays && self.convexity_pending => out
+                    .push_str(&format!(
+                        "  run?  {:<28} (if scan preparation's convexity test finds the region can shadow itself)\n",
+                        s.stage.name()
+                    )),
                 Action::Run => out.push_str(&format!("  run   {}\n", s.stage.name())),
                 Action::Skip { reason } => {
                     out.push_str(&format!("  skip  {:<28} ({reason})\n", s.stage.name()))
@@ -217,7 +229,7 @@ fn skip_reason(stage: Stage, f: &SceneFacts, o: &PlanOptions) -> Option<&'static
         Stage::ScanPreparation if f.geometry == Geometry::Cylinder => {
             Some("an ideal cylinder needs no scan")
         }
-        Stage::ShadowRays if f.region_convex && !o.force_shadow_rays => {
+        Stage::ShadowRays if f.region_convex == Some(true) && !o.force_shadow_rays => {
             Some("the region is convex: it cannot shadow itself")
         }
         Stage::SmoothHemisphere if o.incidence_plane_only => {
@@ -240,7 +252,7 @@ mod tests {
             light_position_known: false,
             calibration_known: false,
             geometry: Geometry::Scan,
-            region_convex: false,
+            region_convex: Some(false),
         }
     }
 
@@ -267,7 +279,7 @@ mod tests {
                 |f| f.calibration_known = true,
                 Stage::RadiometricCalibration,
             ),
-            (|f| f.region_convex = true, Stage::ShadowRays),
+            (|f| f.region_convex = Some(true), Stage::ShadowRays),
         ];
         for (set, stage) in cases {
             let mut facts = full();
@@ -283,7 +295,7 @@ mod tests {
     fn ideal_shapes_need_no_scan_and_options_are_followed() {
         let mut facts = full();
         facts.geometry = Geometry::Cylinder;
-        facts.region_convex = true;
+        facts.region_convex = Some(true);
         let plan = Plan::derive(
             &facts,
             &PlanOptions {

@@ -260,7 +260,7 @@ mod tests {
             light_position_known: true,
             calibration_known: true,
             geometry: Geometry::Sphere,
-            region_convex: true,
+            region_convex: Some(true),
         };
         let plan = Plan::derive(&facts, &PlanOptions::default());
         let mut stages = RunReport::skipped_from_plan(&plan);

@@ -1,9 +1,97 @@
-//! `skinbrdf process`.
+//! `skinbrdf process SESSION_DIR`: the planned pipeline (poses, derendering, smoothing,
+//! fitting), resumable, with every stage's accuracy and run time.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use skinbrdf_pipeline::process::{process, Event, ProcessConfig};
+use skinbrdf_pipeline::report::StageStatus;
+use skinbrdf_pipeline::PlanOptions;
 
 /// Flags of `skinbrdf process`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The session directory.
+    pub session: PathBuf,
+    /// Output directory (default SESSION/out).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Model: lambertian, lafortune1, lafortune2, lafortune3, cook-torrance.
+    #[arg(long, default_value = "lafortune2")]
+    pub model: String,
+    /// Only the incidence plane: skip the rest of the hemisphere.
+    #[arg(long)]
+    pub incidence_plane_only: bool,
+    /// Cast shadow rays even for a convex region.
+    #[arg(long)]
+    pub force_shadow_rays: bool,
+    /// Use every N-th pixel in x and y.
+    #[arg(long, default_value_t = 1)]
+    pub stride: u32,
+    /// Run every planned stage even if its inputs have not changed.
+    #[arg(long)]
+    pub force: bool,
+    /// No figures.
+    #[arg(long)]
+    pub no_figures: bool,
+    /// Also write the MERL binary table (35 MB).
+    #[arg(long)]
+    pub merl: bool,
+    /// Print the run's report as JSON on stdout (progress goes to stderr).
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`skinbrdf process` is not built yet")
+/// Validates the flags into a pipeline configuration.
+pub fn config(args: &Args) -> anyhow::Result<ProcessConfig> {
+    let mut cfg = ProcessConfig::new();
+    cfg.plan = PlanOptions {
+        incidence_plane_only: args.incidence_plane_only,
+        force_shadow_rays: args.force_shadow_rays,
+    };
+    if args.stride == 0 {
+        anyhow::bail!("--stride must be at least 1");
+    }
+    cfg.derender.stride = args.stride;
+    cfg.fit.model = args
+        .model
+        .parse()
+        .map_err(|e| anyhow::anyhow!("--model `{}`: {e}", args.model))?;
+    cfg.fit.figures = !args.no_figures;
+    cfg.fit.merl = args.merl;
+    cfg.force = args.force;
+    cfg.out_dir = args.out.clone();
+    Ok(cfg)
+}
+
+/// Prints pipeline events to stderr.
+pub fn print_event(e: Event<'_>) {
+    match e {
+        Event::Plan(p) => eprint!("{}", p.to_text()),
+        Event::Started(s) => eprintln!("... {}", s.name()),
+        Event::Finished(r) => {
+            let status = match &r.status {
+                StageStatus::Ran => format!("{:.3} s", r.run_time_s),
+                StageStatus::Reused => "reused (inputs unchanged)".into(),
+                StageStatus::Skipped { reason } => format!("skipped: {reason}"),
+            };
+            eprintln!("{:<30} {status}", r.stage.name());
+            for m in &r.metrics {
+                eprintln!("    {:<40} {:.4} {}", m.name, m.value, m.unit);
+            }
+        }
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let cfg = config(&args)?;
+    let out = process(&args.session, &cfg, &mut print_event)
+        .with_context(|| format!("processing {}", args.session.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&out.report)?);
+    } else {
+        print!("{}", out.report.to_text());
+        println!("report: {}", out.out_dir.join("report.md").display());
+    }
+    Ok(())
 }
