@@ -124,7 +124,11 @@ impl BrdfAngles {
     }
 
     /// Local directions with `w_i` at azimuth 0 (the canonical pair for isotropic evaluation).
-    pub fn canonical_directions(theta_i_rad: f64, theta_e_rad: f64, phi_d_rad: f64) -> (DVec3, DVec3) {
+    pub fn canonical_directions(
+        theta_i_rad: f64,
+        theta_e_rad: f64,
+        phi_d_rad: f64,
+    ) -> (DVec3, DVec3) {
         let (si, ci) = theta_i_rad.sin_cos();
         let (se, ce) = theta_e_rad.sin_cos();
         let (sp, cp) = phi_d_rad.sin_cos();

@@ -18,7 +18,7 @@ pub mod pose;
 pub mod sample;
 
 pub use angles::{BrdfAngles, ShadingFrame};
-pub use camera::{BrownConrady, CameraModel, CameraError};
+pub use camera::{BrownConrady, CameraError, CameraModel};
 pub use mesh::{MeshError, TriMesh};
 pub use pose::Pose;
 pub use sample::BrdfSample;

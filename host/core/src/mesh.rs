@@ -15,7 +15,9 @@ pub enum MeshError {
         position: [f32; 3],
     },
     /// A triangle refers to a vertex that does not exist.
-    #[error("triangle {triangle} refers to vertex {vertex}, but the mesh has {vertex_count} vertices")]
+    #[error(
+        "triangle {triangle} refers to vertex {vertex}, but the mesh has {vertex_count} vertices"
+    )]
     IndexOutOfRange {
         /// Triangle index.
         triangle: usize,
@@ -110,7 +112,17 @@ mod tests {
         };
         let errs = m.validate();
         assert_eq!(errs.len(), 2, "{errs:?}");
-        assert!(matches!(errs[0], MeshError::NonFiniteVertex { index: 1, .. }));
-        assert!(matches!(errs[1], MeshError::IndexOutOfRange { triangle: 1, vertex: 7, .. }));
+        assert!(matches!(
+            errs[0],
+            MeshError::NonFiniteVertex { index: 1, .. }
+        ));
+        assert!(matches!(
+            errs[1],
+            MeshError::IndexOutOfRange {
+                triangle: 1,
+                vertex: 7,
+                ..
+            }
+        ));
     }
 }

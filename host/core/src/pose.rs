@@ -42,8 +42,13 @@ impl Pose {
         let angle = rotvec_rad.length();
         let rotation = if angle < 1e-12 {
             // First-order expansion keeps tiny rotations exact to rounding.
-            DQuat::from_xyzw(rotvec_rad.x * 0.5, rotvec_rad.y * 0.5, rotvec_rad.z * 0.5, 1.0)
-                .normalize()
+            DQuat::from_xyzw(
+                rotvec_rad.x * 0.5,
+                rotvec_rad.y * 0.5,
+                rotvec_rad.z * 0.5,
+                1.0,
+            )
+            .normalize()
         } else {
             DQuat::from_axis_angle(rotvec_rad / angle, angle)
         };
