@@ -338,16 +338,8 @@ pub fn generate(
     let mut rays = 0;
     let mut image_truths = Vec::new();
     let mut entries = Vec::new();
-    for (i, shot) in shots.iter().enumerate() {
-        let t0 = Instant::now();
-        let r = renderer.render(
-            shot,
-            &rig,
-            scene.seed.wrapping_mul(1000).wrapping_add(i as u64),
-            true,
-        );
-        rays += r.rays;
-        render_s += t0.elapsed().as_secs_f64();
+    // Post-processing of image i (noise, encoding, files, truth) runs while image i + 1 renders.
+    let finish = |i: usize, shot: &Shot, r: Rendered| -> Result<(ImageTruth, f64), SynthError> {
         let t1 = Instant::now();
         let stored = encode_image(
             &r,
@@ -368,20 +360,47 @@ pub fn generate(
             skinbrdf_session::write_mask_png(&dir.join(&rel), r.width, r.height, m)?;
             Ok(Some(rel))
         };
-        let forehead_mask = mask("forehead", &r.forehead)?;
-        let targets_mask = mask("targets", &r.targets)?;
-        let standard_mask = mask("standard", &r.standard)?;
-        image_truths.push(ImageTruth {
+        let truth = ImageTruth {
             file: shot.file.clone(),
             role: shot.role,
             exposure_us: shot.exposure_us,
             world_from_camera: shot.world_from_camera,
             world_from_head: shot.world_from_head,
-            forehead_mask,
-            targets_mask,
-            standard_mask,
+            forehead_mask: mask("forehead", &r.forehead)?,
+            targets_mask: mask("targets", &r.targets)?,
+            standard_mask: mask("standard", &r.standard)?,
             targets: target_truths(&renderer, &rig, shot, &rig.camera),
-        });
+        };
+        Ok((truth, t1.elapsed().as_secs_f64()))
+    };
+    let render_one = |i: usize| -> (Rendered, f64) {
+        let t0 = Instant::now();
+        let r = renderer.render(
+            &shots[i],
+            &rig,
+            scene.seed.wrapping_mul(1000).wrapping_add(i as u64),
+            true,
+        );
+        (r, t0.elapsed().as_secs_f64())
+    };
+    let mut pending: Option<(usize, Rendered)> = None;
+    for i in 0..=shots.len() {
+        let (done, next) = rayon::join(
+            || pending.take().map(|(j, r)| finish(j, &shots[j], r)),
+            || (i < shots.len()).then(|| render_one(i)),
+        );
+        if let Some(done) = done {
+            let (truth, secs) = done?;
+            image_truths.push(truth);
+            write_s += secs;
+        }
+        if let Some((r, secs)) = next {
+            rays += r.rays;
+            render_s += secs;
+            pending = Some((i, r));
+        }
+    }
+    for shot in &shots {
         entries.push(ImageEntry {
             file: shot.file.clone(),
             role: shot.role,
@@ -391,7 +410,6 @@ pub fn generate(
             world_from_camera: None,
             world_from_head: None,
         });
-        write_s += t1.elapsed().as_secs_f64();
     }
 
     let t2 = Instant::now();
