@@ -181,12 +181,10 @@ fn grazing_only_samples_lambertian_fit_is_exact() {
     )
     .expect("a one-parameter fit on exact data converges");
     let got = fit.model.diffuse_albedo();
-    for c in 0..3 {
-        let want = truth.diffuse_albedo()[c];
+    for (c, (g, want)) in got.iter().zip(truth.diffuse_albedo()).enumerate() {
         assert!(
-            (got[c] - want).abs() / want < ALBEDO_REL_BOUND,
-            "channel {c}: {} vs {want}",
-            got[c]
+            (g - want).abs() / want < ALBEDO_REL_BOUND,
+            "channel {c}: {g} vs {want}"
         );
     }
 }
@@ -779,7 +777,7 @@ fn derender_non_finite_pixels_never_become_samples() {
 
 /// The sequencer's own test world (simulated camera, flash and clock), shared by path so both
 /// suites drive the device the same way.
-#[allow(dead_code, clippy::unwrap_used)]
+#[allow(clippy::unwrap_used)]
 #[path = "../../firmware/sequencer/tests/world/mod.rs"]
 mod world;
 
