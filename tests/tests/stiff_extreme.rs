@@ -337,7 +337,6 @@ fn strong_distortion_round_trip_at_corners() {
 }
 
 #[test]
-#[ignore = "BUG: BrownConrady::undistort (skinbrdf-core camera.rs) returns a ray on the folded branch: with k1 = -0.35 the corner pixel (0,0) gives normalised radius 2.19 > r* = 0.976, where r_d = r(1 + k1 r^2) is negative (mirrored point); the module doc promises such points are rejected"]
 fn folded_distortion_gives_none_not_garbage() {
     // k1 = -0.35 alone: r_d(r) = r (1 - 0.35 r^2) peaks at r* = 1/sqrt(1.05) with r_d = 0.65;
     // the image corners (r_d ~ 1.49) have no preimage.
@@ -364,7 +363,6 @@ fn folded_distortion_gives_none_not_garbage() {
 }
 
 #[test]
-#[ignore = "BUG: CameraModel::project maps points beyond the distortion fold (normalised radius > r*) to pixels instead of None; pixel_ray of that pixel is a different ray"]
 fn project_rejects_points_beyond_the_fold() {
     let cam = barrel_camera(-0.35, 0.0);
     let p = DVec3::new(1.4, 0.0, 1.0); // r = 1.4 > r* = 0.976
@@ -753,7 +751,6 @@ fn derender_saturated_and_black_pixels_are_counted_not_sampled() {
 }
 
 #[test]
-#[ignore = "BUG: derender_image (host/derender/src/image.rs ~l.274) filters NaN and values below the noise floor but not +inf: a pixel channel of +inf becomes a sample with rho = inf (seen at pixel [11,1])"]
 fn derender_non_finite_pixels_never_become_samples() {
     let (w, h) = (80usize, 60usize);
     let mut rgb = vec![[0.3f32; 3]; w * h];

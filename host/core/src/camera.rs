@@ -89,6 +89,35 @@ impl BrownConrady {
         [[dxd_dx, dxd_dy], [dyd_dx, dyd_dy]]
     }
 
+    /// True when the radial map `r -> r (1 + k1 r² + k2 r⁴ + k3 r⁶)` is strictly increasing on
+    /// `[0, sqrt(r2)]`, i.e. the lens model has not folded back before radius² `r2`.
+    ///
+    /// The derivative in `s = r²` is the cubic `g(s) = 1 + 3 k1 s + 5 k2 s² + 7 k3 s³` with
+    /// `g(0) = 1`; its minimum over `[0, r2]` is at an end point or at a root of
+    /// `g'(s) = 3 k1 + 10 k2 s + 21 k3 s²`, so the check is exact and O(1).
+    pub fn radially_monotonic_to(&self, r2: f64) -> bool {
+        if !r2.is_finite() || r2 < 0.0 {
+            return false;
+        }
+        let g = |s: f64| 1.0 + s * (3.0 * self.k1 + s * (5.0 * self.k2 + s * 7.0 * self.k3));
+        let (a, b, c) = (21.0 * self.k3, 10.0 * self.k2, 3.0 * self.k1);
+        let mut candidates = [r2, f64::NAN, f64::NAN];
+        if a.abs() > f64::EPSILON {
+            let disc = b * b - 4.0 * a * c;
+            if disc >= 0.0 {
+                let q = disc.sqrt();
+                candidates[1] = (-b + q) / (2.0 * a);
+                candidates[2] = (-b - q) / (2.0 * a);
+            }
+        } else if b.abs() > f64::EPSILON {
+            candidates[1] = -c / b;
+        }
+        candidates
+            .iter()
+            .filter(|s| s.is_finite() && **s >= 0.0 && **s <= r2)
+            .all(|&s| g(s) > 0.0)
+    }
+
     /// Inverts [`Self::distort`] by Newton's method. Returns `None` if it does not converge to
     /// `tol` (normalised units) or lands where the model is not invertible.
     pub fn undistort(&self, pd: DVec2) -> Option<DVec2> {
@@ -99,7 +128,7 @@ impl BrownConrady {
         for _ in 0..50 {
             let r = self.distort(p) - pd;
             if r.length() < 1e-14 {
-                return Some(p);
+                return self.radially_monotonic_to(p.length_squared()).then_some(p);
             }
             let [[a, b], [c, d]] = self.jacobian(p);
             let det = a * d - b * c;
@@ -113,7 +142,7 @@ impl BrownConrady {
             }
         }
         let r = self.distort(p) - pd;
-        (r.length() < 1e-10).then_some(p)
+        (r.length() < 1e-10 && self.radially_monotonic_to(p.length_squared())).then_some(p)
     }
 }
 
@@ -187,12 +216,16 @@ impl CameraModel {
     }
 
     /// Projects a camera-frame point to pixel coordinates. `None` for points at or behind the
-    /// camera (z <= 1e-9 m).
+    /// camera (z <= 1e-9 m) and for points beyond the radius where the lens model folds back
+    /// (their "pixel" would be a mirror image, not where the lens puts them).
     pub fn project(&self, p_cam: DVec3) -> Option<DVec2> {
         if p_cam.z <= 1e-9 || !p_cam.is_finite() {
             return None;
         }
         let n = DVec2::new(p_cam.x / p_cam.z, p_cam.y / p_cam.z);
+        if !self.distortion.radially_monotonic_to(n.length_squared()) {
+            return None;
+        }
         Some(self.normalized_to_pixel(self.distortion.distort(n)))
     }
 
@@ -270,6 +303,32 @@ mod tests {
             let fd = (d.distort(p + *dp) - d.distort(p - *dp)) / (2.0 * h);
             assert!((fd.x - j[0][col]).abs() < 1e-6);
             assert!((fd.y - j[1][col]).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn the_fold_is_rejected_both_ways() {
+        let mut cam = strong();
+        cam.distortion = BrownConrady {
+            k1: -0.35,
+            ..BrownConrady::NONE
+        };
+        // Fold at r* = 1/sqrt(1.05) = 0.976.
+        assert!(cam.distortion.radially_monotonic_to(0.97 * 0.97));
+        assert!(!cam.distortion.radially_monotonic_to(0.98 * 0.98));
+        assert!(cam.project(DVec3::new(1.4, 0.0, 1.0)).is_none());
+        assert!(cam.project(DVec3::new(0.9, 0.0, 1.0)).is_some());
+        // k2 > 0 makes the derivative positive again beyond r = 2: still folded.
+        cam.distortion.k2 = 0.04;
+        assert!(!cam.distortion.radially_monotonic_to(2.5 * 2.5));
+        // A corner pixel whose only inverse is beyond the fold has no ray.
+        cam.distortion = BrownConrady {
+            k1: -0.35,
+            ..BrownConrady::NONE
+        };
+        if let Some(ray) = cam.pixel_ray(DVec2::new(0.0, 0.0)) {
+            let n = DVec2::new(ray.x / ray.z, ray.y / ray.z);
+            assert!(cam.distortion.radially_monotonic_to(n.length_squared()));
         }
     }
 

@@ -265,11 +265,14 @@ pub fn derender_image(
                         continue;
                     }
                 }
-                if m.image.saturated.is_some_and(|s| s[idx]) {
+                let v = m.image.rgb[idx];
+                // +inf is an overflowed (saturated) value whatever the saturation mask says.
+                if m.image.saturated.is_some_and(|s| s[idx])
+                    || v.iter().any(|&ch| ch == f32::INFINITY)
+                {
                     c.saturated += 1;
                     continue;
                 }
-                let v = m.image.rgb[idx];
                 if v.iter()
                     .any(|&ch| ch.is_nan() || (ch as f64) < cfg.noise_floor)
                 {
