@@ -311,14 +311,19 @@ pub fn run_bench(cfg: &BenchConfig, log: &mut dyn FnMut(&str)) -> Result<BenchOu
         log(&format!("fit {setting} = {value}"));
         let t = Instant::now();
         let model = spec.channel_model();
-        let f = fit_rgb(model.as_ref(), &fit_samples, &c)?;
+        // A setting that makes the fit fail loudly (e.g. too few iterations) is a row with
+        // its failure, not the end of the sweep.
+        let (error_pct, value) = match fit_rgb(model.as_ref(), &fit_samples, &c) {
+            Ok(f) => (model_error_pct(&f.model, &truth.brdf, &fit_samples), value),
+            Err(e) => (f64::NAN, format!("{value} (failed: {e})")),
+        };
         let time_s = t.elapsed().as_secs_f64();
         rows.push(BenchRow {
             stage: "fit",
             setting,
             value,
             error_name: "model median rel. error",
-            error_pct: model_error_pct(&f.model, &truth.brdf, &fit_samples),
+            error_pct,
             time_s,
             pareto: false,
         });
