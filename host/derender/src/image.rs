@@ -267,9 +267,7 @@ pub fn derender_image(
                 }
                 let v = m.image.rgb[idx];
                 // +inf is an overflowed (saturated) value whatever the saturation mask says.
-                if m.image.saturated.is_some_and(|s| s[idx])
-                    || v.iter().any(|&ch| ch == f32::INFINITY)
-                {
+                if m.image.saturated.is_some_and(|s| s[idx]) || v.contains(&f32::INFINITY) {
                     c.saturated += 1;
                     continue;
                 }
