@@ -86,6 +86,14 @@ fn palette(i: i32) -> RGBColor {
     ];
     if i < 0 {
         RGBColor(200, 200, 200)
+    } else if i >= 100 {
+        // A lighter shade of palette colour i - 100 (band edges).
+        let c = P[(i - 100) as usize % P.len()];
+        RGBColor(
+            ((c.0 as u16 + 2 * 255) / 3) as u8,
+            ((c.1 as u16 + 2 * 255) / 3) as u8,
+            ((c.2 as u16 + 2 * 255) / 3) as u8,
+        )
     } else {
         P[i as usize % P.len()]
     }
@@ -165,7 +173,7 @@ fn draw_panel<DB: DrawingBackend>(
                 let ann = chart
                     .draw_series(LineSeries::new(
                         v.iter().copied(),
-                        col.stroke_width(if s.color < 0 { 1 } else { 2 }),
+                        col.stroke_width(if s.color < 0 || s.color >= 100 { 1 } else { 2 }),
                     ))
                     .map_err(|e| e.to_string())?;
                 if !s.label.is_empty() {
@@ -179,7 +187,7 @@ fn draw_panel<DB: DrawingBackend>(
                 let ann = chart
                     .draw_series(
                         v.iter()
-                            .map(|&(x, y)| Circle::new((x, y), 2, col.mix(0.5).filled())),
+                            .map(|&(x, y)| Circle::new((x, y), 3, col.mix(0.8).filled())),
                     )
                     .map_err(|e| e.to_string())?;
                 if !s.label.is_empty() {
@@ -337,7 +345,7 @@ pub fn polar_figure(curves_per_angle: &[(f64, Vec<PlaneCurve>)], scale_label: &s
         .map(|(ti, curves)| {
             let rmax = curves
                 .iter()
-                .flat_map(|c| c.points.iter().map(|p| p.3.max(p.1)))
+                .flat_map(|c| c.points.iter().map(|p| p.1))
                 .filter(|v| v.is_finite())
                 .fold(1e-12, f64::max);
             let mut series = Vec::new();
@@ -370,18 +378,19 @@ pub fn polar_figure(curves_per_angle: &[(f64, Vec<PlaneCurve>)], scale_label: &s
                     (r.max(0.0) * a.sin(), r.max(0.0) * a.cos())
                 };
                 if c.points.iter().any(|p| p.2 != p.3) {
-                    let band: Vec<(f64, f64)> = c
-                        .points
-                        .iter()
-                        .map(|p| to_xy(p.0, p.3))
-                        .chain(c.points.iter().rev().map(|p| to_xy(p.0, p.2)))
-                        .collect();
-                    // A polar band is a closed polygon: draw it as a line loop in the series colour.
-                    series.push(Series {
-                        label: String::new(),
-                        color: k as i32,
-                        kind: SeriesKind::Points(band),
-                    });
+                    // The band's edges as thin lines (clipped to the plot), upper then lower.
+                    let clip = |r: f64| r.min(1.1 * rmax);
+                    let upper: Vec<(f64, f64)> =
+                        c.points.iter().map(|p| to_xy(p.0, clip(p.3))).collect();
+                    let lower: Vec<(f64, f64)> =
+                        c.points.iter().map(|p| to_xy(p.0, clip(p.2))).collect();
+                    for edge in [upper, lower] {
+                        series.push(Series {
+                            label: String::new(),
+                            color: 100 + k as i32,
+                            kind: SeriesKind::Line(edge),
+                        });
+                    }
                 }
                 series.push(Series {
                     label: c.label.clone(),

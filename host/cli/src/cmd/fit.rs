@@ -1,9 +1,113 @@
-//! `skinbrdf fit`.
+//! `skinbrdf fit`: fit a BRDF model to samples, smooth them, and write the parameters (JSON),
+//! a Markdown report, the figures and the exported model.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use skinbrdf_brdf::ModelSpec;
+use skinbrdf_fit::report::{fit_and_report, load_input, ReportOptions};
+use skinbrdf_fit::{FitConfig, ResidualKind};
 
 /// Flags of `skinbrdf fit`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// A sample file (.skbs), a Cornell .brdf file, or a session directory (uses out/samples.skbs
+    /// and, if present, truth.json).
+    pub input: PathBuf,
+    /// Model: lambertian, lafortune1, lafortune2, lafortune3, cook-torrance.
+    #[arg(long, default_value = "lafortune2")]
+    pub model: String,
+    /// Output directory (default: INPUT-fit next to the input, or SESSION/out/fit).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Residual: log (relative error, default) or cosine (cos(theta_i)-weighted absolute error).
+    #[arg(long, default_value = "log")]
+    pub residual: String,
+    /// Log-residual floor as a fraction of the median grey level.
+    #[arg(long, default_value_t = skinbrdf_fit::fit::LOG_FLOOR_REL_MEDIAN)]
+    pub log_floor: f64,
+    /// Fail when the samples do not determine some parameters (default: warn).
+    #[arg(long)]
+    pub strict: bool,
+    /// Also write the MERL binary table (model.binary, 35 MB).
+    #[arg(long)]
+    pub merl: bool,
+    /// Skip the figures.
+    #[arg(long)]
+    pub no_figures: bool,
+}
 
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`skinbrdf fit` is not built yet")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let model: ModelSpec = args.model.parse().context("--model")?;
+    let residual = match args.residual.as_str() {
+        "log" => None,
+        "cosine" => Some(ResidualKind::CosineWeighted),
+        o => anyhow::bail!("--residual: `{o}` is not one of log, cosine"),
+    };
+    if !(args.log_floor > 0.0 && args.log_floor.is_finite()) {
+        anyhow::bail!("--log-floor must be positive, got {}", args.log_floor);
+    }
+    let input = load_input(&args.input)?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        if args.input.is_dir() {
+            args.input.join("out").join("fit")
+        } else {
+            let mut s = args.input.clone().into_os_string();
+            s.push("-fit");
+            PathBuf::from(s)
+        }
+    });
+    let opts = ReportOptions {
+        model,
+        fit: FitConfig {
+            residual,
+            strict: args.strict,
+            log_floor_rel_median: args.log_floor,
+            ..FitConfig::default()
+        },
+        merl: args.merl,
+        figures: !args.no_figures,
+    };
+    let report = fit_and_report(&input, &out, &opts)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    let f = &report.fit;
+    println!(
+        "{}: {} samples, model {}, fit {:.3} s",
+        report.input, report.n_samples, f.model_name, f.fit_time_s
+    );
+    for (c, ch) in f.channels.iter().enumerate() {
+        println!(
+            "  {}: log-RMSE {:.4}, median rel. error {:.4}, {} iterations ({:?}), condition {:.2e}",
+            ["R", "G", "B"][c],
+            ch.error.log_rmse,
+            ch.error.median_rel_err,
+            ch.iterations,
+            ch.status,
+            ch.condition_number
+        );
+    }
+    if let Some(t) = &report.truth {
+        for (c, m) in t.channels.iter().enumerate() {
+            println!(
+                "  vs truth {}: log-RMSE {:.4}, median rel. error {:.4}",
+                ["R", "G", "B"][c],
+                m.log_rmse,
+                m.median_rel_err
+            );
+        }
+    }
+    for w in &f.warnings {
+        eprintln!("warning: {w}");
+    }
+    for (k, v) in &report.timings_s {
+        println!("  {k}: {v:.3} s");
+    }
+    println!("wrote {} (params.json, report.md, figures)", out.display());
+    Ok(())
 }
