@@ -308,9 +308,16 @@ pub fn model_curve(
     }
 }
 
+/// Largest standard error (log units: the smoother works on `ln(rho + floor)`) at which a
+/// smoothed point is drawn. Beyond it the local quadratic is extrapolating into a part of the
+/// plane without samples (its 95% band is wider than a factor of about 1.27 each way), and the
+/// curve would show the polynomial, not the skin.
+pub const LOESS_MAX_LOG_STD_ERROR: f64 = 0.12;
+
 /// A smoothed incidence-plane curve with its band (3-predictor smoother on
-/// `(theta_i, theta_e, phi_d)` in radians); `back` maps the smoother's scale to the plotted one
-/// (e.g. `exp(v) - floor` for a smoother of `ln(rho + floor)`; monotone, so bands map to bands).
+/// `(theta_i, theta_e, phi_d)` in radians), only where the data support it (see
+/// [`LOESS_MAX_LOG_STD_ERROR`]); `back` maps the smoother's scale to the plotted one (e.g.
+/// `exp(v) - floor` for a smoother of `ln(rho + floor)`; monotone, so bands map to bands).
 pub fn loess_curve(
     label: &str,
     l: &Loess,
@@ -326,7 +333,8 @@ pub fn loess_curve(
         .into_iter()
         .zip(preds)
         .filter_map(|(t, p): (f64, Option<LoessPoint>)| {
-            p.map(|p| (t, back(p.value), back(p.lower), back(p.upper)))
+            p.filter(|p| p.std_error.is_finite() && p.std_error <= LOESS_MAX_LOG_STD_ERROR)
+                .map(|p| (t, back(p.value), back(p.lower), back(p.upper)))
         })
         .collect();
     PlaneCurve {
