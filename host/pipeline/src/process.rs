@@ -285,6 +285,10 @@ pub fn process(
         Some(prev) => {
             let (_, samples) = skinbrdf_samples::read_samples(&samples_path)?;
             for stage in [Stage::ScanPreparation, Stage::ShadowRays, Stage::Derender] {
+                if !plan.runs(stage) {
+                    emit(skipped(&plan, stage), &mut reports, on_event);
+                    continue;
+                }
                 let mut r = if stage == Stage::Derender {
                     prev.clone()
                 } else {
