@@ -124,39 +124,7 @@ mod tests {
 
     /// A UV sphere (closed) of radius r.
     pub(crate) fn uv_sphere(r: f32, n_lat: u32, n_lon: u32) -> TriMesh {
-        let mut positions = vec![Vec3::new(0.0, 0.0, r)];
-        for i in 1..n_lat {
-            let th = std::f32::consts::PI * i as f32 / n_lat as f32;
-            for j in 0..n_lon {
-                let ph = 2.0 * std::f32::consts::PI * j as f32 / n_lon as f32;
-                positions.push(Vec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()) * r);
-            }
-        }
-        positions.push(Vec3::new(0.0, 0.0, -r));
-        let last = positions.len() as u32 - 1;
-        let ring = |i: u32, j: u32| 1 + (i - 1) * n_lon + (j % n_lon);
-        let mut indices = Vec::new();
-        for j in 0..n_lon {
-            indices.push([0, ring(1, j), ring(1, j + 1)]);
-            indices.push([last, ring(n_lat - 1, j + 1), ring(n_lat - 1, j)]);
-        }
-        for i in 1..n_lat - 1 {
-            for j in 0..n_lon {
-                let (a, b, c, d) = (
-                    ring(i, j),
-                    ring(i, j + 1),
-                    ring(i + 1, j),
-                    ring(i + 1, j + 1),
-                );
-                indices.push([a, c, d]);
-                indices.push([a, d, b]);
-            }
-        }
-        TriMesh {
-            positions,
-            indices,
-            normals: None,
-        }
+        skinbrdf_mesh::shapes::uv_sphere(glam::DVec3::ZERO, f64::from(r), n_lat, n_lon)
     }
 
     #[test]
