@@ -61,7 +61,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "floor": floor,
             "start": start,
             "single_start_red": {"seconds": single, "cost": o.cost, "iterations": o.iterations, "evaluations": o.evaluations, "params": o.params},
-            "pipeline_rgb": {"seconds": pipeline, "cost_red": full.channels[0].cost, "params_red": full.channels[0].params},
+            "pipeline_rgb": {"seconds": pipeline, "cost_red": full.channels[0].cost, "params_red": full.channels[0].params, "stages": full.channels.iter().map(|c| &c.stages).collect::<Vec<_>>()},
         })
     );
     Ok(())
