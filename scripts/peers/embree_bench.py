@@ -8,6 +8,14 @@ rays` on the same ~200k-triangle mesh with Embree (PyPI `embreex`).
 
 Prints the build time, the closest-hit time (primitive ids only, and with t/u/v output) and the
 hit count, which must equal the Rust bench's (same rays, same mesh).
+
+One command for both, back to back, with the ratio (the machine is shared: compare ratios):
+
+    python3 scripts/peers/embree_bench.py --compare [--reps N]
+
+builds and runs `cargo run --release -p skinbrdf-mesh --example ray_throughput` (which writes
+the mesh), then Embree on the same mesh and rays, then prints both and our/Embree speed ratios.
+embreex's `scene.run` traces on one thread.
 """
 import json
 import sys
@@ -65,7 +73,71 @@ def best_of(fn, n=5):
     return min(times), float(np.median(times)), out
 
 
+def compare():
+    import os
+    import subprocess
+    import tempfile
+
+    reps = "5"
+    if "--reps" in sys.argv:
+        reps = sys.argv[sys.argv.index("--reps") + 1]
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    ply = os.path.join(tempfile.gettempdir(), "skinbrdf_head200k.ply")
+    load = os.getloadavg()
+    cmd = ["cargo", "run", "--quiet", "--release", "-p", "skinbrdf-mesh", "--example",
+           "ray_throughput", "--", "--ply", ply, "--reps", reps, "--json", "--quality", "medium"]
+    ours = json.loads(subprocess.run(cmd, cwd=root, check=True, capture_output=True, text=True).stdout)
+    emb = run_embree(ply, int(reps))
+    n = ours["rays"]
+    rows = [
+        ("skinbrdf grid (coherent), %d threads" % ours["threads"], ours["grid_s"]),
+        ("skinbrdf grid (coherent), 1 thread", ours["grid_1_thread_s"]),
+        ("skinbrdf per ray, %d threads" % ours["threads"], ours["per_ray_s"]),
+        ("skinbrdf per ray, 1 thread", ours["per_ray_1_thread_s"]),
+        ("Embree (embreex scene.run, 1 thread)", emb["closest_hit_ids_best_s"]),
+        ("Embree with t/u/v output", emb["closest_hit_full_best_s"]),
+    ]
+    print(f"load average before: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; after: "
+          + " ".join(f"{x:.2f}" for x in os.getloadavg()))
+    print(f"{ours['triangles']} triangles, {n} rays; hits: ours {ours['hits']} (per ray "
+          f"{ours['per_ray_hits']}), Embree {emb['hits']}")
+    print(f"build: ours (medium) {ours['build_s'].get('medium', float('nan')):.3f} s, Embree "
+          f"{emb['build_s']:.3f} s")
+    e = emb["closest_hit_ids_best_s"]
+    print(f"{'tracer':44} {'best s':>8} {'Mrays/s':>8} {'vs Embree':>9}")
+    for name, t in rows:
+        print(f"{name:44} {t:8.4f} {n / t / 1e6:8.2f} {e / t:8.2f}x")
+    if "--json" in sys.argv:
+        print(json.dumps({"ours": ours, "embree": emb, "load_before": load}))
+
+
+def run_embree(path, reps=5):
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+
+    verts, faces = read_ply(path)
+    origins, dirs = primary_rays()
+    t = time.perf_counter()
+    scene = rtcs.EmbreeScene()
+    TriangleMesh(scene, verts, faces)
+    scene.run(origins[:1], dirs[:1])
+    build_s = time.perf_counter() - t
+    ids_best, ids_med, ids = best_of(lambda: scene.run(origins, dirs), reps)
+    full_best, _, _ = best_of(lambda: scene.run(origins, dirs, output=1), reps)
+    return {
+        "triangles": int(faces.shape[0]),
+        "rays": int(origins.shape[0]),
+        "hits": int(np.count_nonzero(np.asarray(ids) >= 0)),
+        "build_s": build_s,
+        "closest_hit_ids_best_s": ids_best,
+        "closest_hit_ids_median_s": ids_med,
+        "closest_hit_full_best_s": full_best,
+    }
+
+
 def main():
+    if "--compare" in sys.argv:
+        return compare()
     args = [a for a in sys.argv[1:] if not a.startswith("--")]
     if not args:
         raise SystemExit(__doc__)

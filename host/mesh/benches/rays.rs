@@ -8,6 +8,9 @@
 //! cargo bench -p skinbrdf-mesh --bench rays
 //! python3 scripts/peers/embree_bench.py target/skinbrdf-bench/head200k.ply
 //! ```
+//!
+//! The one-command comparison (our example and Embree back to back, with the ratio) is
+//! `python3 scripts/peers/embree_bench.py --compare`.
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -19,43 +22,7 @@ use skinbrdf_mesh::{BuildQuality, MeshBvh, MeshRay};
 
 /// Bumpy sphere: r(θ, φ) = 0.08 m · (1 + 0.03 sin 5θ cos 7φ), 224 rings of 448 vertices.
 fn head_mesh() -> TriMesh {
-    let (n_lat, n_lon) = (224u32, 448u32);
-    let r = |th: f64, ph: f64| 0.08 * (1.0 + 0.03 * (5.0 * th).sin() * (7.0 * ph).cos());
-    let at = |th: f64, ph: f64| {
-        (DVec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()) * r(th, ph)).as_vec3()
-    };
-    let mut positions = vec![at(0.0, 0.0)];
-    for i in 1..n_lat {
-        let th = std::f64::consts::PI * i as f64 / n_lat as f64;
-        for j in 0..n_lon {
-            positions.push(at(th, std::f64::consts::TAU * j as f64 / n_lon as f64));
-        }
-    }
-    positions.push(at(std::f64::consts::PI, 0.0));
-    let last = positions.len() as u32 - 1;
-    let ring = |i: u32, j: u32| 1 + (i - 1) * n_lon + (j % n_lon);
-    let mut indices = Vec::new();
-    for j in 0..n_lon {
-        indices.push([0, ring(1, j), ring(1, j + 1)]);
-        indices.push([last, ring(n_lat - 1, j + 1), ring(n_lat - 1, j)]);
-    }
-    for i in 1..n_lat - 1 {
-        for j in 0..n_lon {
-            let (a, b, c, d) = (
-                ring(i, j),
-                ring(i, j + 1),
-                ring(i + 1, j),
-                ring(i + 1, j + 1),
-            );
-            indices.push([a, c, d]);
-            indices.push([a, d, b]);
-        }
-    }
-    TriMesh {
-        positions,
-        indices,
-        normals: None,
-    }
+    skinbrdf_mesh::shapes::bumpy_sphere(0.08, 0.03, 224, 448)
 }
 
 /// 1500 x 1000 pinhole rays, 30° horizontal field of view, from (0, 0, 0.45) m looking down -z
@@ -103,6 +70,17 @@ fn bench(c: &mut Criterion) {
         rayon::current_num_threads()
     );
     g.throughput(Throughput::Elements(rays.len() as u64));
+    let dirs: Vec<Vec3> = rays.iter().map(|r| r.dir).collect();
+    g.bench_function("primary_1.5Mpx_grid_closest_hit_parallel", |b| {
+        b.iter(|| {
+            bvh.intersect_grid(
+                Vec3::new(0.0, 0.0, 0.45),
+                black_box(&dirs),
+                1500,
+                f32::INFINITY,
+            )
+        })
+    });
     g.bench_function("primary_1.5Mpx_closest_hit_parallel", |b| {
         b.iter(|| bvh.intersect_batch(black_box(&rays)))
     });

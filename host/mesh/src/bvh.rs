@@ -30,9 +30,15 @@ use skinbrdf_core::TriMesh;
 
 use crate::MeshError;
 
-/// How much time to spend building for faster traversal.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How much time to spend building for faster traversal: the obvhs build presets, cheapest
+/// first. Sweep them with [`BuildQuality::ALL`]; parse them from their [`BuildQuality::name`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum BuildQuality {
+    /// obvhs `fastest_build`: no reinsertion, one triangle per leaf.
+    Fastest,
+    /// obvhs `very_fast_build`.
+    VeryFast,
     /// Quick build, slower traversal (obvhs `fast_build`): meshes rebuilt often.
     Fast,
     /// About Embree's build time with faster traversal (obvhs `medium_build`). The default.
@@ -40,15 +46,60 @@ pub enum BuildQuality {
     Medium,
     /// Spatial pre-splits and more reinsertion (obvhs `slow_build`): one mesh traced a lot.
     High,
+    /// obvhs `very_slow_build`: full reinsertion.
+    VeryHigh,
 }
 
 impl BuildQuality {
-    const fn params(self) -> BvhBuildParams {
+    /// Every preset, cheapest build first (for sweeps).
+    pub const ALL: [Self; 6] = [
+        Self::Fastest,
+        Self::VeryFast,
+        Self::Fast,
+        Self::Medium,
+        Self::High,
+        Self::VeryHigh,
+    ];
+
+    /// The obvhs build parameters of the preset.
+    pub const fn params(self) -> BvhBuildParams {
         match self {
+            Self::Fastest => BvhBuildParams::fastest_build(),
+            Self::VeryFast => BvhBuildParams::very_fast_build(),
             Self::Fast => BvhBuildParams::fast_build(),
             Self::Medium => BvhBuildParams::medium_build(),
             Self::High => BvhBuildParams::slow_build(),
+            Self::VeryHigh => BvhBuildParams::very_slow_build(),
         }
+    }
+
+    /// Short name (`fastest`, `very_fast`, `fast`, `medium`, `high`, `very_high`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Fastest => "fastest",
+            Self::VeryFast => "very_fast",
+            Self::Fast => "fast",
+            Self::Medium => "medium",
+            Self::High => "high",
+            Self::VeryHigh => "very_high",
+        }
+    }
+}
+
+impl std::str::FromStr for BuildQuality {
+    type Err = MeshError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|q| q.name() == s.trim().replace('-', "_"))
+            .ok_or_else(|| MeshError::InvalidParameter {
+                field: "bvh build quality",
+                reason: format!(
+                    "`{s}` is not one of {}",
+                    Self::ALL.map(Self::name).join(", ")
+                ),
+            })
     }
 }
 
@@ -91,13 +142,16 @@ pub struct Hit {
 /// A BVH over a [`TriMesh`], ready for ray casting.
 #[derive(Clone)]
 pub struct MeshBvh {
-    bvh: CwBvh,
+    pub(crate) bvh: CwBvh,
     /// Triangles in BVH leaf order.
-    tris: Vec<RtTriangle>,
+    pub(crate) tris: Vec<RtTriangle>,
     /// Input-mesh index of each entry of `tris`.
-    tri_ids: Vec<u32>,
+    pub(crate) tri_ids: Vec<u32>,
     /// Original corners, input order (for barycentrics in the exact input coordinates).
-    corners: Vec<[Vec3A; 3]>,
+    pub(crate) corners: Vec<[Vec3A; 3]>,
+    /// Corners in BVH leaf order (`v0`, `v1 - v0`, `v2 - v0`) for the coherent tracer.
+    pub(crate) leaf_tris: Vec<[Vec3A; 3]>,
+    quality: BuildQuality,
     build_time: Duration,
 }
 
@@ -106,6 +160,7 @@ impl std::fmt::Debug for MeshBvh {
         f.debug_struct("MeshBvh")
             .field("triangles", &self.corners.len())
             .field("nodes", &self.bvh.nodes.len())
+            .field("quality", &self.quality)
             .field("build_time", &self.build_time)
             .finish()
     }
@@ -133,6 +188,13 @@ impl MeshBvh {
         let mut core = Duration::ZERO;
         let bvh = build_cwbvh_from_tris(&tris, quality.params(), &mut core);
         let tri_ids = bvh.primitive_indices.clone();
+        let leaf_tris = tri_ids
+            .iter()
+            .map(|&i| {
+                let [a, b, c] = corners[i as usize];
+                [a, b - a, c - a]
+            })
+            .collect();
         let tris = tri_ids
             .iter()
             .map(|&i| RtTriangle::from(&tris[i as usize]))
@@ -142,8 +204,15 @@ impl MeshBvh {
             tris,
             tri_ids,
             corners,
+            leaf_tris,
+            quality,
             build_time: start.elapsed(),
         })
+    }
+
+    /// The build preset used.
+    pub fn quality(&self) -> BuildQuality {
+        self.quality
     }
 
     /// Wall time the build took.
@@ -156,7 +225,7 @@ impl MeshBvh {
         self.corners.len()
     }
 
-    fn obvhs_ray(origin: Vec3, dir: Vec3, t_max: f32) -> Option<Ray> {
+    pub(crate) fn obvhs_ray(origin: Vec3, dir: Vec3, t_max: f32) -> Option<Ray> {
         if !(origin.is_finite() && dir.is_finite()) || dir == Vec3::ZERO || t_max.is_nan() {
             return None;
         }
@@ -179,15 +248,19 @@ impl MeshBvh {
         {
             return None;
         }
-        let slot = hit.primitive_id as usize;
+        Some(self.hit_at(hit.primitive_id as usize, hit.t, ray.origin, ray.direction))
+    }
+
+    /// The [`Hit`] for a BVH slot hit at `t`.
+    pub(crate) fn hit_at(&self, slot: usize, t_m: f32, origin: Vec3A, dir: Vec3A) -> Hit {
         let triangle = self.tri_ids[slot];
-        let (u, v) = barycentric(&self.corners[triangle as usize], ray.origin, ray.direction);
-        Some(Hit {
-            t_m: hit.t,
+        let (u, v) = barycentric(&self.corners[triangle as usize], origin, dir);
+        Hit {
+            t_m,
             triangle,
             u,
             v,
-        })
+        }
     }
 
     /// True when any triangle is hit with `0 <= t <= t_max` (shadow rays: start slightly off the
@@ -226,7 +299,7 @@ impl MeshBvh {
 /// Barycentric weights `(u, v)` of the second and third corner where the ray meets the plane
 /// of the triangle (Möller–Trumbore with `e1 = v1 - v0`, `e2 = v2 - v0`), clamped into the
 /// triangle (the traversal already decided it is inside; clamping absorbs rounding).
-fn barycentric(c: &[Vec3A; 3], origin: Vec3A, dir: Vec3A) -> (f32, f32) {
+pub(crate) fn barycentric(c: &[Vec3A; 3], origin: Vec3A, dir: Vec3A) -> (f32, f32) {
     let e1 = c[1] - c[0];
     let e2 = c[2] - c[0];
     let p = dir.cross(e2);
@@ -333,7 +406,7 @@ mod tests {
         fn closest_hit_matches_brute_force(
             seed in any::<u64>(),
             n_tris in 1usize..300,
-            quality in prop_oneof![Just(BuildQuality::Fast), Just(BuildQuality::Medium), Just(BuildQuality::High)],
+            quality in proptest::sample::select(BuildQuality::ALL.to_vec()),
             rays in proptest::collection::vec(
                 ((-1.5f32..1.5, -1.5f32..1.5, -1.5f32..1.5), (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0), 0.1f32..4.0, any::<bool>()),
                 64,

@@ -8,9 +8,13 @@
 //! * [`normals`]: shading normals by a local planar fit over a radius (given or estimated from
 //!   the scan's noise) or vertex normals; interpolated at ray hits.
 //! * [`shapes`]: tessellated spheres and cylinders.
-//! * [`bvh`]: [`MeshBvh`], build once and trace many (closest hit, occlusion, batched rays).
+//! * [`bvh`]: [`MeshBvh`], build once and trace many (closest hit, occlusion, batched rays),
+//!   build presets [`BuildQuality`].
+//! * [`coherent`]: [`MeshBvh::intersect_grid`], camera rays (one origin, a grid of directions)
+//!   traced per tile with shared frustum culling: the fast path for whole images.
 
 pub mod bvh;
+pub mod coherent;
 pub mod load;
 pub mod normals;
 pub mod ply;
@@ -18,6 +22,7 @@ pub mod shapes;
 pub mod validate;
 
 pub use bvh::{BuildQuality, Hit, MeshBvh, MeshRay};
+pub use coherent::TraceScratch;
 pub use load::{load_mesh, LengthUnit, LoadOptions, LoadedMesh};
 pub use normals::{estimate_noise, NoiseEstimate, NormalMethod, SurfaceNormals};
 pub use ply::{read_ply, write_ply_binary};

@@ -46,6 +46,29 @@ pub fn uv_sphere(centre_m: DVec3, radius_m: f64, n_lat: u32, n_lon: u32) -> TriM
     }
 }
 
+/// A bumpy closed sphere, the ray-throughput benchmarks' head-sized mesh:
+/// `r(θ, φ) = radius_m · (1 + bump · sin 5θ · cos 7φ)`, `n_lat` rings of `n_lon` vertices, same
+/// topology and winding as [`uv_sphere`] (224 x 448 gives 199,808 triangles).
+pub fn bumpy_sphere(radius_m: f64, bump: f64, n_lat: u32, n_lon: u32) -> TriMesh {
+    let (n_lat, n_lon) = (n_lat.max(2), n_lon.max(3));
+    let r = |th: f64, ph: f64| radius_m * (1.0 + bump * (5.0 * th).sin() * (7.0 * ph).cos());
+    let at = |th: f64, ph: f64| {
+        (DVec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()) * r(th, ph)).as_vec3()
+    };
+    let mut mesh = uv_sphere(DVec3::ZERO, 1.0, n_lat, n_lon);
+    mesh.positions[0] = at(0.0, 0.0);
+    for i in 1..n_lat {
+        let th = std::f64::consts::PI * i as f64 / n_lat as f64;
+        for j in 0..n_lon {
+            let ph = std::f64::consts::TAU * j as f64 / n_lon as f64;
+            mesh.positions[(1 + (i - 1) * n_lon + j) as usize] = at(th, ph);
+        }
+    }
+    let last = mesh.positions.len() - 1;
+    mesh.positions[last] = at(std::f64::consts::PI, 0.0);
+    mesh
+}
+
 /// An open cylinder (no caps) around `axis` through `centre_m`, outward winding.
 pub fn cylinder(
     centre_m: DVec3,

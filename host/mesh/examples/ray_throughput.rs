@@ -1,0 +1,154 @@
+//! Ray throughput on the benchmark mesh: 1500 x 1000 primary rays on a 199,808-triangle bumpy
+//! sphere (the same mesh and rays as `scripts/peers/embree_bench.py`, which runs this example
+//! and Embree back to back: `python3 scripts/peers/embree_bench.py --compare`).
+//!
+//! ```text
+//! cargo run --release -p skinbrdf-mesh --example ray_throughput -- [--ply PATH] [--quality Q] [--reps N] [--json]
+//! ```
+//!
+//! Times (best of `reps`): the coherent grid tracer (`intersect_grid`, all rayon threads, and
+//! on one thread), per-ray traversal (`intersect_batch`, all threads, and one thread), and the
+//! build of every quality preset (or only `--quality`).
+
+use std::time::Instant;
+
+use glam::{DVec3, Vec3};
+use skinbrdf_mesh::{BuildQuality, MeshBvh, MeshRay, TraceScratch};
+
+/// 1500 x 1000 pinhole rays, 30° horizontal field of view, looking down -z (image x = world
+/// +x, image y = world -y).
+fn primary_dirs() -> (Vec<Vec3>, usize) {
+    let (w, h) = (1500usize, 1000usize);
+    let f = 0.5 * w as f64 / (15f64.to_radians()).tan();
+    let (cx, cy) = ((w as f64 - 1.0) * 0.5, (h as f64 - 1.0) * 0.5);
+    let mut dirs = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let d = DVec3::new((x as f64 - cx) / f, -(y as f64 - cy) / f, -1.0).normalize();
+            dirs.push(d.as_vec3());
+        }
+    }
+    (dirs, w)
+}
+
+fn best_of<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut best = f64::INFINITY;
+    let mut out = None;
+    for _ in 0..reps.max(1) {
+        let t = Instant::now();
+        let r = f();
+        best = best.min(t.elapsed().as_secs_f64());
+        out = Some(r);
+    }
+    (best, out.expect("at least one repetition"))
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let opt = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1).cloned())
+    };
+    let json = args.iter().any(|a| a == "--json");
+    let reps: usize = opt("--reps").map(|s| s.parse()).transpose()?.unwrap_or(5);
+    let only: Option<BuildQuality> = opt("--quality").map(|s| s.parse()).transpose()?;
+    let mesh = skinbrdf_mesh::shapes::bumpy_sphere(0.08, 0.03, 224, 448);
+    let origin = Vec3::new(0.0, 0.0, 0.45);
+    let (dirs, width) = primary_dirs();
+    if args.iter().any(|a| a == "--grid-only") {
+        // For `perf stat`: one build, `reps` one-thread grid passes.
+        let bvh = MeshBvh::build(&mesh, only.unwrap_or(BuildQuality::Medium))?;
+        let mut scratch = TraceScratch::default();
+        let mut out = vec![None; dirs.len()];
+        let (s, _) = best_of(reps, || {
+            bvh.intersect_grid_into(origin, &dirs, width, f32::INFINITY, &mut out, &mut scratch)
+        });
+        println!(
+            "grid 1 thread {s:.4} s, {} candidates per tile",
+            scratch.candidates / scratch.tiles.max(1)
+        );
+        return Ok(());
+    }
+    if let Some(p) = opt("--ply") {
+        skinbrdf_mesh::write_ply_binary(std::path::Path::new(&p), &mesh)?;
+    }
+    let rays: Vec<MeshRay> = dirs.iter().map(|&d| MeshRay::new(origin, d)).collect();
+    let n = dirs.len() as f64;
+    let mut builds = Vec::new();
+    for q in BuildQuality::ALL {
+        if only.is_some_and(|o| o != q) {
+            continue;
+        }
+        let (s, _) = best_of(reps.min(3), || MeshBvh::build(&mesh, q));
+        builds.push((q, s));
+    }
+    let quality = only.unwrap_or(BuildQuality::Medium);
+    let bvh = MeshBvh::build(&mesh, quality)?;
+    let (grid_s, grid) = best_of(reps, || {
+        bvh.intersect_grid(origin, &dirs, width, f32::INFINITY)
+    });
+    let hits = grid.iter().filter(|h| h.is_some()).count();
+    let mut scratch = TraceScratch::default();
+    let mut out = vec![None; dirs.len()];
+    let (grid1_s, _) = best_of(reps, || {
+        bvh.intersect_grid_into(origin, &dirs, width, f32::INFINITY, &mut out, &mut scratch)
+    });
+    let (batch_s, batch) = best_of(reps, || bvh.intersect_batch(&rays));
+    let batch_hits = batch.iter().filter(|h| h.is_some()).count();
+    let (single_s, _) = best_of(reps.min(3), || {
+        rays.iter()
+            .filter(|r| bvh.intersect(r.origin, r.dir, r.t_max).is_some())
+            .count()
+    });
+    let tiles = scratch.tiles + scratch.fallback_tiles;
+    let threads = rayon::current_num_threads();
+    let mrays = |s: f64| n / s / 1e6;
+    if json {
+        let b: Vec<String> = builds
+            .iter()
+            .map(|(q, s)| format!("\"{}\": {s:.4}", q.name()))
+            .collect();
+        println!(
+            "{{\"triangles\": {}, \"rays\": {}, \"hits\": {hits}, \"per_ray_hits\": {batch_hits}, \"threads\": {threads}, \"quality\": \"{}\", \"build_s\": {{{}}}, \"grid_s\": {grid_s:.4}, \"grid_1_thread_s\": {grid1_s:.4}, \"per_ray_s\": {batch_s:.4}, \"per_ray_1_thread_s\": {single_s:.4}, \"fallback_tiles\": {}, \"tiles\": {tiles}, \"mean_candidates\": {:.1}}}",
+            mesh.indices.len(),
+            dirs.len(),
+            quality.name(),
+            b.join(", "),
+            scratch.fallback_tiles / reps.max(1) as u64,
+            scratch.candidates as f64 / scratch.tiles.max(1) as f64,
+        );
+    } else {
+        println!(
+            "{} triangles, {} rays, {hits} hits (per-ray path {batch_hits}), {threads} rayon threads, quality {}",
+            mesh.indices.len(),
+            dirs.len(),
+            quality.name()
+        );
+        for (q, s) in &builds {
+            println!("build {:10} {s:.3} s", q.name());
+        }
+        println!(
+            "grid (coherent), {threads} threads   {grid_s:.4} s  {:.2} Mrays/s",
+            mrays(grid_s)
+        );
+        println!(
+            "grid (coherent), 1 thread    {grid1_s:.4} s  {:.2} Mrays/s",
+            mrays(grid1_s)
+        );
+        println!(
+            "per ray, {threads} threads           {batch_s:.4} s  {:.2} Mrays/s",
+            mrays(batch_s)
+        );
+        println!(
+            "per ray, 1 thread            {single_s:.4} s  {:.2} Mrays/s",
+            mrays(single_s)
+        );
+        println!(
+            "tiles {tiles} ({} per ray), mean candidates per tile {:.1}",
+            scratch.fallback_tiles,
+            scratch.candidates as f64 / scratch.tiles.max(1) as f64
+        );
+    }
+    Ok(())
+}

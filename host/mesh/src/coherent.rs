@@ -1,0 +1,501 @@
+//! Coherent ray casting: many rays from one origin laid out on a grid (a camera's pixels).
+//!
+//! [`MeshBvh::intersect_grid`] answers exactly the question [`MeshBvh::intersect`] answers for
+//! each ray (closest hit with `0 <= t <= t_max`, Möller–Trumbore), but shares the work of rays
+//! that start at one point and point in nearby directions — every camera ray of an image:
+//!
+//! 1. **Tiles.** The grid is cut into super-tiles of [`SUPER_TILE_PX`]² rays, each cut into
+//!    tiles of [`TILE_PX`]² rays; bands of super-tiles run in parallel (rayon).
+//! 2. **Frustum.** For a tile, `c` is the mean direction and `(u, v)` complete an orthonormal
+//!    basis; every ray `d` has tangent coordinates `(d·u / d·c, d·v / d·c)` and the tile's
+//!    rectangle `[a0, a1] x [b0, b1]` of them (padded by [`FRUSTUM_PAD`]) bounds the tile by
+//!    four planes through the origin, normals `u - a0 c`, `a1 c - u`, `v - b0 c`, `b1 c - v`
+//!    (a point `p` is inside when `(p - o)·n >= 0` for all four; together they imply
+//!    `(p - o)·c >= 0`, so nothing behind the origin is kept).
+//! 3. **Candidates.** One walk of the CWBVH per super-tile keeps the children whose (conservatively
+//!    quantized) boxes are not entirely behind a plane, and the leaf triangles not entirely
+//!    behind a plane; each tile keeps those of the super-tile's triangles not behind one of its
+//!    own planes. Culling only removes triangles no ray of the tile can hit, so the result is
+//!    the per-ray closest hit.
+//! 4. **Rays against candidates.** The origin is common, so `s = o - v0`, `q = s x e1` and
+//!    `t·det = e2·q` are computed once per candidate; per ray and triangle only `p = d x e2`
+//!    and three dot products remain, four triangles at a time in SIMD lanes (`glam::Vec4`).
+//!
+//! A tile falls back to per-ray BVH traversal when its rays spread too far from their mean
+//! (cosine below [`MIN_TILE_COS`]) or it gathers more than [`MAX_TILE_CANDIDATES`] triangles
+//! (rays grazing along a surface), where testing every candidate would cost more than a
+//! traversal. Rays with a non-finite or zero direction hit nothing (use them for pixels that
+//! need no ray). Scratch buffers are per band (no allocation per ray).
+
+use glam::{Vec3, Vec3A, Vec4};
+use rayon::prelude::*;
+
+use crate::bvh::{Hit, MeshBvh};
+
+/// Tile side, rays: the rays tested together against one candidate list.
+pub const TILE_PX: usize = 8;
+/// Super-tile side, rays: one BVH walk per super-tile; its candidates are re-culled per tile.
+pub const SUPER_TILE_PX: usize = 16;
+/// More candidates than this in a super-tile and it is traced ray by ray.
+pub const MAX_SUPER_CANDIDATES: usize = 4096;
+/// Padding of a tile's tangent rectangle (1e-5 of the distance: 40x the f32 rounding of the
+/// plane tests, a few hundredths of a pixel for any camera).
+pub const FRUSTUM_PAD: f32 = 1e-5;
+/// Rays of a tile must stay within about 78° of the tile's mean direction.
+pub const MIN_TILE_COS: f32 = 0.2;
+/// More candidate triangles than this and a tile is traced ray by ray.
+pub const MAX_TILE_CANDIDATES: usize = 384;
+
+/// Reusable buffers and counters of the coherent tracer (one per thread or band).
+#[derive(Debug, Default, Clone)]
+pub struct TraceScratch {
+    stack: Vec<u32>,
+    cand: Vec<u32>,
+    super_cand: Vec<u32>,
+    packs: Vec<Pack>,
+    tile: Vec<(usize, Vec3A)>,
+    /// Tiles traced with shared candidates.
+    pub tiles: u64,
+    /// Tiles traced ray by ray (too wide or too many candidates).
+    pub fallback_tiles: u64,
+    /// Candidate triangles summed over tiles.
+    pub candidates: u64,
+}
+
+/// Four candidate triangles in SIMD lanes, relative to the tile's origin.
+#[derive(Debug, Clone, Copy)]
+struct Pack {
+    e1: [Vec4; 3],
+    e2: [Vec4; 3],
+    s: [Vec4; 3],
+    q: [Vec4; 3],
+    /// `t · det`.
+    tn: Vec4,
+    slot: [u32; 4],
+}
+
+fn box_in_frustum(lo: Vec3A, hi: Vec3A, planes: &[Vec3A; 4]) -> bool {
+    planes
+        .iter()
+        .all(|n| Vec3A::select(n.cmpge(Vec3A::ZERO), hi, lo).dot(*n) >= 0.0)
+}
+
+fn tri_in_frustum(a: Vec3A, b: Vec3A, c: Vec3A, planes: &[Vec3A; 4]) -> bool {
+    planes
+        .iter()
+        .all(|n| n.dot(a) >= 0.0 || n.dot(b) >= 0.0 || n.dot(c) >= 0.0)
+}
+
+/// The valid rays (finite, non-zero direction) of the grid cells `x0..x1` x `y0..y1`.
+fn gather(
+    dirs: &[Vec3],
+    n: usize,
+    width: usize,
+    (x0, x1): (usize, usize),
+    (y0, y1): (usize, usize),
+    tile: &mut Vec<(usize, Vec3A)>,
+) {
+    tile.clear();
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let i = y * width + x;
+            if i >= n {
+                return;
+            }
+            let d = dirs[i];
+            if d.is_finite() && d != Vec3::ZERO {
+                // -0.0 -> +0.0, as for single rays (obvhs's octant pitfall).
+                tile.push((i, Vec3A::new(d.x + 0.0, d.y + 0.0, d.z + 0.0)));
+            }
+        }
+    }
+}
+
+/// The four planes (through the origin, inward normals) bounding a set of rays, or `None`
+/// when a ray is too far from their mean direction.
+fn frustum(tile: &[(usize, Vec3A)]) -> Option<[Vec3A; 4]> {
+    let c = tile
+        .iter()
+        .fold(Vec3A::ZERO, |acc, (_, d)| acc + d.normalize_or_zero())
+        .normalize_or_zero();
+    if c == Vec3A::ZERO {
+        return None;
+    }
+    let (u, v) = c.any_orthonormal_pair();
+    let (mut a0, mut a1, mut b0, mut b1) = (
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+    );
+    for &(_, d) in tile {
+        let k = d.dot(c);
+        if !k.is_finite() || k <= MIN_TILE_COS * d.length() {
+            return None;
+        }
+        let (a, b) = (d.dot(u) / k, d.dot(v) / k);
+        a0 = a0.min(a);
+        a1 = a1.max(a);
+        b0 = b0.min(b);
+        b1 = b1.max(b);
+    }
+    Some([
+        u - c * (a0 - FRUSTUM_PAD),
+        c * (a1 + FRUSTUM_PAD) - u,
+        v - c * (b0 - FRUSTUM_PAD),
+        c * (b1 + FRUSTUM_PAD) - v,
+    ])
+}
+
+impl MeshBvh {
+    /// Closest hits of rays from one `origin` whose directions `dirs` are laid out row-major on
+    /// a grid `width` wide (a camera's pixels, or sub-pixel samples), in parallel over bands of
+    /// tiles. Same answer as [`MeshBvh::intersect`] per ray (see the module docs); entries with
+    /// a non-finite or zero direction get `None`.
+    pub fn intersect_grid(
+        &self,
+        origin: Vec3,
+        dirs: &[Vec3],
+        width: usize,
+        t_max: f32,
+    ) -> Vec<Option<Hit>> {
+        let mut out = vec![None; dirs.len()];
+        if width == 0 {
+            return out;
+        }
+        let band = SUPER_TILE_PX * width;
+        out.par_chunks_mut(band)
+            .zip(dirs.par_chunks(band))
+            .for_each_init(TraceScratch::default, |scratch, (o, d)| {
+                self.intersect_grid_into(origin, d, width, t_max, o, scratch)
+            });
+        out
+    }
+
+    /// [`MeshBvh::intersect_grid`] on the calling thread, into `out` (same length as `dirs`),
+    /// with caller-owned scratch buffers: for callers that parallelize over bands themselves.
+    pub fn intersect_grid_into(
+        &self,
+        origin: Vec3,
+        dirs: &[Vec3],
+        width: usize,
+        t_max: f32,
+        out: &mut [Option<Hit>],
+        scratch: &mut TraceScratch,
+    ) {
+        let n = dirs.len().min(out.len());
+        out.iter_mut().for_each(|h| *h = None);
+        if width == 0 || !origin.is_finite() || t_max.is_nan() {
+            return;
+        }
+        let o = Vec3A::from(origin);
+        let height = n.div_ceil(width);
+        let sc = scratch;
+        for ty in (0..height).step_by(SUPER_TILE_PX) {
+            for tx in (0..width).step_by(SUPER_TILE_PX) {
+                let (y1, x1) = (
+                    (ty + SUPER_TILE_PX).min(height),
+                    (tx + SUPER_TILE_PX).min(width),
+                );
+                gather(dirs, n, width, (tx, x1), (ty, y1), &mut sc.tile);
+                if sc.tile.is_empty() {
+                    continue;
+                }
+                let Some(planes) = frustum(&sc.tile) else {
+                    self.trace_per_ray(o, t_max, sc, out);
+                    continue;
+                };
+                self.frustum_candidates(o, &planes, sc);
+                if sc.cand.len() > MAX_SUPER_CANDIDATES {
+                    self.trace_per_ray(o, t_max, sc, out);
+                    continue;
+                }
+                std::mem::swap(&mut sc.cand, &mut sc.super_cand);
+                for sy in (ty..y1).step_by(TILE_PX) {
+                    for sx in (tx..x1).step_by(TILE_PX) {
+                        gather(
+                            dirs,
+                            n,
+                            width,
+                            (sx, (sx + TILE_PX).min(x1)),
+                            (sy, (sy + TILE_PX).min(y1)),
+                            &mut sc.tile,
+                        );
+                        if !sc.tile.is_empty() {
+                            self.trace_tile(o, t_max, sc, out);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    fn trace_per_ray(&self, o: Vec3A, t_max: f32, sc: &mut TraceScratch, out: &mut [Option<Hit>]) {
+        sc.fallback_tiles += 1;
+        for &(i, d) in &sc.tile {
+            out[i] = self.intersect(o.into(), d.into(), t_max);
+        }
+    }
+
+    /// Traces the rays of `sc.tile` against the candidates of `sc.super_cand` that lie in the
+    /// tile's own frustum.
+    fn trace_tile(&self, o: Vec3A, t_max: f32, sc: &mut TraceScratch, out: &mut [Option<Hit>]) {
+        let Some(planes) = frustum(&sc.tile) else {
+            return self.trace_per_ray(o, t_max, sc, out);
+        };
+        sc.cand.clear();
+        for &k in &sc.super_cand {
+            let [v0, e1, e2] = self.leaf_tris[k as usize];
+            let a = v0 - o;
+            if tri_in_frustum(a, a + e1, a + e2, &planes) {
+                sc.cand.push(k);
+            }
+        }
+        if sc.cand.len() > MAX_TILE_CANDIDATES {
+            return self.trace_per_ray(o, t_max, sc, out);
+        }
+        sc.tiles += 1;
+        sc.candidates += sc.cand.len() as u64;
+        if sc.cand.is_empty() {
+            return;
+        }
+        sc.packs.clear();
+        for chunk in sc.cand.chunks(4) {
+            let mut l = [[0.0f32; 13]; 4];
+            let mut slot = [u32::MAX; 4];
+            for (lane, &k) in chunk.iter().enumerate() {
+                let [v0, e1, e2] = self.leaf_tris[k as usize];
+                let s = o - v0;
+                let q = s.cross(e1);
+                let tn = e2.dot(q);
+                l[lane] = [
+                    e1.x, e1.y, e1.z, e2.x, e2.y, e2.z, s.x, s.y, s.z, q.x, q.y, q.z, tn,
+                ];
+                slot[lane] = k;
+            }
+            for lane in l.iter_mut().skip(chunk.len()) {
+                // Empty lane: zero edges (det = 0 never hits) and a NaN distance.
+                lane[12] = f32::NAN;
+            }
+            let g = |j: usize| Vec4::new(l[0][j], l[1][j], l[2][j], l[3][j]);
+            sc.packs.push(Pack {
+                e1: [g(0), g(1), g(2)],
+                e2: [g(3), g(4), g(5)],
+                s: [g(6), g(7), g(8)],
+                q: [g(9), g(10), g(11)],
+                tn: g(12),
+                slot,
+            });
+        }
+        for &(i, d) in &sc.tile {
+            let (dx, dy, dz) = (Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z));
+            let mut best_t = t_max;
+            let mut best_slot = u32::MAX;
+            for p in &sc.packs {
+                let [e1x, e1y, e1z] = p.e1;
+                let [e2x, e2y, e2z] = p.e2;
+                let px = dy * e2z - dz * e2y;
+                let py = dz * e2x - dx * e2z;
+                let pz = dx * e2y - dy * e2x;
+                let det = e1x * px + e1y * py + e1z * pz;
+                let un = p.s[0] * px + p.s[1] * py + p.s[2] * pz;
+                let vn = dx * p.q[0] + dy * p.q[1] + dz * p.q[2];
+                let inv = Vec4::ONE / det;
+                let (uu, vv, t) = (un * inv, vn * inv, p.tn * inv);
+                let m = uu.cmpge(Vec4::ZERO)
+                    & vv.cmpge(Vec4::ZERO)
+                    & (uu + vv).cmple(Vec4::ONE)
+                    & t.cmpge(Vec4::ZERO)
+                    & t.cmple(Vec4::splat(best_t));
+                let bits = m.bitmask();
+                if bits != 0 {
+                    let ts = t.to_array();
+                    for (lane, &tl) in ts.iter().enumerate() {
+                        if bits & (1 << lane) != 0 && (tl < best_t || best_slot == u32::MAX) {
+                            best_t = tl;
+                            best_slot = p.slot[lane];
+                        }
+                    }
+                }
+            }
+            if best_slot != u32::MAX {
+                out[i] = Some(self.hit_at(best_slot as usize, best_t, o, d));
+            }
+        }
+    }
+
+    /// Leaf slots of the triangles that can lie in the frustum (planes through `o`).
+    fn frustum_candidates(&self, o: Vec3A, planes: &[Vec3A; 4], sc: &mut TraceScratch) {
+        sc.cand.clear();
+        sc.stack.clear();
+        if self.bvh.nodes.is_empty() {
+            return;
+        }
+        sc.stack.push(0);
+        while let Some(ni) = sc.stack.pop() {
+            let node = &self.bvh.nodes[ni as usize];
+            for ch in 0..8 {
+                if node.is_child_empty(ch) {
+                    continue;
+                }
+                let b = node.child_aabb(ch);
+                if !box_in_frustum(b.min - o, b.max - o, planes) {
+                    continue;
+                }
+                if node.is_leaf(ch) {
+                    let (first, count) = node.child_primitives(ch);
+                    for k in first..first + count {
+                        let [v0, e1, e2] = self.leaf_tris[k as usize];
+                        let a = v0 - o;
+                        if tri_in_frustum(a, a + e1, a + e2, planes) {
+                            sc.cand.push(k);
+                        }
+                    }
+                } else {
+                    sc.stack.push(node.child_node_index(ch));
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::BuildQuality;
+    use glam::DVec3;
+    use skinbrdf_core::TriMesh;
+
+    /// Pinhole rays (width x height, horizontal field of view `fov_deg`) from `origin` looking
+    /// down -z, with a few holes (zero directions).
+    fn grid(width: usize, height: usize, fov_deg: f64) -> Vec<Vec3> {
+        let f = 0.5 * width as f64 / (0.5 * fov_deg.to_radians()).tan();
+        let (cx, cy) = ((width as f64 - 1.0) * 0.5, (height as f64 - 1.0) * 0.5);
+        let mut dirs = Vec::new();
+        for y in 0..height {
+            for x in 0..width {
+                if (x * 7 + y * 3) % 97 == 0 {
+                    dirs.push(Vec3::ZERO);
+                    continue;
+                }
+                let d = DVec3::new((x as f64 - cx) / f, -(y as f64 - cy) / f, -1.0).normalize();
+                dirs.push(d.as_vec3());
+            }
+        }
+        dirs
+    }
+
+    fn check(mesh: &TriMesh, origin: Vec3, dirs: &[Vec3], width: usize, quality: BuildQuality) {
+        let bvh = MeshBvh::build(mesh, quality).unwrap();
+        let grid = bvh.intersect_grid(origin, dirs, width, f32::INFINITY);
+        let mut hits = 0;
+        let mut differ = 0;
+        // Within this of an edge, Möller–Trumbore in f32 may go either way (obvhs's test also
+        // rejects -0.0 barycentrics, a leak on exact edges the grid tracer does not have).
+        let on_edge = |h: &Hit| h.u.min(h.v).min(1.0 - h.u - h.v) < 1e-4;
+        for (d, g) in dirs.iter().zip(&grid) {
+            let single = bvh.intersect(origin, *d, f32::INFINITY);
+            if *d == Vec3::ZERO {
+                assert_eq!(*g, None);
+                continue;
+            }
+            match (single, *g) {
+                (None, None) => {}
+                (Some(a), Some(b)) => {
+                    hits += 1;
+                    assert!(
+                        (a.t_m - b.t_m).abs() <= 1e-5 * a.t_m.max(1.0),
+                        "{a:?} {b:?}"
+                    );
+                    if a.triangle != b.triangle {
+                        // Only on a shared edge (same t): both hits are correct.
+                        assert!(on_edge(&a) || on_edge(&b), "{a:?} {b:?}");
+                        differ += 1;
+                    }
+                }
+                (Some(h), None) | (None, Some(h)) if on_edge(&h) => {}
+                (a, b) => panic!("single {a:?} vs grid {b:?} for {d:?}"),
+            }
+        }
+        assert!(hits > dirs.len() / 10, "only {hits} hits");
+        assert!(
+            differ * 50 <= hits,
+            "{differ} of {hits} on different triangles"
+        );
+    }
+
+    #[test]
+    fn grid_matches_single_rays_on_a_sphere() {
+        let mesh = crate::shapes::uv_sphere(DVec3::ZERO, 0.08, 60, 120);
+        let dirs = grid(157, 93, 30.0);
+        for q in [
+            BuildQuality::Fastest,
+            BuildQuality::Medium,
+            BuildQuality::High,
+        ] {
+            check(&mesh, Vec3::new(0.0, 0.01, 0.45), &dirs, 157, q);
+        }
+        // From inside the sphere (every ray hits, frusta contain the origin's surroundings).
+        check(
+            &mesh,
+            Vec3::new(0.01, 0.0, 0.02),
+            &dirs,
+            157,
+            BuildQuality::Medium,
+        );
+    }
+
+    #[test]
+    fn wide_tiles_fall_back_and_agree() {
+        // 170° field of view on a small grid: tiles too wide for a frustum.
+        let mesh = crate::shapes::uv_sphere(DVec3::ZERO, 0.5, 20, 40);
+        let dirs = grid(20, 12, 170.0);
+        check(
+            &mesh,
+            Vec3::new(0.0, 0.0, 0.2),
+            &dirs,
+            20,
+            BuildQuality::Fast,
+        );
+        let bvh = MeshBvh::build(&mesh, BuildQuality::Fast).unwrap();
+        let mut sc = TraceScratch::default();
+        let mut out = vec![None; dirs.len()];
+        bvh.intersect_grid_into(
+            Vec3::new(0.0, 0.0, 0.2),
+            &dirs,
+            20,
+            f32::INFINITY,
+            &mut out,
+            &mut sc,
+        );
+        assert!(sc.fallback_tiles > 0);
+        assert_eq!(
+            out,
+            bvh.intersect_grid(Vec3::new(0.0, 0.0, 0.2), &dirs, 20, f32::INFINITY)
+        );
+    }
+
+    #[test]
+    fn t_max_and_degenerate_inputs() {
+        let mesh = crate::shapes::uv_sphere(DVec3::ZERO, 0.1, 16, 32);
+        let bvh = MeshBvh::build(&mesh, BuildQuality::Medium).unwrap();
+        let dirs = vec![-Vec3::Z; 16];
+        // The sphere's front is 0.9 m away.
+        assert!(bvh
+            .intersect_grid(Vec3::Z, &dirs, 4, 0.5)
+            .iter()
+            .all(Option::is_none));
+        assert!(bvh
+            .intersect_grid(Vec3::Z, &dirs, 4, 2.0)
+            .iter()
+            .all(|h| h.is_some_and(|h| (h.t_m - 0.9).abs() < 1e-3)));
+        assert!(bvh
+            .intersect_grid(Vec3::NAN, &dirs, 4, 2.0)
+            .iter()
+            .all(Option::is_none));
+        assert!(bvh.intersect_grid(Vec3::Z, &dirs, 0, 2.0).len() == 16);
+        // A ragged last row.
+        let h = bvh.intersect_grid(Vec3::Z, &dirs[..13], 4, 2.0);
+        assert!(h.iter().all(Option::is_some));
+    }
+}
