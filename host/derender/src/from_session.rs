@@ -135,7 +135,11 @@ pub fn session_geometry(
         centre_m: r.centre_m,
         radius_m: r.radius_m,
     });
-    Ok((Geometry::new(mesh, cfg.normals, roi)?, report, load_s))
+    Ok((
+        Geometry::with_quality(mesh, cfg.normals, roi, cfg.bvh_quality)?,
+        report,
+        load_s,
+    ))
 }
 
 /// Rasterizes the projected target squares into a mask (true = on a target).

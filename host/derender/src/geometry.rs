@@ -56,8 +56,13 @@ pub struct Geometry {
     pub can_self_shadow: bool,
     /// Tolerance used by the convexity test, metres.
     pub convexity_tol_m: f64,
-    /// Region vertices (indices) — used to find the pixels that need rays.
+    /// Region vertices (indices): inside the region sphere (convexity test, bounding box).
     pub roi_vertices: Vec<u32>,
+    /// Vertices of the triangles that can reach into the region (their bounding box meets the
+    /// region sphere): projected per image to find the pixels that need rays.
+    pub region_vertices: Vec<u32>,
+    /// Those triangles, as indices into `region_vertices`.
+    pub region_triangles: Vec<[u32; 3]>,
     /// Time to build the BVH.
     pub bvh_time: Duration,
     /// Time to compute normals.
@@ -67,13 +72,24 @@ pub struct Geometry {
 }
 
 impl Geometry {
-    /// Prepares a mesh: BVH, normals, region vertices and the convexity test.
+    /// Prepares a mesh: BVH (default build quality), normals, region vertices and the
+    /// convexity test.
     pub fn new(
         mesh: TriMesh,
         normals: NormalMethod,
         roi: Option<Roi>,
     ) -> Result<Self, DerenderError> {
-        let bvh = MeshBvh::build(&mesh, BuildQuality::Medium)?;
+        Self::with_quality(mesh, normals, roi, BuildQuality::default())
+    }
+
+    /// [`Geometry::new`] with a chosen BVH build preset.
+    pub fn with_quality(
+        mesh: TriMesh,
+        normals: NormalMethod,
+        roi: Option<Roi>,
+        quality: BuildQuality,
+    ) -> Result<Self, DerenderError> {
+        let bvh = MeshBvh::build(&mesh, quality)?;
         let bvh_time = bvh.build_time();
         let t = Instant::now();
         let normals = SurfaceNormals::compute(&mesh, normals)?;
@@ -84,6 +100,7 @@ impl Geometry {
         if roi_vertices.is_empty() {
             return Err(DerenderError::EmptyRegion);
         }
+        let (region_vertices, region_triangles) = region_triangles(&mesh, roi);
         let t = Instant::now();
         let noise = normals
             .noise
@@ -100,11 +117,41 @@ impl Geometry {
             can_self_shadow,
             convexity_tol_m,
             roi_vertices,
+            region_vertices,
+            region_triangles,
             bvh_time,
             normals_time,
             convexity_time: t.elapsed(),
         })
     }
+}
+
+/// Triangles whose bounding box meets the region sphere (all without a region), with their
+/// vertices renumbered into a compact list.
+fn region_triangles(mesh: &TriMesh, roi: Option<Roi>) -> (Vec<u32>, Vec<[u32; 3]>) {
+    let mut local = vec![u32::MAX; mesh.positions.len()];
+    let mut verts = Vec::new();
+    let mut tris = Vec::new();
+    for t in &mesh.indices {
+        if let Some(r) = roi {
+            let p = t.map(|i| mesh.positions[i as usize].as_dvec3());
+            let lo = p[0].min(p[1]).min(p[2]);
+            let hi = p[0].max(p[1]).max(p[2]);
+            let nearest = r.centre_m.clamp(lo, hi);
+            if nearest.distance_squared(r.centre_m) > r.radius_m * r.radius_m {
+                continue;
+            }
+        }
+        tris.push(t.map(|i| {
+            let l = &mut local[i as usize];
+            if *l == u32::MAX {
+                *l = verts.len() as u32;
+                verts.push(i);
+            }
+            *l
+        }));
+    }
+    (verts, tris)
 }
 
 fn region_is_convex(mesh: &TriMesh, normals: &[Vec3], roi: &[u32], tol_m: f64) -> bool {

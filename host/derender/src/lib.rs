@@ -34,7 +34,10 @@ pub mod stats;
 pub use calibrate::{calibrate_c, CEstimator, Calibration, StandardImage};
 pub use from_session::{derender_session, PoseChoice, SessionOptions, SessionRun};
 pub use geometry::{Geometry, Roi};
-pub use image::{derender_image, FilterCounts, ImageSamples, ImageView, Measurement};
+pub use image::{
+    derender_image, derender_image_with_rays, region_pixels, FilterCounts, ImageSamples, ImageView,
+    Measurement, RegionPixels,
+};
 pub use session::{
     derender_with_loader, CalibrationInput, DerenderInputs, DerenderReport, ImagePoses, OwnedImage,
     PoseSource, StageTimes,
@@ -44,7 +47,7 @@ pub use stats::RobustStats;
 use serde::Serialize;
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::BrdfSample;
-use skinbrdf_mesh::NormalMethod;
+use skinbrdf_mesh::{BuildQuality, NormalMethod};
 
 /// Errors of derendering.
 #[derive(Debug, thiserror::Error)]
@@ -109,13 +112,15 @@ pub struct DerenderConfig {
     pub normals: NormalMethod,
     /// Averaging of C.
     pub c_estimator: CEstimator,
+    /// BVH build preset (build time against tracing speed).
+    pub bvh_quality: BuildQuality,
 }
 
 impl DerenderConfig {
     /// The defaults: every pixel, 75° grazing limit (a 1° normal error then costs at most
     /// 6.5% in `1/cos θ_i`; at 60° it is 3%), noise floor 0.01 (1% of white: ten times a
     /// typical 8-bit quantisation step), shadows when needed, planar-fit normals with the
-    /// radius from the scan's noise, median C.
+    /// radius from the scan's noise, median C, medium BVH build.
     pub const DEFAULT: Self = Self {
         stride: 1,
         grazing_limit_deg: 75.0,
@@ -123,6 +128,7 @@ impl DerenderConfig {
         shadows: ShadowMode::Auto,
         normals: NormalMethod::PlanarFitAuto,
         c_estimator: CEstimator::Median,
+        bvh_quality: BuildQuality::Medium,
     };
 
     /// Checks ranges.

@@ -9,10 +9,11 @@ use rayon::prelude::*;
 use serde::Serialize;
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::{BrdfSample, CameraModel, Pose};
+use skinbrdf_mesh::CameraRays;
 
 use crate::calibrate::{calibrate_c, Calibration, StandardImage};
 use crate::geometry::Geometry;
-use crate::image::{derender_image, FilterCounts, ImageView, Measurement};
+use crate::image::{derender_image_with_rays, FilterCounts, ImageView, Measurement};
 use crate::{DerenderConfig, DerenderError};
 
 /// Poses of one image.
@@ -112,8 +113,10 @@ pub struct StageTimes {
     pub image_load_s: f64,
     /// Estimating C, seconds.
     pub calibration_s: f64,
-    /// Rays and samples, seconds.
+    /// Rays and samples, seconds (camera table, region projection, rays, samples).
     pub derender_s: f64,
+    /// Of which the primary rays (coherent grid tracing), seconds.
+    pub rays_s: f64,
     /// Everything, seconds.
     pub total_s: f64,
 }
@@ -139,6 +142,8 @@ pub struct DerenderReport {
     pub counts: FilterCounts,
     /// Per image.
     pub images: Vec<ImageReport>,
+    /// Pixels of the projected region summed over images (before the stride).
+    pub region_pixels: u64,
     /// C used.
     pub c: [f64; 3],
     /// C estimated from the standard (with its spread), when it was.
@@ -221,6 +226,11 @@ pub fn derender_with_loader(
     let mut images = Vec::new();
     let mut shadow_rays_cast = 0;
     let mut derender_time = Duration::ZERO;
+    let mut rays_s = 0.0;
+    let mut region_pixels = 0;
+    let t = Instant::now();
+    let camera_rays = CameraRays::new(&inputs.camera);
+    derender_time += t.elapsed();
     // Decoding dominates on small regions: decode a batch of images in parallel (one per
     // rayon thread, bounding memory to that many images), then trace them one by one (the
     // tracing itself is parallel over rows).
@@ -243,8 +253,11 @@ pub fn derender_with_loader(
                 mask: img.mask.as_deref(),
                 targets: img.targets.as_deref(),
             };
-            let r = derender_image(geom, &inputs.camera, inputs.light_position_m, c, &m, cfg);
+            let r =
+                derender_image_with_rays(geom, &camera_rays, inputs.light_position_m, c, &m, cfg);
             derender_time += t.elapsed();
+            rays_s += r.rays_s;
+            region_pixels += r.region_pixels;
             counts.add(&r.counts);
             shadow_rays_cast += r.shadow_rays;
             images.push(ImageReport {
@@ -257,6 +270,7 @@ pub fn derender_with_loader(
     }
     times.image_load_s = load_time.as_secs_f64();
     times.derender_s = derender_time.as_secs_f64();
+    times.rays_s = rays_s;
     times.total_s =
         start.elapsed().as_secs_f64() + times.bvh_s + times.normals_s + times.convexity_s;
     let primary_rays = counts.considered - counts.off_mask - counts.on_target - counts.no_ray;
@@ -264,6 +278,7 @@ pub fn derender_with_loader(
         samples,
         counts,
         images,
+        region_pixels,
         c,
         calibration,
         shadow_rays: cfg.shadows.needs_rays(geom.can_self_shadow),

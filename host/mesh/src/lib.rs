@@ -10,10 +10,13 @@
 //! * [`shapes`]: tessellated spheres and cylinders.
 //! * [`bvh`]: [`MeshBvh`], build once and trace many (closest hit, occlusion, batched rays),
 //!   build presets [`BuildQuality`].
+//! * [`camera_rays`]: [`CameraRays`], per-pixel camera rays from a coarse exact undistortion
+//!   table plus one Newton step (instead of a full Newton solve per pixel).
 //! * [`coherent`]: [`MeshBvh::intersect_grid`], camera rays (one origin, a grid of directions)
 //!   traced per tile with shared frustum culling: the fast path for whole images.
 
 pub mod bvh;
+pub mod camera_rays;
 pub mod coherent;
 pub mod load;
 pub mod normals;
@@ -22,6 +25,7 @@ pub mod shapes;
 pub mod validate;
 
 pub use bvh::{BuildQuality, Hit, MeshBvh, MeshRay};
+pub use camera_rays::CameraRays;
 pub use coherent::TraceScratch;
 pub use load::{load_mesh, LengthUnit, LoadOptions, LoadedMesh};
 pub use normals::{estimate_noise, NoiseEstimate, NormalMethod, SurfaceNormals};

@@ -38,6 +38,9 @@ pub struct Args {
     /// Average of C over the standard: median or trimmed.
     #[arg(long, default_value = "median")]
     pub c_estimator: String,
+    /// BVH build preset: fastest, very_fast, fast, medium, high, very_high.
+    #[arg(long, default_value = "medium")]
+    pub bvh_quality: String,
     /// Poses: auto (session.toml, else truth.json), session, truth, estimated (the pose
     /// stage's output, --poses-file or SESSION/out/poses.json).
     #[arg(long, default_value = "auto")]
@@ -144,6 +147,10 @@ fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
         shadows,
         normals,
         c_estimator,
+        bvh_quality: args
+            .bvh_quality
+            .parse()
+            .map_err(|e| anyhow::anyhow!("--bvh-quality: {e}"))?,
     };
     cfg.validate()?;
     Ok((
@@ -204,8 +211,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("  scan: {}", m.summary());
     }
     println!(
-        "  samples kept {} of {} pixels considered ({} primary rays)",
-        c.kept, c.considered, r.primary_rays
+        "  samples kept {} of {} pixels considered ({} primary rays; {} pixels of the projected region)",
+        c.kept, c.considered, r.primary_rays, r.region_pixels
     );
     for (reason, n) in c.reasons() {
         if n > 0 {
@@ -250,12 +257,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let t = &r.times;
     println!(
-        "  time: mesh {:.3} s, bvh {:.3} s, normals {:.3} s, convexity {:.3} s, images {:.3} s, C {:.3} s, rays+samples {:.3} s, total {:.3} s",
-        t.mesh_load_s, t.bvh_s, t.normals_s, t.convexity_s, t.image_load_s, t.calibration_s, t.derender_s, t.total_s
+        "  time: mesh {:.3} s, bvh ({}) {:.3} s, normals {:.3} s, convexity {:.3} s, images {:.3} s, C {:.3} s, rays+samples {:.3} s (of which primary rays {:.3} s), total {:.3} s",
+        t.mesh_load_s, cfg.bvh_quality.name(), t.bvh_s, t.normals_s, t.convexity_s, t.image_load_s, t.calibration_s, t.derender_s, t.rays_s, t.total_s
     );
-    if t.derender_s > 0.0 {
+    if t.derender_s > 0.0 && t.rays_s > 0.0 {
         println!(
-            "  throughput: {:.2} M primary rays/s",
+            "  throughput: {:.2} M primary rays/s traced, {:.2} M pixels/s derendered (rays + samples)",
+            r.primary_rays as f64 / t.rays_s / 1e6,
             r.primary_rays as f64 / t.derender_s / 1e6
         );
     }
