@@ -10,6 +10,9 @@ use skinbrdf_fit::fit::auto_floor;
 use skinbrdf_fit::lm::{self, ChannelData, LmConfig, ResidualKind};
 use skinbrdf_fit::{fit_data, FitConfig, FitData};
 
+/// Timed runs of each variant (the median is reported).
+const REPEATS: usize = 5;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = std::env::args()
         .nth(1)
@@ -48,12 +51,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         peak_rho: sorted[(sorted.len() as f64 * 0.999) as usize],
     };
     let start = model.starting_points(&hint)[1].clone();
-    let t = Instant::now();
-    let o = lm::solve(&model, &start, &cd, &LmConfig::default()).ok_or("no finite cost")?;
-    let single = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let full = fit_data(&model, &data, &FitConfig::default())?;
-    let pipeline = t.elapsed().as_secs_f64();
+    // Median of REPEATS runs of each (the machine is shared; the median is robust to a burst).
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mut times = Vec::new();
+    let mut o = None;
+    for _ in 0..REPEATS {
+        let t = Instant::now();
+        o = Some(lm::solve(&model, &start, &cd, &LmConfig::default()).ok_or("no finite cost")?);
+        times.push(t.elapsed().as_secs_f64());
+    }
+    let o = o.ok_or("no run")?;
+    let single = median(times);
+    let mut times = Vec::new();
+    let mut full = None;
+    for _ in 0..REPEATS {
+        let t = Instant::now();
+        full = Some(fit_data(&model, &data, &FitConfig::default())?);
+        times.push(t.elapsed().as_secs_f64());
+    }
+    let full = full.ok_or("no run")?;
+    let pipeline = median(times);
     println!(
         "{}",
         serde_json::json!({
@@ -61,7 +81,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "floor": floor,
             "start": start,
             "single_start_red": {"seconds": single, "cost": o.cost, "iterations": o.iterations, "evaluations": o.evaluations, "params": o.params},
-            "pipeline_rgb": {"seconds": pipeline, "cost_red": full.channels[0].cost, "params_red": full.channels[0].params, "stages": full.channels.iter().map(|c| &c.stages).collect::<Vec<_>>()},
+            "repeats": REPEATS,
+            "threads": rayon::current_num_threads(),
+            "pipeline_rgb": {"seconds": pipeline, "cost_red": full.channels[0].cost, "params_red": full.channels[0].params, "costs": full.channels.iter().map(|c| c.cost).collect::<Vec<_>>(), "stages": full.channels.iter().map(|c| &c.stages).collect::<Vec<_>>()},
         })
     );
     Ok(())

@@ -719,31 +719,69 @@ mod tests {
         out
     }
 
-    /// Bounds on the Cornell fits of a 2-lobe Lafortune model (measured values in
-    /// docs/fitting.md). A paint is not exactly Lafortune, and its diffuse level falls towards
-    /// grazing, so these are model-error bounds. The dominant channel (largest median: red for
-    /// garnet, blue for krylon) carries the signal; the others of a saturated paint are near zero
-    /// and partly gamut-mapped, hence the looser bound.
-    const CORNELL_DOMINANT_LOG_RMSE: f64 = 0.55;
-    const CORNELL_DOMINANT_MEDIAN_REL: f64 = 0.2;
-    const CORNELL_ANY_LOG_RMSE: f64 = 1.0;
+    /// The stated error bound of one Cornell material's 2-lobe Lafortune fit.
+    struct CornellBound {
+        file: &'static str,
+        /// The channel that carries the paint's colour (largest median).
+        dominant: usize,
+        /// Log-RMSE bound on the dominant channel.
+        dominant_log_rmse: f64,
+        /// Median relative error bound on the dominant channel.
+        dominant_median_rel: f64,
+        /// Log-RMSE bound on every channel.
+        any_log_rmse: f64,
+    }
+
+    /// Per-material bounds on the Cornell fits of a 2-lobe Lafortune model: the measured values
+    /// (docs/fitting.md) plus ~10% headroom. A paint is not exactly Lafortune and its diffuse
+    /// level falls towards grazing, so these are model-error bounds; the weak channels of a
+    /// saturated paint are near zero and partly gamut-mapped, hence the looser bound on them.
+    const CORNELL_BOUNDS: [CornellBound; 2] = [
+        CornellBound {
+            file: "garnet_red.brdf",
+            dominant: 0,
+            dominant_log_rmse: 0.44,
+            dominant_median_rel: 0.13,
+            any_log_rmse: 0.95,
+        },
+        CornellBound {
+            file: "krylon_blue.brdf",
+            dominant: 2,
+            dominant_log_rmse: 0.53,
+            dominant_median_rel: 0.17,
+            any_log_rmse: 0.81,
+        },
+    ];
 
     #[test]
     fn cornell_files_fit_within_the_stated_error() {
-        for (name, dominant) in [("garnet_red.brdf", 0), ("krylon_blue.brdf", 2)] {
-            let samples = cornell(name);
+        // Every file of the data directory has a bound.
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/cornell");
+        let mut files: Vec<String> = std::fs::read_dir(&dir)
+            .expect("cornell dir")
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".brdf"))
+            .collect();
+        files.sort();
+        let mut bounded: Vec<String> = CORNELL_BOUNDS.iter().map(|b| b.file.into()).collect();
+        bounded.sort();
+        assert_eq!(files, bounded, "a Cornell file without a stated bound");
+        for b in &CORNELL_BOUNDS {
+            let samples = cornell(b.file);
             let fit =
                 fit_rgb(&LafortuneFit::standard(2), &samples, &FitConfig::default()).expect("fit");
-            let d = fit.channels[dominant].error;
+            let d = fit.channels[b.dominant].error;
             assert!(
-                d.log_rmse < CORNELL_DOMINANT_LOG_RMSE
-                    && d.median_rel_err < CORNELL_DOMINANT_MEDIAN_REL,
-                "{name}: {d:?}"
+                d.log_rmse < b.dominant_log_rmse && d.median_rel_err < b.dominant_median_rel,
+                "{}: {d:?}",
+                b.file
             );
             for c in &fit.channels {
                 assert!(
-                    c.error.log_rmse < CORNELL_ANY_LOG_RMSE,
-                    "{name}: {:?}",
+                    c.error.log_rmse < b.any_log_rmse,
+                    "{}: {:?}",
+                    b.file,
                     c.error
                 );
                 assert!(c.status.converged());
@@ -755,7 +793,7 @@ mod tests {
                 &FitConfig::default(),
             )
             .expect("fit");
-            assert!(lam.channels[dominant].error.log_rmse > 1.3 * d.log_rmse);
+            assert!(lam.channels[b.dominant].error.log_rmse > 1.3 * d.log_rmse);
         }
     }
 

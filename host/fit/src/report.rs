@@ -226,6 +226,70 @@ pub fn smooth(samples: &[BrdfSample]) -> Result<(Loess, f64, f64), ReportError> 
     Ok((l, span, floor))
 }
 
+/// Samples per session the pairwise difference test uses at most (the pooled pilot smooth is
+/// predicted at every one of them).
+pub const COMPARE_MAX_SAMPLES: usize = 10_000;
+
+/// `(theta_i, theta_e, phi_d)` and `ln(channel mean + floor)` of an evenly strided subset.
+fn log_design(samples: &[BrdfSample], k_max: usize, floor: f64) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let n = samples.len();
+    let k = n.min(k_max);
+    (0..k)
+        .map(|i| {
+            let s = &samples[((i as u128 * n as u128) / k as u128) as usize];
+            let x = vec![
+                f64::from(s.theta_i_rad),
+                f64::from(s.theta_e_rad),
+                f64::from(s.phi_d_rad),
+            ];
+            let mean = f64::from(s.rho.iter().sum::<f32>()) / 3.0;
+            (x, (mean.max(0.0) + floor).ln())
+        })
+        .unzip()
+}
+
+/// Whether two sessions differ beyond their confidence bands, free of smoothing bias.
+///
+/// Comparing the two sessions' own loess curves is biased: a loess estimate's bias depends on
+/// where the samples happen to lie, so two noisy samplings of one BRDF differ at a steep flank by
+/// more than their (variance-only) bands allow. Instead both are compared against one pilot
+/// smooth of the pooled samples: each session's residuals from the pilot are smoothed with the
+/// same span, and the two residual curves (nearly flat, so nearly free of smoothing bias) are
+/// compared with their bands ([`plot::compare_curves`]: largest `|z|` against the
+/// Bonferroni-corrected 95% quantile over the angles of the incidence plane).
+fn compare_pair(
+    a: &Input,
+    b: &Input,
+    theta_i_deg: f64,
+    span: f64,
+    floor: f64,
+) -> Result<plot::Difference, ReportError> {
+    let (xa, ya) = log_design(&a.samples, COMPARE_MAX_SAMPLES, floor);
+    let (xb, yb) = log_design(&b.samples, COMPARE_MAX_SAMPLES, floor);
+    let cfg = LoessConfig {
+        bandwidth: Bandwidth::Span(span),
+        max_sigma_points: 5000,
+        ..LoessConfig::default()
+    };
+    let xp: Vec<Vec<f64>> = xa.iter().chain(&xb).cloned().collect();
+    let yp: Vec<f64> = ya.iter().chain(&yb).copied().collect();
+    let pilot = Loess::fit(&xp, &yp, cfg)?;
+    let residual_curve = |label: &str, x: Vec<Vec<f64>>, y: Vec<f64>| {
+        let pred = pilot.predict_many(&x);
+        let (xr, r): (Vec<Vec<f64>>, Vec<f64>) = x
+            .into_iter()
+            .zip(y)
+            .zip(pred)
+            .filter_map(|((x, y), p)| p.map(|p| (x, y - p.value)))
+            .unzip();
+        let l = Loess::fit(&xr, &r, cfg)?;
+        Ok::<_, ReportError>(plot::loess_curve(label, &l, theta_i_deg, |v| v))
+    };
+    let ca = residual_curve(&a.label, xa, ya)?;
+    let cb = residual_curve(&b.label, xb, yb)?;
+    Ok(plot::compare_curves(&ca, &cb))
+}
+
 /// Accuracy of the fitted model against a true model at the samples' angles.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TruthScore {
@@ -522,21 +586,29 @@ pub fn compare(
         problem: e.to_string(),
     })?;
     let mut curves = Vec::new();
-    let mut log_curves = Vec::new();
+    let mut smooths = Vec::new();
     for inp in inputs {
-        let (l, _, floor) = smooth(&inp.samples)?;
+        let (l, span, floor) = smooth(&inp.samples)?;
         curves.push(plot::loess_curve(
             &inp.label,
             &l,
             theta_i_deg,
             move |v: f64| v.exp() - floor,
         ));
-        log_curves.push(plot::loess_curve(&inp.label, &l, theta_i_deg, |v| v));
+        smooths.push((span, floor));
     }
     let mut differences = Vec::new();
-    for a in 0..log_curves.len() {
-        for b in a + 1..log_curves.len() {
-            differences.push(plot::compare_curves(&log_curves[a], &log_curves[b]));
+    for a in 0..inputs.len() {
+        for b in a + 1..inputs.len() {
+            let span = smooths[a].0.max(smooths[b].0);
+            let floor = smooths[a].1.max(smooths[b].1);
+            differences.push(compare_pair(
+                &inputs[a],
+                &inputs[b],
+                theta_i_deg,
+                span,
+                floor,
+            )?);
         }
     }
     let fig = plot::overlay_figure(
@@ -631,6 +703,45 @@ mod tests {
             .expect("self pair");
         assert!(!same.differ && same.max_z < 1e-9);
         assert!(dir.path().join("overlay.svg").is_file());
+    }
+
+    fn synthetic_input(label: &str, seed: u64, scale: f32) -> Input {
+        let (_, mut samples) = crate::synthetic::lafortune2_samples(3_000, 0.1, seed);
+        for s in &mut samples {
+            s.rho = s.rho.map(|v| v * scale);
+        }
+        Input {
+            path: PathBuf::from(label),
+            label: label.to_owned(),
+            samples,
+            cornell: None,
+            truth: None,
+        }
+    }
+
+    #[test]
+    fn compare_separates_a_real_difference_from_noise() {
+        // Two independent noisy sessions of one BRDF must not differ (their bands overlap);
+        // the same BRDF 30% brighter must.
+        let a = synthetic_input("a", 1, 1.0);
+        let a2 = synthetic_input("a2", 2, 1.0);
+        let b = synthetic_input("b", 3, 1.3);
+        let dir = tempfile::tempdir().expect("tempdir");
+        let r = compare(&[a, a2, b], 30.0, dir.path()).expect("compare");
+        let find = |x: &str, y: &str| {
+            r.differences
+                .iter()
+                .find(|d| d.a == x && d.b == y)
+                .expect("pair")
+                .clone()
+        };
+        let same = find("a", "a2");
+        assert!(!same.differ, "{same:?}");
+        assert!(same.max_z > 0.0, "independent noise gives some difference");
+        for (x, y) in [("a", "b"), ("a2", "b")] {
+            let d = find(x, y);
+            assert!(d.differ && d.fraction_disjoint > 0.5, "{d:?}");
+        }
     }
 
     #[test]

@@ -21,7 +21,7 @@
 //! with `I` chosen so that the irradiance at the centre's distance is 1 (`I = d_c^2`),
 //! `w_i`, `w_e` expressed in the shading frame of the interpolated vertex normal (the BRDF
 //! models are isotropic, so the tangent's direction does not matter). A sample whose shadow
-//! ray hits the mesh, or whose geometric normal faces away from the light, gets 0: there is no
+//! ray hits the mesh, or whose shading normal faces away from the light, gets 0: there is no
 //! ambient term, so shadows are black, as under a flash in a dark room.
 //!
 //! The **Lambertian** panel uses `f_r = a / pi` with `a` the measured model's directional
@@ -94,7 +94,8 @@ pub enum RenderError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum NormalSource {
-    /// The mesh's own vertex normals when it has them, else area-weighted vertex normals.
+    /// The mesh's own vertex normals when it has them, else a plane fit over the scan's noise
+    /// radius (a raw scan's face normals are too noisy to shade with).
     #[default]
     Auto,
     /// Area-weighted vertex normals (ignore the file's).
@@ -144,7 +145,7 @@ impl Default for RenderConfig {
             view_dir: [0.0, 1.0, 0.0],
             up: [0.0, 0.0, 1.0],
             fov_y_deg: 30.0,
-            camera_distance_rel: 4.5,
+            camera_distance_rel: 4.0,
             light_azimuth_deg: 35.0,
             light_elevation_deg: 25.0,
             light_distance_rel: 6.0,
@@ -383,6 +384,8 @@ mod tests {
             supersample: 1,
             light_azimuth_deg: light_az,
             light_elevation_deg: light_el,
+            // An ideal tessellated sphere: its vertex normals are the analytic ones.
+            normals: NormalSource::Vertex,
             ..RenderConfig::default()
         }
     }

@@ -9,9 +9,14 @@ use skinbrdf_mesh::{BuildQuality, MeshBvh, MeshRay, NormalMethod, SurfaceNormals
 
 use crate::{NormalSource, RenderConfig, RenderError};
 
-/// Shadow-ray origin offset along the geometric normal, in bounding radii (1e-4 of a 0.12 m head
-/// radius is 12 µm: above f32 hit noise at that range, below any visible feature).
+/// Minimum shadow-ray origin offset, in bounding radii (1e-4 of a 0.12 m head radius is 12 µm:
+/// above f32 hit noise at that range, below any visible feature).
 const SHADOW_BIAS_REL: f64 = 1e-4;
+/// Shadow-ray origin offset along the shading normal in median edge lengths: the flat facets of
+/// a coarse or noisy scan shadow each other near the terminator (black speckles where the smooth
+/// shading normal still faces the light); starting the shadow ray half an edge out skips them
+/// and hides only contact shadows smaller than the tessellation.
+const SHADOW_BIAS_EDGES: f64 = 0.5;
 
 /// A pinhole camera.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,6 +65,7 @@ pub struct Scene<'a> {
     /// Bounding-sphere radius, metres.
     pub radius_m: f64,
     supersample: u32,
+    shadow_bias_m: f64,
 }
 
 /// Linear radiance of the two panels, per pixel (average of its samples).
@@ -91,8 +97,8 @@ impl<'a> Scene<'a> {
         cfg.validate()?;
         let bvh = MeshBvh::build(mesh, BuildQuality::Medium)?;
         let method = match cfg.normals {
-            NormalSource::Auto | NormalSource::Vertex => NormalMethod::Vertex,
-            NormalSource::PlanarFit => NormalMethod::PlanarFitAuto,
+            NormalSource::Vertex => NormalMethod::Vertex,
+            NormalSource::Auto | NormalSource::PlanarFit => NormalMethod::PlanarFitAuto,
         };
         let normals = match (&mesh.normals, cfg.normals) {
             (Some(n), NormalSource::Auto) if n.len() == mesh.positions.len() => SurfaceNormals {
@@ -134,6 +140,21 @@ impl<'a> Scene<'a> {
         let light_dir = (ce * (ca * back + sa * right) + se * up).normalize();
         let light_m = centre_m + light_dir * cfg.light_distance_rel * radius_m;
         let d_c = cfg.light_distance_rel * radius_m;
+        let mut edges: Vec<f64> = mesh
+            .indices
+            .iter()
+            .step_by((mesh.indices.len() / 20_000).max(1))
+            .map(|t| {
+                f64::from(mesh.positions[t[0] as usize].distance(mesh.positions[t[1] as usize]))
+            })
+            .collect();
+        let median_edge_m = if edges.is_empty() {
+            0.0
+        } else {
+            let k = edges.len() / 2;
+            *edges.select_nth_unstable_by(k, f64::total_cmp).1
+        };
+        let shadow_bias_m = (SHADOW_BIAS_EDGES * median_edge_m).max(SHADOW_BIAS_REL * radius_m);
         Ok(Self {
             mesh,
             bvh,
@@ -144,6 +165,7 @@ impl<'a> Scene<'a> {
             centre_m,
             radius_m,
             supersample: cfg.supersample,
+            shadow_bias_m,
         })
     }
 
@@ -165,11 +187,11 @@ impl<'a> Scene<'a> {
             })
             .collect();
         let hits = self.bvh.intersect_batch(&primary);
-        let bias = (SHADOW_BIAS_REL * self.radius_m) as f32;
-        // Per hit: point, geometric normal facing the camera, shading normal on the same side.
+        let bias = self.shadow_bias_m as f32;
+        // Per hit: point and shading normal, on the side of the geometric normal facing the
+        // camera.
         struct Surf {
             p: DVec3,
-            ng: DVec3,
             ns: DVec3,
         }
         let surfs: Vec<Option<Surf>> = primary
@@ -190,22 +212,22 @@ impl<'a> Scene<'a> {
                 if ns.dot(ng) < 0.0 {
                     ns = -ns;
                 }
-                Some(Surf { p, ng, ns })
+                Some(Surf { p, ns })
             })
             .collect();
         let light = self.light_m;
-        // Shadow rays only where the surface faces the light (others are unlit anyway).
+        // Shadow rays only where the shading normal faces the light (others are unlit anyway).
         let shadow: Vec<MeshRay> = surfs
             .par_iter()
             .map(|s| match s {
-                Some(s) if s.ng.dot(light - s.p) > 0.0 => {
-                    let o = s.p.as_vec3() + s.ng.as_vec3() * bias;
+                Some(s) if s.ns.dot(light - s.p) > 0.0 => {
+                    let o = s.p.as_vec3() + s.ns.as_vec3() * bias;
                     let to = light.as_vec3() - o;
                     let d = to.length();
                     MeshRay {
                         origin: o,
                         dir: to / d,
-                        t_max: d - bias,
+                        t_max: (d - bias).max(0.0),
                     }
                 }
                 // A degenerate ray: hits nothing, is never counted.
