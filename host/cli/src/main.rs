@@ -45,6 +45,8 @@ enum Command {
     Compare(cmd::compare::Args),
     /// Run the planned pipeline (poses, derender, smooth, fit) on a session.
     Process(cmd::process::Args),
+    /// Render a head mesh with a Lambertian and the measured BRDF side by side.
+    Render(cmd::render::Args),
     /// Sweep accuracy/run-time settings and write the error-against-run-time table.
     Bench(cmd::bench::Args),
 }
@@ -90,5 +92,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Compare(a) => cmd::compare::run(a),
         Command::Process(a) => cmd::process::run(a),
         Command::Bench(a) => cmd::bench::run(a),
+        Command::Render(a) => cmd::render::run(a),
     }
 }

@@ -9,6 +9,7 @@ pub mod fit;
 pub mod ports;
 pub mod poses;
 pub mod process;
+pub mod render;
 pub mod sim;
 pub mod synth;
 pub mod targets;
