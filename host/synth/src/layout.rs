@@ -2,15 +2,22 @@
 //! the camera are for every shot, and how the head moves.
 //!
 //! World frame: origin at the nominal head centre, +z up, +y the direction the face looks.
-//! Azimuths are measured about +z from +y towards +x. The reference structure (which defines
-//! the world frame) carries an arc of targets above and around the head, facing outwards and
-//! slightly down, plus a bar of targets above the flash, facing the head. The flash stands at
-//! `flash_azimuth_deg`, `flash_distance_m` from the head axis, aimed at the forehead, with a ring
-//! of eight targets around its 82 mm diffuser. The headdress carries two rows of targets on a
-//! band above the forehead. The camera moves on the circle (2 m) from near the flash (retro-
-//! reflection) to the far side (grazing), always aimed at the forehead; then the six extra
-//! images: three of the flash (light position), one of the standard under the flash
-//! (reference standard) and two more of the standard (standard position).
+//! Azimuths are measured about +z from +y towards +x.
+//!
+//! The framing is an operator's: a long lens (default `hfov_deg = 16`, ~0.37 mm per pixel at
+//! 2 m) aimed at the forehead, so the forehead region covers ~20 000 pixels per image. So
+//! everything the poses need sits close around the head ([`build_rig`]): a cage of reference
+//! targets (which defines the world frame) on a cylinder of radius 0.22 m about the head's
+//! axis, rows above, beside and below the face, leaning towards the cameras and the flash; a
+//! small reference panel around the flash for the light-position images; a headdress with
+//! rows of 25 mm tags (quiet paper between them) above and beside the forehead region. The
+//! flash stands at `flash_azimuth_deg`, `flash_distance_m` from the head axis, aimed at the
+//! forehead, with a ring of eight targets around its 82 mm diffuser. The camera moves on the
+//! circle (2 m) from near the flash (retro-reflection) to the far side (grazing), always aimed
+//! at the forehead; then the six extra images: three of the flash (light position, from 1.4 m),
+//! one of the standard under the flash (reference standard) and two more of the standard
+//! (standard position), from 2 m. [`usable_targets`] says which targets a shot can use; the
+//! tests check every shot of every built-in scene sees enough of them.
 
 use glam::DVec3;
 use rand::{Rng, SeedableRng};
@@ -91,33 +98,90 @@ fn camera_model(scene: &Scene) -> CameraModel {
     m
 }
 
+/// Distance of the reference structure's targets from the head's vertical axis, metres: outside
+/// the head and the headdress, inside the field of view of the measurement images on both sides
+/// of the head.
+pub const REFERENCE_RADIUS_M: f64 = 0.22;
+/// Heights of the reference structure's rows relative to the forehead's centre, metres (two
+/// rows above/below the face, two beside it).
+pub const REFERENCE_ROWS_M: [f64; 4] = [-0.13, -0.045, 0.045, 0.13];
+/// Azimuth step of the reference structure's targets, degrees.
+pub const REFERENCE_STEP_DEG: f64 = 15.0;
+/// Quiet paper between two printed targets, metres (beyond each tag's own white ring).
+pub const TARGET_GAP_M: f64 = 0.006;
+/// Distance of the light-position cameras from the flash, metres.
+pub const LIGHT_CAMERA_DISTANCE_M: f64 = 1.4;
+/// Distance of the standard cameras from the standard, metres.
+pub const STANDARD_CAMERA_DISTANCE_M: f64 = 2.0;
+
+/// Paper half-diagonal of a printed target of edge `size_m` (the paper is
+/// [`crate::render::PAPER_HALF_EXTENT`] tag half-edges wide).
+pub fn paper_half_diagonal_m(size_m: f64) -> f64 {
+    0.5 * size_m * crate::render::PAPER_HALF_EXTENT * std::f64::consts::SQRT_2
+}
+
+/// Centre-to-centre distance two printed targets of edge `size_m` need (paper edge to edge
+/// plus [`TARGET_GAP_M`]).
+pub fn target_pitch_m(size_m: f64) -> f64 {
+    size_m * crate::render::PAPER_HALF_EXTENT + TARGET_GAP_M
+}
+
+/// The azimuth (degrees) every reference and headdress target leans towards: lit by the flash
+/// (within 85 degrees of it) and seen by every camera of the arc (within 65 degrees of its far
+/// end) when both are possible.
+pub fn facing_azimuth_deg(scene: &Scene) -> f64 {
+    let s = &scene.session;
+    let lo = s.arc_end_deg.max(s.arc_start_deg) - 65.0;
+    let hi = s.flash_azimuth_deg + 85.0;
+    0.5 * (lo + hi)
+}
+
+/// A protected object for the occlusion check: a ball that no reference target may hide from
+/// a camera.
+struct Protected {
+    centre: DVec3,
+    radius_m: f64,
+}
+
+/// Whether a ball at `c` (radius `r`) hides any protected ball from the camera at `eye`.
+fn hides(eye: DVec3, c: DVec3, r: f64, protected: &[Protected]) -> bool {
+    let dc = c - eye;
+    let dist_c = dc.length();
+    protected.iter().any(|p| {
+        let dp = p.centre - eye;
+        let dist_p = dp.length();
+        if dist_c >= dist_p {
+            return false;
+        }
+        let angle = dc.angle_between(dp);
+        angle < (r / dist_c).asin() + (p.radius_m / dist_p).min(1.0).asin()
+    })
+}
+
 /// Builds the fixed set-up of a scene.
+///
+/// The framing is an operator's: a long lens (the scene's `hfov_deg`) aimed at the forehead
+/// from the arc, so the forehead fills a large part of the frame. Everything the poses need is
+/// therefore close around the head:
+/// * the **reference structure**: a cage of targets on a cylinder of radius
+///   [`REFERENCE_RADIUS_M`] about the head's axis, rows [`REFERENCE_ROWS_M`] above, beside and
+///   below the forehead, every [`REFERENCE_STEP_DEG`]; each target leans towards
+///   [`facing_azimuth_deg`] (lit by the flash, seen by the whole arc). A candidate that would
+///   hide the forehead region, a headdress target, the flash or the standard from any nominal
+///   camera, or that collides with the standard, is left out. Plus a small panel of
+///   reference targets around the flash (at two depths, so not coplanar) for the light-position
+///   images.
+/// * the **headdress**: rows of targets on the head above and beside the forehead region, one
+///   pitch ([`target_pitch_m`]) apart, leaning towards the cameras and the flash, none within
+///   the region of interest.
 pub fn build_rig(scene: &Scene) -> Rig {
     let shape = Shape::from_scene(&scene.geometry);
     let g = &scene.geometry;
     let t = &scene.targets;
     let s = &scene.session;
     let roi_centre_head = shape.point(0.0, g.roi_elevation_deg.to_radians());
-    let head_top = shape.bounding_radius();
-
-    // Reference arc: two rows above the head, facing outwards and 15 degrees down.
-    let mut reference = Vec::new();
-    let mut id = REFERENCE_ID0;
-    let ring_r = 0.45;
-    for (row, z) in [head_top + 0.08, head_top + 0.16].into_iter().enumerate() {
-        let mut az_deg = -60.0 + 5.0 * row as f64;
-        while az_deg <= 100.0 {
-            let radial = crate::shape::direction(az_deg.to_radians(), 0.0);
-            let out = (radial * 15f64.to_radians().cos() - DVec3::Z * 15f64.to_radians().sin())
-                .normalize();
-            let centre = radial * ring_r + DVec3::Z * z;
-            if let Some(tg) = Target::square(id, t.reference_size_m, centre, out, DVec3::Z) {
-                reference.push(tg);
-                id += 1;
-            }
-            az_deg += 10.0;
-        }
-    }
+    let face_az = facing_azimuth_deg(scene).to_radians();
+    let facing = crate::shape::direction(face_az, 0.0);
 
     // Flash: aimed at the forehead.
     let fa = s.flash_azimuth_deg.to_radians();
@@ -125,16 +189,102 @@ pub fn build_rig(scene: &Scene) -> Rig {
         crate::shape::direction(fa, 0.0) * s.flash_distance_m + DVec3::Z * s.flash_height_m;
     let world_from_flash =
         Pose::look_at(flash_pos, roi_centre_head, DVec3::Z).unwrap_or(Pose::IDENTITY);
-    // Bar of reference targets above the flash, facing the head.
+
+    // Headdress: rows above and beside the forehead region.
+    let headdress = headdress_targets(scene, &shape, roi_centre_head, facing);
+
+    // Standard: in front of the head, towards the flash, facing between the flash and the
+    // reference-standard camera.
+    let roi_world = roi_centre_head;
+    let to_flash_h = (flash_pos - roi_world)
+        .truncate()
+        .extend(0.0)
+        .normalize_or(DVec3::Y);
+    let std_pos = roi_world + to_flash_h * 0.15 + DVec3::Y * 0.05;
+    let cam_rs = reference_standard_camera_position(std_pos);
+    let normal = ((flash_pos - std_pos).normalize() + (cam_rs - std_pos).normalize()).normalize();
+    let z = normal;
+    let x = DVec3::Z.cross(z).normalize_or(DVec3::X);
+    let y = z.cross(x);
+    let world_from_standard = Pose::new(
+        glam::DQuat::from_mat3(&glam::DMat3::from_cols(x, y, z)),
+        std_pos,
+    );
+    let half = 0.5 * scene.standard.size_m;
+    let off = half + 0.75 * t.standard_size_m + 0.006;
+    let standard_radius_m =
+        off * std::f64::consts::SQRT_2 + paper_half_diagonal_m(t.standard_size_m);
+
+    // Reference cage around the head.
+    let mut protected = vec![
+        Protected {
+            centre: roi_centre_head,
+            radius_m: g.roi_radius_m + 0.01,
+        },
+        Protected {
+            centre: flash_pos,
+            radius_m: 0.5 * s.flash_diameter_m + 1.5 * t.flash_size_m + 0.02,
+        },
+        Protected {
+            centre: std_pos,
+            radius_m: standard_radius_m,
+        },
+    ];
+    protected.extend(headdress.iter().map(|h| Protected {
+        centre: h.centre(),
+        radius_m: paper_half_diagonal_m(t.headdress_size_m),
+    }));
+    let cams = nominal_cameras(scene, roi_centre_head, flash_pos, std_pos);
+    let mut reference = Vec::new();
+    let mut id = REFERENCE_ID0;
+    let ref_r = paper_half_diagonal_m(t.reference_size_m) + 0.005;
+    for dz in REFERENCE_ROWS_M {
+        let zc = roi_centre_head.z + dz;
+        let mut b_deg = -180.0
+            + if dz.abs() < 0.1 {
+                0.5 * REFERENCE_STEP_DEG
+            } else {
+                0.0
+            };
+        while b_deg < 180.0 - 1e-9 {
+            let centre = crate::shape::direction(b_deg.to_radians(), 0.0) * REFERENCE_RADIUS_M
+                + DVec3::Z * zc;
+            b_deg += REFERENCE_STEP_DEG;
+            if centre.distance(std_pos) < standard_radius_m + ref_r
+                || cams
+                    .iter()
+                    .any(|eye| hides(*eye, centre, ref_r, &protected))
+            {
+                continue;
+            }
+            // Lean towards the arc's height at 2 m.
+            let out = (facing + DVec3::Z * ((s.camera_height_m - zc) / 2.0)).normalize();
+            if let Some(tg) = Target::square(id, t.reference_size_m, centre, out, DVec3::Z) {
+                reference.push(tg);
+                id += 1;
+            }
+        }
+    }
+    // Reference panel around the flash, for the light-position images: two columns each side
+    // of the flash's target ring, the outer ones on 4 cm stand-offs (not coplanar).
+    // Smaller than the head cage's: the light-position cameras are closer.
+    let flash_ref_size = (0.7 * t.flash_size_m).min(t.reference_size_m);
+    let ring_outer = 0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01 + 0.75 * t.flash_size_m;
+    let col_in = ring_outer + 0.75 * flash_ref_size + TARGET_GAP_M;
+    let col_out = col_in + target_pitch_m(flash_ref_size);
     let toward_head = world_from_flash.transform_vector(DVec3::Z);
     let right = world_from_flash.transform_vector(DVec3::X);
     let up = world_from_flash.transform_vector(DVec3::NEG_Y);
-    for dz in [0.16, 0.26] {
-        for k in 0..4 {
-            let dx = -0.24 + 0.16 * k as f64;
-            let centre = flash_pos + right * dx + up * dz;
-            if let Some(tg) = Target::square(id, t.reference_size_m, centre, toward_head, DVec3::Z)
-            {
+    let dz_row = 0.5 * target_pitch_m(flash_ref_size);
+    for (dx, standoff) in [
+        (-col_out, 0.04),
+        (-col_in, 0.0),
+        (col_in, 0.0),
+        (col_out, 0.04),
+    ] {
+        for dz in [-dz_row, dz_row] {
+            let centre = flash_pos + right * dx + up * dz + toward_head * standoff;
+            if let Some(tg) = Target::square(id, flash_ref_size, centre, toward_head, DVec3::Z) {
                 reference.push(tg);
                 id += 1;
             }
@@ -157,60 +307,6 @@ pub fn build_rig(scene: &Scene) -> Rig {
         })
         .collect();
 
-    // Headdress: two rows on a band above the forehead.
-    let mut headdress = Vec::new();
-    let mut hid = HEADDRESS_ID0;
-    let bounds_el = match shape {
-        Shape::Cylinder { .. } => [(0.0, 0.0), (0.0, 0.0)],
-        Shape::Star { .. } => [(38f64, 20.0), (54.0, 20.0)],
-    };
-    for (row, (el_deg, step)) in bounds_el.into_iter().enumerate() {
-        let (el, half) = match shape {
-            Shape::Cylinder { length_m, radius_m } => {
-                // On a cylinder the band sits near the top of the side.
-                let z = 0.5 * length_m - 0.02 - 0.03 * row as f64;
-                ((z / radius_m).atan(), 90.0)
-            }
-            Shape::Star { .. } => (el_deg.to_radians(), if row == 0 { 90.0 } else { 80.0 }),
-        };
-        let step = if step > 0.0 { step } else { 20.0 };
-        let mut az_deg: f64 = -half + if row == 1 { 10.0 } else { 0.0 };
-        while az_deg <= half + 1e-9 {
-            let az = az_deg.to_radians();
-            let p = shape.point(az, el);
-            let n_surf = shape.normal(p);
-            let radial = crate::shape::direction(az, 0.0);
-            let out = (radial + DVec3::Z * 0.35).normalize();
-            let half_extent = 0.5 * t.headdress_size_m * 1.5;
-            let tilt = n_surf.dot(out).clamp(-1.0, 1.0).acos();
-            let centre = p + n_surf * (0.002 + half_extent * tilt.sin());
-            if let Some(tg) = Target::square(hid, t.headdress_size_m, centre, out, DVec3::Z) {
-                headdress.push(tg);
-                hid += 1;
-            }
-            az_deg += step;
-        }
-    }
-
-    // Standard: in front of the head, towards the flash, facing between the flash and the
-    // reference-standard camera.
-    let roi_world = roi_centre_head;
-    let to_flash_h = (flash_pos - roi_world)
-        .truncate()
-        .extend(0.0)
-        .normalize_or(DVec3::Y);
-    let std_pos = roi_world + to_flash_h * 0.15 + DVec3::Y * 0.05;
-    let cam_rs = reference_standard_camera_position(scene);
-    let normal = ((flash_pos - std_pos).normalize() + (cam_rs - std_pos).normalize()).normalize();
-    let z = normal;
-    let x = DVec3::Z.cross(z).normalize_or(DVec3::X);
-    let y = z.cross(x);
-    let world_from_standard = Pose::new(
-        glam::DQuat::from_mat3(&glam::DMat3::from_cols(x, y, z)),
-        std_pos,
-    );
-    let half = 0.5 * scene.standard.size_m;
-    let off = half + 0.75 * t.standard_size_m + 0.006;
     let standard_targets = [
         (-1.0, -1.0),
         (0.0, -1.0),
@@ -248,9 +344,123 @@ pub fn build_rig(scene: &Scene) -> Rig {
     }
 }
 
-fn reference_standard_camera_position(scene: &Scene) -> DVec3 {
-    crate::shape::direction(10f64.to_radians(), 0.0) * 1.4
-        + DVec3::Z * scene.session.camera_height_m
+/// Headdress targets (head frame): rows at fixed elevations (or heights on a cylinder), one
+/// pitch apart along each row, rows staggered; a tag too close to an earlier one or to the
+/// region of interest is left out. Each leans half-way from the surface's outward direction
+/// towards `facing` and up (stand-off wedges keep the paper off the skin).
+fn headdress_targets(
+    scene: &Scene,
+    shape: &Shape,
+    roi_centre_head: DVec3,
+    facing: DVec3,
+) -> Vec<Target> {
+    let t = &scene.targets;
+    let size = t.headdress_size_m;
+    let pitch = target_pitch_m(size);
+    let paper_half = 0.5 * size * crate::render::PAPER_HALF_EXTENT;
+    let roi_clear = scene.geometry.roi_radius_m + paper_half_diagonal_m(size) + 0.003;
+    // (elevation, azimuth limit) per row, degrees; on a cylinder the elevation is that of a
+    // height on its side.
+    let rows: Vec<(f64, f64)> = match *shape {
+        Shape::Cylinder { length_m, radius_m } => {
+            let top = 0.5 * length_m - paper_half - 0.004;
+            [0.0, top - pitch, top]
+                .into_iter()
+                .map(|z| ((z / radius_m).atan().to_degrees(), 110.0))
+                .collect()
+        }
+        Shape::Star { .. } => vec![(12.0, 110.0), (38.0, 110.0), (60.0, 110.0)],
+    };
+    let mut placed: Vec<Target> = Vec::new();
+    let mut hid = HEADDRESS_ID0;
+    for (row, (el_deg, limit_deg)) in rows.into_iter().enumerate() {
+        let el = el_deg.to_radians();
+        let ring_r = shape.point(0.0, el).truncate().length().max(1e-3);
+        let step = 2.0 * (0.5 * pitch / ring_r).min(1.0).asin();
+        let limit = limit_deg.to_radians();
+        let offset = if row % 2 == 1 { 0.5 * step } else { 0.0 };
+        let n = (limit / step).floor() as i32 + 1;
+        for k in -n..=n {
+            let az = offset + k as f64 * step;
+            if az.abs() > limit {
+                continue;
+            }
+            let p = shape.point(az, el);
+            let n_surf = shape.normal(p);
+            let radial = crate::shape::direction(az, 0.0);
+            let out = (radial + facing + DVec3::Z * 0.4).normalize();
+            let tilt = n_surf.dot(out).clamp(-1.0, 1.0).acos();
+            let centre = p + n_surf * (0.002 + paper_half * tilt.sin());
+            if centre.distance(roi_centre_head) < roi_clear
+                || placed.iter().any(|q| q.centre().distance(centre) < pitch)
+            {
+                continue;
+            }
+            if let Some(tg) = Target::square(hid, size, centre, out, DVec3::Z) {
+                placed.push(tg);
+                hid += 1;
+            }
+        }
+    }
+    placed
+}
+
+/// Nominal (jitter-free) camera centres of a scene: the arc's ends and points between, the
+/// light-position and the standard cameras.
+fn nominal_cameras(scene: &Scene, roi: DVec3, flash_pos: DVec3, std_pos: DVec3) -> Vec<DVec3> {
+    let s = &scene.session;
+    let mut cams: Vec<DVec3> = (0..=12)
+        .map(|k| {
+            let f = f64::from(k) / 12.0;
+            let az = (s.arc_start_deg + (s.arc_end_deg - s.arc_start_deg) * f).to_radians();
+            crate::shape::direction(az, 0.0) * s.camera_radius_m + DVec3::Z * s.camera_height_m
+        })
+        .collect();
+    let _ = roi;
+    for k in 0..3 {
+        cams.push(light_camera_eye(scene, flash_pos, roi, k));
+    }
+    for (az, dz) in standard_camera_offsets() {
+        cams.push(standard_camera_eye(std_pos, az, dz));
+    }
+    cams
+}
+
+/// The light-position cameras' azimuth offsets and heights.
+fn light_camera_eye(scene: &Scene, flash_pos: DVec3, roi: DVec3, k: usize) -> DVec3 {
+    let _ = scene;
+    let fwd = (roi - flash_pos).normalize_or(DVec3::Y);
+    let right = fwd.cross(DVec3::Z).normalize_or(DVec3::X);
+    let offsets = [(-0.2, 0.05), (0.0, -0.06), (0.2, 0.08)];
+    let (dx, dz) = offsets[k % 3];
+    flash_pos + fwd * LIGHT_CAMERA_DISTANCE_M + right * dx + DVec3::Z * dz
+}
+
+/// Azimuth (degrees) and height offsets of the reference-standard camera, then the two
+/// standard-position cameras.
+const fn standard_camera_offsets() -> [(f64, f64); 3] {
+    [(10.0, 0.0), (-8.0, 0.12), (22.0, 0.06)]
+}
+
+/// Where the standard cameras aim: a third of the way from the standard to the head's axis,
+/// so the reference cage around the head is in the frame too.
+fn standard_aim(std_pos: DVec3) -> DVec3 {
+    std_pos.lerp(DVec3::new(0.0, 0.0, std_pos.z), 0.35)
+}
+
+/// The standard cameras look down on the standard from this height above it, metres (whatever
+/// the arc's height: the reference cage behind the head stays in view).
+pub const STANDARD_CAMERA_HEIGHT_M: f64 = 0.10;
+
+fn standard_camera_eye(std_pos: DVec3, az_deg: f64, dz: f64) -> DVec3 {
+    std_pos
+        + crate::shape::direction(az_deg.to_radians(), 0.0) * STANDARD_CAMERA_DISTANCE_M
+        + DVec3::Z * (STANDARD_CAMERA_HEIGHT_M + dz)
+}
+
+fn reference_standard_camera_position(std_pos: DVec3) -> DVec3 {
+    let (az, dz) = standard_camera_offsets()[0];
+    standard_camera_eye(std_pos, az, dz)
 }
 
 /// Smooth pseudo-random head sway: a sum of slow sinusoids per axis, amplitude-normalised.
@@ -338,26 +548,20 @@ fn camera_for(
             Pose::look_at(eye, roi + jitter(rng, s.aim_jitter_m), DVec3::Z).unwrap_or(fallback)
         }
         ImageRole::LightPosition => {
-            let f = rig.world_from_flash;
-            let flash = f.translation_m;
-            let fwd = f.transform_vector(DVec3::Z);
-            let right = f.transform_vector(DVec3::X);
-            let offsets = [(-0.25, 0.05), (0.0, -0.08), (0.25, 0.10)];
-            let (dx, dz) = offsets[k % 3];
-            let eye = flash + fwd * 1.0 + right * dx + DVec3::Z * dz + jitter(rng, 0.01);
-            Pose::look_at(eye, flash + DVec3::Z * 0.08, DVec3::Z).unwrap_or(fallback)
+            let flash = rig.world_from_flash.translation_m;
+            let eye = light_camera_eye(scene, flash, roi, k) + jitter(rng, 0.01);
+            Pose::look_at(eye, flash + jitter(rng, 0.005), DVec3::Z).unwrap_or(fallback)
         }
         ImageRole::ReferenceStandard | ImageRole::StandardPosition => {
-            let (az_deg, r, dz) = match (role, k % 2) {
-                (ImageRole::ReferenceStandard, _) => (10.0, 1.4, 0.0),
-                (_, 0) => (-8.0, 1.6, 0.12),
-                _ => (30.0, 1.6, -0.05),
+            let offsets = standard_camera_offsets();
+            let (az_deg, dz) = match (role, k % 2) {
+                (ImageRole::ReferenceStandard, _) => offsets[0],
+                (_, 0) => offsets[1],
+                _ => offsets[2],
             };
-            let eye = crate::shape::direction(f64::to_radians(az_deg), 0.0) * r
-                + DVec3::Z * (s.camera_height_m + dz)
-                + jitter(rng, 0.005);
-            let target = rig.world_from_standard.translation_m;
-            Pose::look_at(eye, target, DVec3::Z).unwrap_or(fallback)
+            let std_pos = rig.world_from_standard.translation_m;
+            let eye = standard_camera_eye(std_pos, az_deg, dz) + jitter(rng, 0.005);
+            Pose::look_at(eye, standard_aim(std_pos), DVec3::Z).unwrap_or(fallback)
         }
     }
 }
@@ -443,4 +647,179 @@ fn shots_from(
             }
         })
         .collect()
+}
+
+/// Most oblique view of a target counted as usable by [`usable_targets`], degrees (the pose
+/// stage warns at 70).
+pub const USABLE_VIEW_MAX_DEG: f64 = 70.0;
+
+/// The targets of a shot a detector can use: facing the camera within
+/// [`USABLE_VIEW_MAX_DEG`], all four corners inside the image, not hidden by anything, and lit.
+/// Returns `(layout, id, centre in the world)`.
+pub fn usable_targets(
+    renderer: &crate::render::Renderer,
+    rig: &Rig,
+    shot: &Shot,
+) -> Vec<(crate::render::Layout, u32, DVec3)> {
+    use crate::render::Layout;
+    let cam = &rig.camera;
+    let camera_from_world = shot.world_from_camera.inverse();
+    let eye = shot.world_from_camera.translation_m;
+    let mut groups: Vec<(Layout, &Vec<Target>, Pose)> = vec![
+        (Layout::Reference, &rig.reference, Pose::IDENTITY),
+        (Layout::Headdress, &rig.headdress, shot.world_from_head),
+        (Layout::Flash, &rig.flash_targets, rig.world_from_flash),
+    ];
+    if shot.standard_present {
+        groups.push((
+            Layout::Standard,
+            &rig.standard_targets,
+            rig.world_from_standard,
+        ));
+    }
+    let cos_max = USABLE_VIEW_MAX_DEG.to_radians().cos();
+    let mut out = Vec::new();
+    for (layout, list, frame) in groups {
+        for t in list {
+            let centre = frame.transform_point(t.centre());
+            let out_n = frame.transform_vector(t.outward_normal());
+            if out_n.dot((eye - centre).normalize()) < cos_max {
+                continue;
+            }
+            let corners_w = t.corners_m.map(|c| frame.transform_point(c));
+            let inside = corners_w.iter().all(|c| {
+                cam.project(camera_from_world.transform_point(*c))
+                    .is_some_and(|p| cam.contains(p))
+            });
+            let unoccluded = corners_w.iter().all(|c| {
+                let p = *c + (centre - *c) * 0.02;
+                let d = p - eye;
+                let dist = d.length();
+                renderer
+                    .first_hit_m(shot, rig, eye, d / dist)
+                    .is_none_or(|t| t >= dist - 1e-3)
+            });
+            if inside && unoccluded && renderer.target_lit(shot, centre, out_n) {
+                out.push((layout, t.id, centre));
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod framing_tests {
+    use super::*;
+    use crate::render::{Layout, Renderer};
+    use crate::scene::BUILTIN_SCENES;
+
+    /// Minimum usable reference targets per image (well over the 1-2 PnP needs, for accuracy).
+    const MIN_REFERENCE: usize = 5;
+    /// Minimum usable headdress targets per measurement image.
+    const MIN_HEADDRESS: usize = 3;
+
+    fn spread_m(pts: &[DVec3]) -> f64 {
+        let c = pts.iter().copied().sum::<DVec3>() / pts.len().max(1) as f64;
+        pts.iter().map(|p| p.distance(c)).fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn every_shot_of_every_scene_sees_enough_well_spread_targets() {
+        let mut report = String::new();
+        let mut failures = Vec::new();
+        for (name, _) in BUILTIN_SCENES {
+            let scene = Scene::load(name).expect("builtin scene");
+            let rig = build_rig(&scene);
+            let shots = plan_shots(&scene, &rig);
+            let renderer = Renderer::new(&scene, &rig).expect("renderer");
+            let mut min_ref = usize::MAX;
+            let mut min_head = usize::MAX;
+            for shot in &shots {
+                let vis = usable_targets(&renderer, &rig, shot);
+                let of = |l: Layout| -> Vec<DVec3> {
+                    vis.iter().filter(|v| v.0 == l).map(|v| v.2).collect()
+                };
+                let (r, h, f, s) = (
+                    of(Layout::Reference),
+                    of(Layout::Headdress),
+                    of(Layout::Flash),
+                    of(Layout::Standard),
+                );
+                min_ref = min_ref.min(r.len());
+                let mut bad = Vec::new();
+                if r.len() < MIN_REFERENCE || spread_m(&r) < 0.08 {
+                    bad.push(format!(
+                        "reference {} (spread {:.3} m)",
+                        r.len(),
+                        spread_m(&r)
+                    ));
+                }
+                match shot.role {
+                    ImageRole::Measurement => {
+                        min_head = min_head.min(h.len());
+                        if h.len() < MIN_HEADDRESS {
+                            bad.push(format!("headdress {}", h.len()));
+                        }
+                    }
+                    ImageRole::LightPosition if f.len() < 4 => {
+                        bad.push(format!("flash {}", f.len()))
+                    }
+                    ImageRole::StandardPosition | ImageRole::ReferenceStandard if s.len() < 4 => {
+                        bad.push(format!("standard {}", s.len()))
+                    }
+                    _ => {}
+                }
+                if !bad.is_empty() {
+                    failures.push(format!("{name} {}: {}", shot.file, bad.join(", ")));
+                }
+            }
+            report += &format!(
+                "{name}: {} reference, {} headdress targets; per image min reference {min_ref}, min headdress {min_head}\n",
+                rig.reference.len(),
+                rig.headdress.len()
+            );
+        }
+        eprintln!("{report}");
+        assert!(failures.is_empty(), "{}", failures.join("\n"));
+    }
+
+    #[test]
+    fn no_headdress_target_reaches_into_the_region_of_interest() {
+        for (name, _) in BUILTIN_SCENES {
+            let scene = Scene::load(name).expect("builtin scene");
+            let rig = build_rig(&scene);
+            for t in &rig.headdress {
+                for c in t.corners_m.iter().chain([t.centre()].iter()) {
+                    let d = c.distance(rig.roi_centre_head);
+                    assert!(
+                        d > scene.geometry.roi_radius_m,
+                        "{name}: headdress tag {} is {d:.4} m from the region's centre",
+                        t.id
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn printed_targets_do_not_overlap() {
+        for (name, _) in BUILTIN_SCENES {
+            let scene = Scene::load(name).expect("builtin scene");
+            let rig = build_rig(&scene);
+            for list in [&rig.reference, &rig.headdress] {
+                for (i, a) in list.iter().enumerate() {
+                    for b in &list[i + 1..] {
+                        let need = 0.5 * (target_pitch_m(a.size_m) + target_pitch_m(b.size_m))
+                            - TARGET_GAP_M;
+                        assert!(
+                            a.centre().distance(b.centre()) >= need - 1e-9,
+                            "{name}: targets {} and {} overlap",
+                            a.id,
+                            b.id
+                        );
+                    }
+                }
+            }
+        }
+    }
 }

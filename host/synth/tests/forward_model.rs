@@ -19,6 +19,8 @@ use skinbrdf_synth::{generate, Scene, SynthOptions};
 /// Relative tolerance of the in-memory comparison: f32 storage of the pixel (6e-8) and the
 /// f32 BVH hit refined onto the analytic surface in f64; 1e-5 leaves a wide margin.
 const EXACT_REL_TOL: f64 = 1e-5;
+/// Pixels seen within ~6 degrees of the silhouette are not compared (see `expected`).
+const GRAZING_VIEW_COS: f64 = 0.1;
 
 struct Expected {
     v: [f64; 3],
@@ -45,6 +47,11 @@ fn expected(
     let t = shape.intersect_analytic(o_h, d_h)?;
     let p = o_h + d_h * t;
     let n = shape.normal(p);
+    // Silhouette pixels: along a ray this grazing, the tessellation's few-µm offset from the
+    // analytic surface becomes up to a millimetre, beyond the renderer's refinement window.
+    if n.dot(-d_h) < GRAZING_VIEW_COS {
+        return None;
+    }
     let light = head_from_world.transform_point(light_world);
     let to = light - p;
     let d_m = to.length();
