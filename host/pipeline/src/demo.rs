@@ -97,6 +97,8 @@ pub enum DemoEvent<'a> {
 pub struct DemoOutput {
     /// The capture record.
     pub capture: CaptureRecord,
+    /// Wall time of the capture, seconds.
+    pub capture_s: f64,
     /// The synthesis summary.
     pub synth: SynthSummary,
     /// The pipeline's output.
@@ -172,8 +174,11 @@ pub fn run_demo(
     let report_path = cfg.out_dir.join("report.md");
     let md = demo_markdown(&capture, capture_s, &synth, &out, total_s);
     write_atomic(&report_path, md.as_bytes())?;
+    let html = demo_html(&capture, capture_s, &synth, &out, total_s);
+    write_atomic(&cfg.out_dir.join("report.html"), html.as_bytes())?;
     Ok(DemoOutput {
         capture,
+        capture_s,
         synth,
         process: out,
         report_path,
@@ -234,6 +239,41 @@ fn metric_rows(ms: &[Metric]) -> String {
     ms.iter()
         .map(|m| format!("| {} | {:.4} {} |\n", m.name, m.value, m.unit))
         .collect()
+}
+
+fn demo_html(
+    c: &CaptureRecord,
+    capture_s: f64,
+    s: &SynthSummary,
+    out: &ProcessOutput,
+    total_s: f64,
+) -> String {
+    use crate::report::html_escape;
+    let mut h = format!(
+        "<p>The firmware simulator captured a timed session; the generator rendered it; the \
+         pipeline recovered poses from the images, derendered, smoothed and fitted. Total \
+         {total_s:.1} s.</p>\n<h2>Capture ({} {}, firmware {})</h2>\n<table>\n",
+        html_escape(&c.device.kind),
+        html_escape(&c.device.serial),
+        html_escape(&c.device.firmware_version)
+    );
+    for m in capture_metrics(c, capture_s) {
+        h.push_str(&format!(
+            "<tr><td>{}</td><td class=\"num\">{:.4} {}</td></tr>\n",
+            html_escape(&m.name),
+            m.value,
+            html_escape(&m.unit)
+        ));
+    }
+    h.push_str(&format!(
+        "</table>\n<h2>Synthesis</h2>\n<table>\n<tr><td>images</td><td class=\"num\">{}</td></tr>\n<tr><td>resolution</td><td class=\"num\">{} x {}</td></tr>\n<tr><td>primary rays</td><td class=\"num\">{}</td></tr>\n<tr><td>render time</td><td class=\"num\">{:.2} s</td></tr>\n<tr><td>total time</td><td class=\"num\">{:.2} s</td></tr>\n</table>\n",
+        s.images, s.resolution.0, s.resolution.1, s.rays, s.render_s, s.total_s
+    ));
+    let figures: Vec<(String, String)> = crate::process::png_figures(&out.out_dir, "fit")
+        .into_iter()
+        .map(|rel| (rel.clone(), format!("session/out/{rel}")))
+        .collect();
+    crate::report::html_page("skinbrdf demo", &h, &out.report, &figures)
 }
 
 fn demo_markdown(

@@ -303,9 +303,13 @@ pub fn process(
         }
         None => {
             on_event(Event::Started(Stage::Derender));
+            // Shadow rays follow the plan: forced, skipped (a region known to be convex), or
+            // left to scan preparation's convexity test (a scan).
             let mut dcfg = cfg.derender;
             if cfg.plan.force_shadow_rays {
                 dcfg.shadows = skinbrdf_derender::ShadowMode::Always;
+            } else if !plan.runs(Stage::ShadowRays) {
+                dcfg.shadows = skinbrdf_derender::ShadowMode::Never;
             }
             // Estimated poses when the pose stage ran, else the session's own (all known);
             // never the ground truth.
@@ -319,7 +323,9 @@ pub fn process(
                 estimated: estimated.clone(),
             };
             let run = skinbrdf_derender::derender_session(&session, &opts, &dcfg)?;
-            facts.region_convex = Some(!run.report.region_can_self_shadow);
+            if facts.region_convex.is_none() {
+                facts.region_convex = Some(!run.report.region_can_self_shadow);
+            }
             let [scan, shadow, der] = derender_reports(&plan, &run);
             for r in [scan, shadow] {
                 emit(r, &mut reports, on_event);
@@ -421,12 +427,23 @@ pub fn process(
     };
     report.total_time_s = t0.elapsed().as_secs_f64();
     let md = format!(
-        "# skinbrdf process: {}\n\n{}\n## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`.\n",
+        "# skinbrdf process: {}\n\n{}\n## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the same report with the figures inline: `report.html`.\n",
         dir.display(),
         "```text\n".to_string() + &report.plan.to_text() + "```\n",
         report.to_markdown()
     );
     write_atomic(&out_dir.join("report.md"), md.as_bytes())?;
+    let figures: Vec<(String, String)> = png_figures(&out_dir, "fit")
+        .into_iter()
+        .map(|rel| (rel.clone(), rel))
+        .collect();
+    let html = crate::report::html_page(
+        &format!("skinbrdf process: {}", dir.display()),
+        "",
+        &report,
+        &figures,
+    );
+    write_atomic(&out_dir.join("report.html"), html.as_bytes())?;
     let r = StageReport::ran(Stage::Report, t.elapsed().as_secs_f64());
     on_event(Event::Finished(&r));
     report.stages.push(r);
@@ -437,6 +454,21 @@ pub fn process(
         out_dir,
         fit: fit_out,
     })
+}
+
+/// The PNG figures in `base/sub`, as paths relative to `base` (`sub/name.png`), sorted.
+pub fn png_figures(base: &Path, sub: &str) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(base.join(sub))
+        .map(|rd| {
+            rd.filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.ends_with(".png"))
+                .map(|n| format!("{sub}/{n}"))
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
 }
 
 /// Within 5 degrees of the incidence plane (`phi_d` near 0 or pi).
@@ -656,7 +688,15 @@ fn derender_reports(plan: &Plan, run: &SessionRun) -> [StageReport; 3] {
         "mm",
         MetricKind::Quality,
     ));
-    let shadow = if d.shadow_rays {
+    let shadow = if !plan.runs(Stage::ShadowRays) {
+        let mut r = skipped(plan, Stage::ShadowRays);
+        if d.region_can_self_shadow {
+            r.notes.push(
+                "the tessellated shape failed the convexity test within its tolerance; the plan's geometric fact wins".into(),
+            );
+        }
+        r
+    } else if d.shadow_rays {
         let mut r = StageReport::ran(Stage::ShadowRays, 0.0);
         r.metrics.push(Metric::new(
             "shadow_rays_cast",
@@ -674,10 +714,14 @@ fn derender_reports(plan: &Plan, run: &SessionRun) -> [StageReport; 3] {
     } else if d.region_can_self_shadow {
         StageReport::skipped(Stage::ShadowRays, "disabled by the derender settings")
     } else {
-        StageReport::skipped(
+        // The same reason the final plan gives, with where the fact came from.
+        let mut r = StageReport::skipped(
             Stage::ShadowRays,
-            "the convexity test found the region convex: it cannot shadow itself",
-        )
+            "the region is convex: it cannot shadow itself",
+        );
+        r.notes
+            .push("found by scan preparation's convexity test".into());
+        r
     };
     let mut der = StageReport::ran(
         Stage::Derender,

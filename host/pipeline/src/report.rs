@@ -223,6 +223,114 @@ impl RunReport {
     }
 }
 
+/// Escapes text for HTML.
+pub fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+impl RunReport {
+    /// The stage table as HTML (one row per figure; out-of-bound figures marked).
+    pub fn to_html_table(&self) -> String {
+        let mut out = String::from(
+            "<table>\n<tr><th>stage</th><th>status</th><th>time (s)</th><th>figure</th><th>value</th><th>bound</th></tr>\n",
+        );
+        for s in &self.stages {
+            let status = match &s.status {
+                StageStatus::Ran => "ran".to_string(),
+                StageStatus::Reused => "reused".to_string(),
+                StageStatus::Skipped { reason } => format!("skipped: {reason}"),
+            };
+            let n = s.metrics.len().max(1) + s.notes.len();
+            out.push_str(&format!(
+                "<tr><td rowspan=\"{n}\">{}</td><td rowspan=\"{n}\">{}</td><td rowspan=\"{n}\" class=\"num\">{:.3}</td>",
+                html_escape(s.stage.name()),
+                html_escape(&status),
+                s.run_time_s
+            ));
+            if s.metrics.is_empty() {
+                out.push_str("<td></td><td></td><td></td></tr>\n");
+            }
+            for (i, m) in s.metrics.iter().enumerate() {
+                if i > 0 {
+                    out.push_str("<tr>");
+                }
+                let bound = m
+                    .bound
+                    .map(|b| format!("≤ {} {}", sig(b), html_escape(&m.unit)))
+                    .unwrap_or_default();
+                let class = if m.within_bound() { "num" } else { "num bad" };
+                out.push_str(&format!(
+                    "<td>{}</td><td class=\"{class}\">{} {}</td><td class=\"num\">{bound}</td></tr>\n",
+                    html_escape(&m.name),
+                    sig(m.value),
+                    html_escape(&m.unit)
+                ));
+            }
+            for note in &s.notes {
+                out.push_str(&format!(
+                    "<tr><td colspan=\"3\" class=\"note\">note: {}</td></tr>\n",
+                    html_escape(note)
+                ));
+            }
+        }
+        out.push_str(&format!(
+            "<tr><th>total</th><td></td><td class=\"num\">{:.3}</td><td></td><td></td><td></td></tr>\n</table>\n",
+            self.total_time_s
+        ));
+        out
+    }
+}
+
+/// A self-contained HTML page: a title, free HTML sections, the plan, the stage table and the
+/// figures (`(caption, path relative to the page)`), shown inline.
+pub fn html_page(
+    title: &str,
+    sections_html: &str,
+    report: &RunReport,
+    figures: &[(String, String)],
+) -> String {
+    let mut h = format!(
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{t}</title>\n<style>\nbody{{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em}}\ntable{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #ccc;padding:2px 8px;vertical-align:top}}\n.num{{text-align:right;font-variant-numeric:tabular-nums}}.bad{{color:#b00;font-weight:bold}}.note{{color:#555;font-size:90%}}\nfigure{{margin:1em 0}}img{{max-width:100%;border:1px solid #eee}}pre{{background:#f6f6f6;padding:.5em}}\n</style></head><body>\n<h1>{t}</h1>\n",
+        t = html_escape(title)
+    );
+    h.push_str(sections_html);
+    h.push_str("<h2>Pipeline plan</h2>\n<pre>");
+    h.push_str(&html_escape(&report.plan.to_text()));
+    h.push_str("</pre>\n<h2>Stages: accuracy and run time</h2>\n");
+    h.push_str(&report.to_html_table());
+    let v = report.violations();
+    if v.is_empty() {
+        h.push_str("<p>Every figure with a stated bound is within it.</p>\n");
+    } else {
+        h.push_str("<p><b>Out of bounds:</b></p><ul>\n");
+        for (st, m) in v {
+            h.push_str(&format!(
+                "<li>{}: {} = {} {}</li>\n",
+                html_escape(st.stage.name()),
+                html_escape(&m.name),
+                sig(m.value),
+                html_escape(&m.unit)
+            ));
+        }
+        h.push_str("</ul>\n");
+    }
+    if !figures.is_empty() {
+        h.push_str("<h2>Figures</h2>\n");
+        for (caption, path) in figures {
+            h.push_str(&format!(
+                "<figure><img src=\"{p}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>\n",
+                p = html_escape(path),
+                c = html_escape(caption)
+            ));
+        }
+    }
+    h.push_str("</body></html>\n");
+    h
+}
+
 fn sig(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         return format!("{v}");
@@ -290,5 +398,15 @@ mod tests {
             "{md}"
         );
         assert!(report.to_text().contains("EXCEEDED"));
+        let html = html_page(
+            "t <1>",
+            "",
+            &report,
+            &[("a figure".into(), "fit/x.png".into())],
+        );
+        assert!(html.contains("<title>t &lt;1&gt;</title>"), "{html}");
+        assert!(html.contains("class=\"num bad\">5.000 mm"), "{html}");
+        assert!(html.contains("<img src=\"fit/x.png\""), "{html}");
+        assert!(html.contains("skipped: an ideal sphere needs no scan"));
     }
 }

@@ -41,6 +41,19 @@ fn demo_runs_end_to_end_and_process_resumes() {
     let md = std::fs::read_to_string(&out.report_path).unwrap();
     assert!(md.contains("## Stages: accuracy against ground truth and run time"));
     assert!(md.contains("camera_position_error_median"));
+    let html = std::fs::read_to_string(dir.path().join("report.html")).expect("report.html");
+    assert!(html.contains("<h2>Stages: accuracy and run time</h2>"));
+    assert!(
+        html.contains("<img src=\"session/out/fit/"),
+        "figures inline"
+    );
+    for fig in html.split("<img src=\"").skip(1) {
+        let rel = fig.split('"').next().unwrap();
+        assert!(
+            dir.path().join(rel).is_file(),
+            "{rel} is referenced but missing"
+        );
+    }
 
     // Unchanged inputs: everything is reused, nothing recomputed.
     let session = dir.path().join("session");

@@ -23,7 +23,7 @@ pub struct Args {
     /// Fewer settings per sweep.
     #[arg(long)]
     pub quick: bool,
-    /// Print the rows as JSON.
+    /// Print the rows, the photogrammetry figures and the files written as JSON on stdout.
     #[arg(long)]
     pub json: bool,
 }
@@ -40,9 +40,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .transpose()?,
         quick: args.quick,
     };
-    let out = run_bench(&cfg, &mut |m| eprintln!("... {m}")).context("skinbrdf bench")?;
+    let mut progress = super::StageProgress::default();
+    let out = run_bench(&cfg, &mut |m| {
+        tracing::info!(setting = m, "bench");
+        progress.println(&format!("... {m}"));
+        progress.start(m);
+    })
+    .context("skinbrdf bench")?;
+    progress.finish();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&out.rows)?);
+        println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
         print!("{}", out.table_md);
         for f in &out.files {

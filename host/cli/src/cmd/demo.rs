@@ -20,7 +20,7 @@ pub struct Args {
     /// Simulated device time per host time during the capture.
     #[arg(long, default_value_t = 50.0)]
     pub time_scale: f64,
-    /// Print the pipeline's report as JSON on stdout.
+    /// Print a JSON summary on stdout (capture, synthesis, every stage's figures, total time).
     #[arg(long)]
     pub json: bool,
 }
@@ -37,26 +37,67 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .as_deref()
         .map(super::parse_size)
         .transpose()?;
+    let mut progress = super::StageProgress::default();
     let out = run_demo(&cfg, &mut |e| match e {
-        DemoEvent::Step(s) => eprintln!("== {s}"),
+        DemoEvent::Step(s) => {
+            progress.finish();
+            progress.println(&format!("== {s}"));
+            tracing::info!(step = s, "demo step");
+            progress.start(s);
+        }
         DemoEvent::Captured(c, secs) => {
+            progress.finish();
             for m in capture_metrics(c, secs) {
-                eprintln!("    {:<40} {:.4} {}", m.name, m.value, m.unit);
+                progress.println(&format!("    {:<40} {:.4} {}", m.name, m.value, m.unit));
             }
         }
-        DemoEvent::Synthesized(s) => eprintln!(
-            "    {} images at {}x{} in {:.2} s",
-            s.images, s.resolution.0, s.resolution.1, s.total_s
-        ),
-        DemoEvent::Process(e) => super::process::print_event(e),
+        DemoEvent::Synthesized(s) => {
+            progress.finish();
+            progress.println(&format!(
+                "    {} images at {}x{} in {:.2} s",
+                s.images, s.resolution.0, s.resolution.1, s.total_s
+            ));
+        }
+        DemoEvent::Process(e) => super::process::print_event(&mut progress, e),
     })
     .context("skinbrdf demo")?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&out.process.report)?);
+        let capture: serde_json::Map<String, serde_json::Value> =
+            capture_metrics(&out.capture, out.capture_s)
+                .into_iter()
+                .map(|m| {
+                    (
+                        format!("{}_{}", m.name, m.unit)
+                            .trim_end_matches('_')
+                            .to_string(),
+                        m.value.into(),
+                    )
+                })
+                .collect();
+        let s = &out.synth;
+        let summary = serde_json::json!({
+            "total_s": out.total_s,
+            "report": out.report_path,
+            "capture": capture,
+            "synth": {
+                "images": s.images,
+                "width_px": s.resolution.0,
+                "height_px": s.resolution.1,
+                "rays": s.rays,
+                "render_s": s.render_s,
+                "total_s": s.total_s,
+            },
+            "process": out.process.report,
+        });
+        println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         println!("\n{}", out.process.report.to_text());
         println!("demo finished in {:.1} s", out.total_s);
-        println!("report: {}", out.report_path.display());
+        println!(
+            "report: {} (with the figures inline: {})",
+            out.report_path.display(),
+            out.report_path.with_extension("html").display()
+        );
     }
     Ok(())
 }

@@ -33,3 +33,40 @@ pub(crate) fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
     }
     Ok((w, h))
 }
+
+/// One spinner per running stage on stderr (drawn only on a terminal), with its elapsed time;
+/// lines printed through [`StageProgress::println`] appear above it.
+#[derive(Debug, Default)]
+pub(crate) struct StageProgress {
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl StageProgress {
+    /// Starts a spinner for `what` (ending the previous one).
+    pub(crate) fn start(&mut self, what: &str) {
+        self.finish();
+        let bar = indicatif::ProgressBar::new_spinner();
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{spinner} {msg} [{elapsed_precise}]")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+        );
+        bar.set_message(what.to_string());
+        bar.enable_steady_tick(std::time::Duration::from_millis(120));
+        self.bar = Some(bar);
+    }
+
+    /// Ends the current spinner.
+    pub(crate) fn finish(&mut self) {
+        if let Some(bar) = self.bar.take() {
+            bar.finish_and_clear();
+        }
+    }
+
+    /// Prints a line to stderr above the spinner.
+    pub(crate) fn println(&self, line: &str) {
+        match &self.bar {
+            Some(bar) => bar.suspend(|| eprintln!("{line}")),
+            None => eprintln!("{line}"),
+        }
+    }
+}

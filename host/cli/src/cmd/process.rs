@@ -64,20 +64,28 @@ pub fn config(args: &Args) -> anyhow::Result<ProcessConfig> {
     Ok(cfg)
 }
 
-/// Prints pipeline events to stderr.
-pub fn print_event(e: Event<'_>) {
+/// Prints pipeline events to stderr, with a spinner while a stage runs.
+pub(crate) fn print_event(progress: &mut super::StageProgress, e: Event<'_>) {
     match e {
-        Event::Plan(p) => eprint!("{}", p.to_text()),
-        Event::Started(s) => eprintln!("... {}", s.name()),
+        Event::Plan(p) => progress.println(p.to_text().trim_end()),
+        Event::Started(s) => {
+            tracing::info!(stage = s.name(), "stage started");
+            progress.start(s.name());
+        }
         Event::Finished(r) => {
+            progress.finish();
             let status = match &r.status {
                 StageStatus::Ran => format!("{:.3} s", r.run_time_s),
                 StageStatus::Reused => "reused (inputs unchanged)".into(),
                 StageStatus::Skipped { reason } => format!("skipped: {reason}"),
             };
-            eprintln!("{:<30} {status}", r.stage.name());
+            tracing::info!(stage = r.stage.name(), status = %status, "stage finished");
+            progress.println(&format!("{:<30} {status}", r.stage.name()));
             for m in &r.metrics {
-                eprintln!("    {:<40} {:.4} {}", m.name, m.value, m.unit);
+                progress.println(&format!("    {:<40} {:.4} {}", m.name, m.value, m.unit));
+            }
+            for n in &r.notes {
+                progress.println(&format!("    note: {n}"));
             }
         }
     }
@@ -85,13 +93,18 @@ pub fn print_event(e: Event<'_>) {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let cfg = config(&args)?;
-    let out = process(&args.session, &cfg, &mut print_event)
+    let mut progress = super::StageProgress::default();
+    let out = process(&args.session, &cfg, &mut |e| print_event(&mut progress, e))
         .with_context(|| format!("processing {}", args.session.display()))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&out.report)?);
     } else {
         print!("{}", out.report.to_text());
-        println!("report: {}", out.out_dir.join("report.md").display());
+        println!(
+            "report: {} (with the figures inline: {})",
+            out.out_dir.join("report.md").display(),
+            out.out_dir.join("report.html").display()
+        );
     }
     Ok(())
 }
