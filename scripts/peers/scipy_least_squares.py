@@ -103,6 +103,10 @@ load_after = os.getloadavg()
 
 s1 = ours["single_start_red"]
 pl = ours["pipeline_rgb"]
+cpu = pl.get("cpu_seconds")
+if cpu:
+    print(f"skinbrdf RGB pipeline: {cpu:.3f} s of CPU time per run (all threads); on an idle machine "
+          f"with {ours.get('threads')} cores the wall time approaches {cpu / max(ours.get('threads') or 1, 1):.3f} s\n")
 print(f"samples {count}, skinbrdf threads {ours.get('threads')}, SciPy {scipy_version}, "
       f"load average {load_ours[0]:.2f} (before SciPy) / {load_after[0]:.2f} (after)\n")
 print("| run | skinbrdf (s) | SciPy lm (s) | SciPy trf (s) | lm / skinbrdf | trf / skinbrdf | final cost skinbrdf / lm / trf |")

@@ -13,6 +13,19 @@ use skinbrdf_fit::{fit_data, FitConfig, FitData};
 /// Timed runs of each variant (the median is reported).
 const REPEATS: usize = 5;
 
+/// CPU time (user + system, all threads) of this process so far, from `/proc/self/stat`
+/// (Linux; `None` elsewhere). On an idle machine with `T` cores the wall time of a well
+/// parallelised run approaches `cpu / T`: this is the load-independent figure.
+fn process_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = stat.rsplit_once(')')?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    // USER_HZ is 100 on every Linux configuration in use.
+    Some(ticks / 100.0)
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = std::env::args()
         .nth(1)
@@ -67,6 +80,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let single = median(times);
     let mut times = Vec::new();
     let mut full = None;
+    let cpu0 = process_cpu_s();
     for _ in 0..REPEATS {
         let t = Instant::now();
         full = Some(fit_data(&model, &data, &FitConfig::default())?);
@@ -74,6 +88,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let full = full.ok_or("no run")?;
     let pipeline = median(times);
+    let pipeline_cpu = cpu0
+        .zip(process_cpu_s())
+        .map(|(a, b)| (b - a) / REPEATS as f64);
     println!(
         "{}",
         serde_json::json!({
@@ -83,7 +100,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "single_start_red": {"seconds": single, "cost": o.cost, "iterations": o.iterations, "evaluations": o.evaluations, "params": o.params},
             "repeats": REPEATS,
             "threads": rayon::current_num_threads(),
-            "pipeline_rgb": {"seconds": pipeline, "cost_red": full.channels[0].cost, "params_red": full.channels[0].params, "costs": full.channels.iter().map(|c| c.cost).collect::<Vec<_>>(), "stages": full.channels.iter().map(|c| &c.stages).collect::<Vec<_>>()},
+            "pipeline_rgb": {"seconds": pipeline, "cpu_seconds": pipeline_cpu, "cost_red": full.channels[0].cost, "params_red": full.channels[0].params, "costs": full.channels.iter().map(|c| c.cost).collect::<Vec<_>>(), "stages": full.channels.iter().map(|c| &c.stages).collect::<Vec<_>>()},
         })
     );
     Ok(())
