@@ -2,7 +2,8 @@
 //!
 //! For every pixel, `n x n` stratified jittered rays (n = ceil(sqrt(samples_per_pixel)); one ray
 //! through the pixel centre when n = 1) are traced through the true camera (pinhole + Brown-
-//! Conrady distortion, [`CameraModel::pixel_ray`]) against three obvhs BVHs ([`MeshBvh`]): the
+//! Conrady distortion, [`CameraModel::pixel_ray`], through the camera's undistortion table
+//! [`CameraRays`], equal to it within 1e-9 rad) against three obvhs BVHs ([`MeshBvh`]): the
 //! skin and the headdress targets (head frame, moved by the head pose), the reference and flash
 //! targets and the flash diffuser (world frame), and the reflectance standard (its own frame,
 //! present only in the standard images). The pixel's value is the mean of the rays' values `V`:
@@ -19,6 +20,12 @@
 //!
 //! Only pixels whose block (16 x 16) is touched by the projection of some object's bounds are
 //! traced; the rest are background (exactly what tracing them would give, and tested so).
+//!
+//! Cost: the camera rays come from the undistortion table; the skin's render mesh (the large
+//! one) is traced for a band of [`BAND_ROWS`] pixel rows at once with the coherent tile tracer
+//! ([`MeshBvh::intersect_grid_into`], the same closest hits as ray-by-ray traversal), the small
+//! meshes ray by ray; a skin hit is moved onto the analytic surface by a Newton iteration along
+//! the ray that reuses one directional derivative ([`refine_on_ray`]).
 
 use std::sync::Arc;
 
@@ -26,7 +33,7 @@ use glam::{DVec2, DVec3, Vec3};
 use rayon::prelude::*;
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::{CameraModel, Pose, ShadingFrame, TriMesh};
-use skinbrdf_mesh::{BuildQuality, MeshBvh};
+use skinbrdf_mesh::{BuildQuality, CameraRays, Hit, MeshBvh, TraceScratch};
 use skinbrdf_session::Target;
 
 use crate::layout::{Rig, Shot};
@@ -41,6 +48,9 @@ pub const DIFFUSER_ALBEDO: f64 = 0.9;
 pub const SHADOW_OFFSET_M: f64 = 2e-5;
 /// Culling block size, pixels.
 const BLOCK_PX: u32 = 16;
+/// Pixel rows per band of coherent tracing (one task; 8 rows x 2 strata = one super-tile band
+/// of the grid tracer at 4 rays per pixel).
+const BAND_ROWS: u32 = 8;
 /// Half extent of a printed target's paper in tag units (the black border is at ±1, the tag's
 /// white ring ends at ±1.25; a quarter cell more of paper around it).
 pub const PAPER_HALF_EXTENT: f64 = 1.5;
@@ -161,6 +171,7 @@ impl Group {
 #[derive(Debug)]
 pub struct Renderer {
     camera: CameraModel,
+    camera_rays: CameraRays,
     skin: Group,
     head_tags: Group,
     world: Group,
@@ -214,6 +225,32 @@ struct View {
     fired: bool,
     ambient: bool,
     standard_present: bool,
+}
+
+/// Moves a mesh hit near the surface along the ray `dir` (unit) onto the analytic surface:
+/// Newton on `f(p + s·dir) = 0` ([`crate::shape::Shape::implicit`]) with the directional
+/// derivative taken once by central differences (the start is within a few µm, over which it
+/// does not change measurably): 3 evaluations, then one per step, where a full-gradient Newton
+/// ([`crate::shape::Shape::refine_along`], same root) needs 7 per step. Stops at |f| < 1e-13 m;
+/// keeps the mesh hit when the ray is not near the surface.
+fn refine_on_ray(shape: &crate::shape::Shape, mut p: DVec3, dir: DVec3) -> DVec3 {
+    let h = 1e-7;
+    let dfds = (shape.implicit(p + dir * h) - shape.implicit(p - dir * h)) / (2.0 * h);
+    if !dfds.is_finite() || dfds.abs() < 1e-6 {
+        return p;
+    }
+    for _ in 0..8 {
+        let f = shape.implicit(p);
+        if f.abs() < 1e-13 {
+            break;
+        }
+        let step = f / dfds;
+        if step.abs() > 1e-4 {
+            break;
+        }
+        p -= dir * step;
+    }
+    p
 }
 
 /// SplitMix64 step mapped to `[0, 1)`.
@@ -333,6 +370,7 @@ impl Renderer {
             .max(1.0) as u32;
         Ok(Self {
             camera: rig.camera,
+            camera_rays: CameraRays::new(&rig.camera),
             skin,
             head_tags,
             world,
@@ -465,7 +503,9 @@ impl Renderer {
         v
     }
 
-    fn trace(&self, o_w: DVec3, d_w: DVec3, view: &View) -> Sample {
+    /// The sample of one world ray. `skin_hit` is the skin's closest hit when the caller traced
+    /// it already (coherently, with [`MeshBvh::intersect_grid_into`]); `None` traces it here.
+    fn trace(&self, o_w: DVec3, d_w: DVec3, view: &View, skin_hit: Option<Option<Hit>>) -> Sample {
         let mut best = (f32::INFINITY, Surface::Skin, 0u8);
         let (oh, dh) = (
             view.head_from_world.transform_point(o_w),
@@ -475,18 +515,24 @@ impl Renderer {
             view.standard_from_world.transform_point(o_w),
             view.standard_from_world.transform_vector(d_w),
         );
-        let mut consider = |g: &Group, o: DVec3, d: DVec3, which: u8| {
+        let consider = |best: &mut (f32, Surface, u8), g: &Group, o: DVec3, d: DVec3, which: u8| {
             if let Some(h) = g.bvh.intersect(o.as_vec3(), d.as_vec3(), best.0) {
                 if h.t_m < best.0 {
-                    best = (h.t_m, g.kinds[h.triangle as usize], which);
+                    *best = (h.t_m, g.kinds[h.triangle as usize], which);
                 }
             }
         };
-        consider(&self.world, o_w, d_w, 0);
-        consider(&self.skin, oh, dh, 1);
-        consider(&self.head_tags, oh, dh, 1);
+        consider(&mut best, &self.world, o_w, d_w, 0);
+        match skin_hit {
+            None => consider(&mut best, &self.skin, oh, dh, 1),
+            Some(Some(h)) if h.t_m < best.0 => {
+                best = (h.t_m, self.skin.kinds[h.triangle as usize], 1);
+            }
+            Some(_) => {}
+        }
+        consider(&mut best, &self.head_tags, oh, dh, 1);
         if view.standard_present {
-            consider(&self.standard, os, ds, 2);
+            consider(&mut best, &self.standard, os, ds, 2);
         }
         let (t, surf, which) = best;
         let none = Sample {
@@ -504,7 +550,7 @@ impl Renderer {
                 let p = oh + dh * t;
                 // Refine onto the analytic surface along the ray (removes the tessellation's
                 // few-µm offset and the f32 hit's rounding): Newton on the implicit function.
-                let p = self.shape.refine_along(p, dh);
+                let p = refine_on_ray(&self.shape, p, dh);
                 let v = self.skin_value(p, oh, view.light_head, view.fired, view.ambient);
                 Sample {
                     v,
@@ -727,59 +773,106 @@ impl Renderer {
         let n = self.spp_side;
         let inv = 1.0 / f64::from(n * n);
         let origin = view.world_from_camera.translation_m;
-        let rows: Vec<RowOut> = (0..h)
+        let origin_head = view.head_from_world.transform_point(origin).as_vec3();
+        let nu = n as usize;
+        let gw = w as usize * nu;
+        // Bands of pixel rows; in each, every ray's direction on a grid of sub-pixel samples
+        // (n x n per pixel), the skin (the big mesh) traced coherently for the whole band, the
+        // small meshes ray by ray.
+        let bands: Vec<Vec<RowOut>> = (0..h.div_ceil(BAND_ROWS))
             .into_par_iter()
-            .map(|y| {
-                let mut v = vec![[0.0f32; 3]; w as usize];
-                let mut fh = vec![false; w as usize];
-                let mut tg = vec![false; w as usize];
-                let mut st = vec![false; w as usize];
-                let mut rays = 0u64;
-                for x in 0..w {
-                    if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
-                        continue;
-                    }
-                    // Jitter from a per-pixel hash: independent of which pixels are traced and of
-                    // the thread schedule.
-                    let mut state = seed
-                        ^ (u64::from(y) << 32 | u64::from(x)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-                    let mut acc = [0.0f64; 3];
-                    let (mut all_roi, mut any_tag, mut all_std) = (true, false, true);
-                    for sy in 0..n {
-                        for sx in 0..n {
-                            let (jx, jy) = if n == 1 {
-                                (0.0, 0.0)
-                            } else {
-                                (
-                                    (f64::from(sx) + unit(&mut state)) / f64::from(n) - 0.5,
-                                    (f64::from(sy) + unit(&mut state)) / f64::from(n) - 0.5,
-                                )
-                            };
-                            let px = DVec2::new(f64::from(x) + jx, f64::from(y) + jy);
-                            let Some(dir_c) = self.camera.pixel_ray(px) else {
-                                all_roi = false;
-                                all_std = false;
-                                continue;
-                            };
-                            rays += 1;
-                            let d = view.world_from_camera.transform_vector(dir_c);
-                            let s = self.trace(origin, d, &view);
-                            for (a, sv) in acc.iter_mut().zip(s.v) {
-                                *a += sv;
+            .map_init(TraceScratch::default, |scratch, band| {
+                let y0 = band * BAND_ROWS;
+                let y1 = (y0 + BAND_ROWS).min(h);
+                let gh = (y1 - y0) as usize * nu;
+                let mut dirs_w = vec![DVec3::ZERO; gw * gh];
+                let mut dirs_h = vec![Vec3::ZERO; gw * gh];
+                for y in y0..y1 {
+                    for x in 0..w {
+                        if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
+                            continue;
+                        }
+                        // Jitter from a per-pixel hash: independent of which pixels are traced
+                        // and of the thread schedule.
+                        let mut state = seed
+                            ^ (u64::from(y) << 32 | u64::from(x))
+                                .wrapping_mul(0x9e37_79b9_7f4a_7c15);
+                        for sy in 0..n {
+                            for sx in 0..n {
+                                let (jx, jy) = if n == 1 {
+                                    (0.0, 0.0)
+                                } else {
+                                    (
+                                        (f64::from(sx) + unit(&mut state)) / f64::from(n) - 0.5,
+                                        (f64::from(sy) + unit(&mut state)) / f64::from(n) - 0.5,
+                                    )
+                                };
+                                let px = DVec2::new(f64::from(x) + jx, f64::from(y) + jy);
+                                let Some(dir_c) = self.camera_rays.pixel_ray(px) else {
+                                    continue;
+                                };
+                                let g = ((y - y0) * n + sy) as usize * gw + (x * n + sx) as usize;
+                                let d = view.world_from_camera.transform_vector(dir_c);
+                                dirs_w[g] = d;
+                                dirs_h[g] = view.head_from_world.transform_vector(d).as_vec3();
                             }
-                            all_roi &= s.skin_roi;
-                            any_tag |= s.target;
-                            all_std &= s.standard;
                         }
                     }
-                    v[x as usize] = acc.map(|a| (a * inv) as f32);
-                    fh[x as usize] = all_roi;
-                    tg[x as usize] = any_tag;
-                    st[x as usize] = all_std;
                 }
-                (v, fh, tg, st, rays)
+                let mut skin_hits = vec![None; gw * gh];
+                self.skin.bvh.intersect_grid_into(
+                    origin_head,
+                    &dirs_h,
+                    gw,
+                    f32::INFINITY,
+                    &mut skin_hits,
+                    scratch,
+                );
+                (y0..y1)
+                    .map(|y| {
+                        let mut v = vec![[0.0f32; 3]; w as usize];
+                        let mut fh = vec![false; w as usize];
+                        let mut tg = vec![false; w as usize];
+                        let mut st = vec![false; w as usize];
+                        let mut rays = 0u64;
+                        for x in 0..w {
+                            if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
+                                continue;
+                            }
+                            let mut acc = [0.0f64; 3];
+                            let (mut all_roi, mut any_tag, mut all_std) = (true, false, true);
+                            for sy in 0..n {
+                                for sx in 0..n {
+                                    let g =
+                                        ((y - y0) * n + sy) as usize * gw + (x * n + sx) as usize;
+                                    let d = dirs_w[g];
+                                    if d == DVec3::ZERO {
+                                        // No camera ray through this position.
+                                        all_roi = false;
+                                        all_std = false;
+                                        continue;
+                                    }
+                                    rays += 1;
+                                    let s = self.trace(origin, d, &view, Some(skin_hits[g]));
+                                    for (a, sv) in acc.iter_mut().zip(s.v) {
+                                        *a += sv;
+                                    }
+                                    all_roi &= s.skin_roi;
+                                    any_tag |= s.target;
+                                    all_std &= s.standard;
+                                }
+                            }
+                            v[x as usize] = acc.map(|a| (a * inv) as f32);
+                            fh[x as usize] = all_roi;
+                            tg[x as usize] = any_tag;
+                            st[x as usize] = all_std;
+                        }
+                        (v, fh, tg, st, rays)
+                    })
+                    .collect()
             })
             .collect();
+        let rows = bands.into_iter().flatten();
         let mut out = Rendered {
             width: w,
             height: h,
