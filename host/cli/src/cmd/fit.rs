@@ -38,6 +38,10 @@ pub struct Args {
     /// Skip the figures.
     #[arg(long)]
     pub no_figures: bool,
+    /// Skip the head rendering (a session directory with scan.ply gets
+    /// head_comparison.{png,svg}: Lambertian vs the fitted BRDF, the method's Figs. 7 and 10).
+    #[arg(long)]
+    pub no_render: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -109,5 +113,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("  {k}: {v:.3} s");
     }
     println!("wrote {} (params.json, report.md, figures)", out.display());
+    let scan = args.input.join("scan.ply");
+    if args.input.is_dir() && scan.is_file() && !args.no_figures && !args.no_render {
+        let mesh = skinbrdf_mesh::load_mesh(&scan, &skinbrdf_mesh::LoadOptions::default())
+            .with_context(|| format!("loading {}", scan.display()))?;
+        let cfg = skinbrdf_render::RenderConfig::default();
+        let img = skinbrdf_render::render_comparison(&mesh.mesh, &f.model, &cfg)?;
+        let files = img.write(&out.join("head_comparison"), &cfg.labels)?;
+        println!(
+            "  render: {:.3} s ({} rays); wrote {}",
+            img.stats.trace_s + img.stats.compose_s,
+            img.stats.rays,
+            files
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     Ok(())
 }
