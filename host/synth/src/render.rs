@@ -21,11 +21,12 @@
 //! Only pixels whose block (16 x 16) is touched by the projection of some object's bounds are
 //! traced; the rest are background (exactly what tracing them would give, and tested so).
 //!
-//! Cost: the camera rays come from the undistortion table; the skin's render mesh (the large
-//! one) is traced for a band of [`BAND_ROWS`] pixel rows at once with the coherent tile tracer
-//! ([`MeshBvh::intersect_grid_into`], the same closest hits as ray-by-ray traversal), the small
-//! meshes ray by ray; a skin hit is moved onto the analytic surface by a Newton iteration along
-//! the ray that reuses one directional derivative ([`refine_on_ray`]).
+//! Cost: the camera rays come from the undistortion table; every mesh (the large skin one and
+//! the small ones) is traced for a band of [`BAND_ROWS`] pixel rows at once with the coherent
+//! tile tracer ([`MeshBvh::intersect_grid_into`], the same closest hits as ray-by-ray
+//! traversal; a tile that sees none of a mesh costs one frustum test); a skin hit is moved onto
+//! the analytic surface by a Newton iteration along the ray that reuses one directional
+//! derivative ([`refine_on_ray`]).
 
 use std::sync::Arc;
 
@@ -503,9 +504,10 @@ impl Renderer {
         v
     }
 
-    /// The sample of one world ray. `skin_hit` is the skin's closest hit when the caller traced
-    /// it already (coherently, with [`MeshBvh::intersect_grid_into`]); `None` traces it here.
-    fn trace(&self, o_w: DVec3, d_w: DVec3, view: &View, skin_hit: Option<Option<Hit>>) -> Sample {
+    /// The sample of one world ray. `pre` holds the closest hits of the world, skin, headdress
+    /// and standard meshes when the caller traced them already (coherently, with
+    /// [`MeshBvh::intersect_grid_into`]); `None` traces them here, ray by ray.
+    fn trace(&self, o_w: DVec3, d_w: DVec3, view: &View, pre: Option<[Option<Hit>; 4]>) -> Sample {
         let mut best = (f32::INFINITY, Surface::Skin, 0u8);
         let (oh, dh) = (
             view.head_from_world.transform_point(o_w),
@@ -515,24 +517,25 @@ impl Renderer {
             view.standard_from_world.transform_point(o_w),
             view.standard_from_world.transform_vector(d_w),
         );
-        let consider = |best: &mut (f32, Surface, u8), g: &Group, o: DVec3, d: DVec3, which: u8| {
-            if let Some(h) = g.bvh.intersect(o.as_vec3(), d.as_vec3(), best.0) {
+        let groups = [
+            (&self.world, o_w, d_w, 0u8),
+            (&self.skin, oh, dh, 1),
+            (&self.head_tags, oh, dh, 1),
+            (&self.standard, os, ds, 2),
+        ];
+        for (k, (g, o, d, which)) in groups.into_iter().enumerate() {
+            if k == 3 && !view.standard_present {
+                continue;
+            }
+            let hit = match pre {
+                Some(p) => p[k],
+                None => g.bvh.intersect(o.as_vec3(), d.as_vec3(), best.0),
+            };
+            if let Some(h) = hit {
                 if h.t_m < best.0 {
-                    *best = (h.t_m, g.kinds[h.triangle as usize], which);
+                    best = (h.t_m, g.kinds[h.triangle as usize], which);
                 }
             }
-        };
-        consider(&mut best, &self.world, o_w, d_w, 0);
-        match skin_hit {
-            None => consider(&mut best, &self.skin, oh, dh, 1),
-            Some(Some(h)) if h.t_m < best.0 => {
-                best = (h.t_m, self.skin.kinds[h.triangle as usize], 1);
-            }
-            Some(_) => {}
-        }
-        consider(&mut best, &self.head_tags, oh, dh, 1);
-        if view.standard_present {
-            consider(&mut best, &self.standard, os, ds, 2);
         }
         let (t, surf, which) = best;
         let none = Sample {
@@ -773,7 +776,8 @@ impl Renderer {
         let n = self.spp_side;
         let inv = 1.0 / f64::from(n * n);
         let origin = view.world_from_camera.translation_m;
-        let origin_head = view.head_from_world.transform_point(origin).as_vec3();
+        let origin_head = view.head_from_world.transform_point(origin);
+        let origin_std = view.standard_from_world.transform_point(origin);
         let nu = n as usize;
         let gw = w as usize * nu;
         // Bands of pixel rows; in each, every ray's direction on a grid of sub-pixel samples
@@ -786,7 +790,9 @@ impl Renderer {
                 let y1 = (y0 + BAND_ROWS).min(h);
                 let gh = (y1 - y0) as usize * nu;
                 let mut dirs_w = vec![DVec3::ZERO; gw * gh];
+                let mut dirs_wf = vec![Vec3::ZERO; gw * gh];
                 let mut dirs_h = vec![Vec3::ZERO; gw * gh];
+                let mut dirs_s = vec![Vec3::ZERO; gw * gh];
                 for y in y0..y1 {
                     for x in 0..w {
                         if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
@@ -814,20 +820,38 @@ impl Renderer {
                                 let g = ((y - y0) * n + sy) as usize * gw + (x * n + sx) as usize;
                                 let d = view.world_from_camera.transform_vector(dir_c);
                                 dirs_w[g] = d;
+                                dirs_wf[g] = d.as_vec3();
                                 dirs_h[g] = view.head_from_world.transform_vector(d).as_vec3();
+                                if view.standard_present {
+                                    dirs_s[g] =
+                                        view.standard_from_world.transform_vector(d).as_vec3();
+                                }
                             }
                         }
                     }
                 }
-                let mut skin_hits = vec![None; gw * gh];
-                self.skin.bvh.intersect_grid_into(
-                    origin_head,
-                    &dirs_h,
-                    gw,
-                    f32::INFINITY,
-                    &mut skin_hits,
-                    scratch,
-                );
+                // Closest hits per mesh: world, skin, headdress, standard.
+                let mut hits = [
+                    vec![None; gw * gh],
+                    vec![None; gw * gh],
+                    vec![None; gw * gh],
+                    vec![None; gw * gh],
+                ];
+                let [hw, hs, ht, hst] = &mut hits;
+                let trace_grid = |g: &Group,
+                                  o: DVec3,
+                                  d: &[Vec3],
+                                  out: &mut [Option<Hit>],
+                                  sc: &mut TraceScratch| {
+                    g.bvh
+                        .intersect_grid_into(o.as_vec3(), d, gw, f32::INFINITY, out, sc);
+                };
+                trace_grid(&self.world, origin, &dirs_wf, hw, scratch);
+                trace_grid(&self.skin, origin_head, &dirs_h, hs, scratch);
+                trace_grid(&self.head_tags, origin_head, &dirs_h, ht, scratch);
+                if view.standard_present {
+                    trace_grid(&self.standard, origin_std, &dirs_s, hst, scratch);
+                }
                 (y0..y1)
                     .map(|y| {
                         let mut v = vec![[0.0f32; 3]; w as usize];
@@ -853,7 +877,8 @@ impl Renderer {
                                         continue;
                                     }
                                     rays += 1;
-                                    let s = self.trace(origin, d, &view, Some(skin_hits[g]));
+                                    let pre = [hits[0][g], hits[1][g], hits[2][g], hits[3][g]];
+                                    let s = self.trace(origin, d, &view, Some(pre));
                                     for (a, sv) in acc.iter_mut().zip(s.v) {
                                         *a += sv;
                                     }
