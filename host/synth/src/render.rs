@@ -30,7 +30,7 @@
 
 use std::sync::Arc;
 
-use glam::{DVec2, DVec3, Vec3};
+use glam::{DMat3, DVec2, DVec3, Vec3};
 use rayon::prelude::*;
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::{CameraModel, Pose, ShadingFrame, TriMesh};
@@ -509,27 +509,40 @@ impl Renderer {
     /// [`MeshBvh::intersect_grid_into`]); `None` traces them here, ray by ray.
     fn trace(&self, o_w: DVec3, d_w: DVec3, view: &View, pre: Option<[Option<Hit>; 4]>) -> Sample {
         let mut best = (f32::INFINITY, Surface::Skin, 0u8);
-        let (oh, dh) = (
-            view.head_from_world.transform_point(o_w),
-            view.head_from_world.transform_vector(d_w),
-        );
-        let (os, ds) = (
-            view.standard_from_world.transform_point(o_w),
-            view.standard_from_world.transform_vector(d_w),
-        );
-        let groups = [
-            (&self.world, o_w, d_w, 0u8),
-            (&self.skin, oh, dh, 1),
-            (&self.head_tags, oh, dh, 1),
-            (&self.standard, os, ds, 2),
-        ];
-        for (k, (g, o, d, which)) in groups.into_iter().enumerate() {
+        let head = || {
+            (
+                view.head_from_world.transform_point(o_w),
+                view.head_from_world.transform_vector(d_w),
+            )
+        };
+        let std_frame = || {
+            (
+                view.standard_from_world.transform_point(o_w),
+                view.standard_from_world.transform_vector(d_w),
+            )
+        };
+        for (k, (g, which)) in [
+            (&self.world, 0u8),
+            (&self.skin, 1),
+            (&self.head_tags, 1),
+            (&self.standard, 2),
+        ]
+        .into_iter()
+        .enumerate()
+        {
             if k == 3 && !view.standard_present {
                 continue;
             }
             let hit = match pre {
                 Some(p) => p[k],
-                None => g.bvh.intersect(o.as_vec3(), d.as_vec3(), best.0),
+                None => {
+                    let (o, d) = match which {
+                        0 => (o_w, d_w),
+                        1 => head(),
+                        _ => std_frame(),
+                    };
+                    g.bvh.intersect(o.as_vec3(), d.as_vec3(), best.0)
+                }
             };
             if let Some(h) = hit {
                 if h.t_m < best.0 {
@@ -550,6 +563,7 @@ impl Renderer {
         let t = f64::from(t);
         match surf {
             Surface::Skin => {
+                let (oh, dh) = head();
                 let p = oh + dh * t;
                 // Refine onto the analytic surface along the ray (removes the tessellation's
                 // few-µm offset and the f32 hit's rounding): Newton on the implicit function.
@@ -563,10 +577,10 @@ impl Renderer {
                 }
             }
             Surface::Tag(layout, i) => {
-                let (tag, o, d, light) = match (which, layout) {
-                    (1, _) => (&self.tags_head[i as usize], oh, dh, view.light_head),
-                    (2, _) => (&self.tags_standard[i as usize], os, ds, view.light_std),
-                    _ => (&self.tags_world[i as usize].1, o_w, d_w, self.light_world),
+                let (tag, (o, d), light) = match (which, layout) {
+                    (1, _) => (&self.tags_head[i as usize], head(), view.light_head),
+                    (2, _) => (&self.tags_standard[i as usize], std_frame(), view.light_std),
+                    _ => (&self.tags_world[i as usize].1, (o_w, d_w), self.light_world),
                 };
                 let p = o + d * t;
                 let albedo = if tag.white_at(p) {
@@ -598,6 +612,7 @@ impl Renderer {
                 }
             }
             Surface::Standard => {
+                let (os, ds) = std_frame();
                 let p = os + ds * t;
                 let mut v = [0.0; 3];
                 if ds.z < 0.0 {
@@ -778,6 +793,10 @@ impl Renderer {
         let origin = view.world_from_camera.translation_m;
         let origin_head = view.head_from_world.transform_point(origin);
         let origin_std = view.standard_from_world.transform_point(origin);
+        // Rotations as matrices (9 multiply-adds per direction instead of a quaternion product).
+        let rot_wc = DMat3::from_quat(view.world_from_camera.rotation);
+        let rot_hw = DMat3::from_quat(view.head_from_world.rotation);
+        let rot_sw = DMat3::from_quat(view.standard_from_world.rotation);
         let nu = n as usize;
         let gw = w as usize * nu;
         // Bands of pixel rows; in each, every ray's direction on a grid of sub-pixel samples
@@ -818,13 +837,12 @@ impl Renderer {
                                     continue;
                                 };
                                 let g = ((y - y0) * n + sy) as usize * gw + (x * n + sx) as usize;
-                                let d = view.world_from_camera.transform_vector(dir_c);
+                                let d = rot_wc * dir_c;
                                 dirs_w[g] = d;
                                 dirs_wf[g] = d.as_vec3();
-                                dirs_h[g] = view.head_from_world.transform_vector(d).as_vec3();
+                                dirs_h[g] = (rot_hw * d).as_vec3();
                                 if view.standard_present {
-                                    dirs_s[g] =
-                                        view.standard_from_world.transform_vector(d).as_vec3();
+                                    dirs_s[g] = (rot_sw * d).as_vec3();
                                 }
                             }
                         }
