@@ -9,6 +9,11 @@
 //! ```text
 //! cargo run --release -p skinbrdf-derender --example derender_24mp -- [--dir DIR] [--images N] [--regen] [--runs R]
 //! ```
+//!
+//! `--resolution WxH`, `--spp N` and `--images N` (`--images 0` keeps the scene's count) make
+//! it any synthetic session: `--resolution 1524x1012 --spp 4 --images 0 --regen` is the
+//! default session (and times its synthesis); `--noise-free` renders without sensor and scanner
+//! noise.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -30,16 +35,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .to_string()
     }));
     let images: u32 = opt("--images").map(|s| s.parse()).transpose()?.unwrap_or(4);
+    let spp: u32 = opt("--spp").map(|s| s.parse()).transpose()?.unwrap_or(1);
+    let resolution = match opt("--resolution") {
+        Some(r) => {
+            let (w, h) = r.split_once('x').ok_or("--resolution WxH")?;
+            (w.parse()?, h.parse()?)
+        }
+        None => (6000, 4000),
+    };
     let runs: usize = opt("--runs").map(|s| s.parse()).transpose()?.unwrap_or(2);
     if args.iter().any(|a| a == "--regen") || !dir.join("session.toml").exists() {
         let mut scene = Scene::load("default")?;
-        scene.session.measurement_images = images;
+        if images > 0 {
+            scene.session.measurement_images = images;
+        }
         let t = Instant::now();
         let s = generate(
             &scene,
             &SynthOptions {
-                resolution: Some((6000, 4000)),
-                samples_per_pixel: Some(1),
+                resolution: Some(resolution),
+                samples_per_pixel: Some(spp),
+                noise_free: args.iter().any(|a| a == "--noise-free"),
                 ..Default::default()
             },
             &dir,
@@ -63,7 +79,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let decode = t.image_load_s;
         let proper = t.total_s - decode;
         println!(
-            "run {run}: {} measurement images of 24 MP: {} region pixels, {} primary rays, {} samples kept",
+            "run {run}: {} measurement images: {} region pixels, {} primary rays, {} samples kept",
             r.images.len(),
             r.region_pixels,
             r.primary_rays,

@@ -18,6 +18,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::{CameraModel, Pose};
+use skinbrdf_mesh::CameraRays;
 
 use crate::image::ImageView;
 use crate::stats::RobustStats;
@@ -66,13 +67,14 @@ pub struct Calibration {
 
 /// Per-pixel C values of one standard image.
 fn standard_pixels(
-    camera: &CameraModel,
+    rays: &CameraRays,
     light_world_m: DVec3,
     brdf: &BrdfModel,
     size_m: [f64; 2],
     s: &StandardImage<'_>,
     cfg: &DerenderConfig,
 ) -> Vec<[f64; 3]> {
+    let camera = rays.camera();
     let std_from_world = s.world_from_standard.inverse();
     let std_from_cam = std_from_world * s.world_from_camera;
     let cam_from_std = std_from_cam.inverse();
@@ -118,7 +120,7 @@ fn standard_pixels(
                 if s.mask.is_some_and(|m| !m[idx]) || s.image.saturated.is_some_and(|m| m[idx]) {
                     continue;
                 }
-                let Some(dc) = camera.pixel_ray(DVec2::new(x as f64, y as f64)) else {
+                let Some(dc) = rays.pixel_ray(DVec2::new(x as f64, y as f64)) else {
                     continue;
                 };
                 let d = std_from_cam.transform_vector(dc);
@@ -164,8 +166,9 @@ pub fn calibrate_c(
     cfg: &DerenderConfig,
 ) -> Result<Calibration, DerenderError> {
     let mut all: Vec<[f64; 3]> = Vec::new();
+    let rays = CameraRays::new(camera);
     for s in images {
-        all.extend(standard_pixels(camera, light_world_m, brdf, size_m, s, cfg));
+        all.extend(standard_pixels(&rays, light_world_m, brdf, size_m, s, cfg));
     }
     if all.len() < 10 {
         return Err(DerenderError::Calibration(format!(
