@@ -291,6 +291,7 @@ impl MeshBvh {
             let (dx, dy, dz) = (Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z));
             let mut best_t = t_max;
             let mut best_slot = u32::MAX;
+            let (mut best_u, mut best_v) = (0.0f32, 0.0f32);
             for p in &sc.packs {
                 let [e1x, e1y, e1z] = p.e1;
                 let [e2x, e2y, e2z] = p.e2;
@@ -309,17 +310,25 @@ impl MeshBvh {
                     & t.cmple(Vec4::splat(best_t));
                 let bits = m.bitmask();
                 if bits != 0 {
-                    let ts = t.to_array();
+                    let (ts, us, vs) = (t.to_array(), uu.to_array(), vv.to_array());
                     for (lane, &tl) in ts.iter().enumerate() {
                         if bits & (1 << lane) != 0 && (tl < best_t || best_slot == u32::MAX) {
                             best_t = tl;
                             best_slot = p.slot[lane];
+                            (best_u, best_v) = (us[lane], vs[lane]);
                         }
                     }
                 }
             }
             if best_slot != u32::MAX {
-                out[i] = Some(self.hit_at(best_slot as usize, best_t, o, d));
+                // The test's own barycentrics (in [0, 1], u + v <= 1 by the mask), for the
+                // same corners in the same order as `intersect`'s.
+                out[i] = Some(Hit {
+                    t_m: best_t,
+                    triangle: self.tri_ids[best_slot as usize],
+                    u: best_u,
+                    v: best_v,
+                });
             }
         }
     }
@@ -407,7 +416,12 @@ mod tests {
                         (a.t_m - b.t_m).abs() <= 1e-5 * a.t_m.max(1.0),
                         "{a:?} {b:?}"
                     );
-                    if a.triangle != b.triangle {
+                    if a.triangle == b.triangle {
+                        assert!(
+                            (a.u - b.u).abs() < 1e-4 && (a.v - b.v).abs() < 1e-4,
+                            "{a:?} {b:?}"
+                        );
+                    } else {
                         // Only on a shared edge (same t): both hits are correct.
                         assert!(on_edge(&a) || on_edge(&b), "{a:?} {b:?}");
                         differ += 1;
