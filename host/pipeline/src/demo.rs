@@ -269,10 +269,19 @@ fn demo_html(
         "</table>\n<h2>Synthesis</h2>\n<table>\n<tr><td>images</td><td class=\"num\">{}</td></tr>\n<tr><td>resolution</td><td class=\"num\">{} x {}</td></tr>\n<tr><td>primary rays</td><td class=\"num\">{}</td></tr>\n<tr><td>render time</td><td class=\"num\">{:.2} s</td></tr>\n<tr><td>total time</td><td class=\"num\">{:.2} s</td></tr>\n</table>\n",
         s.images, s.resolution.0, s.resolution.1, s.rays, s.render_s, s.total_s
     ));
-    let figures: Vec<(String, String)> = crate::process::png_figures(&out.out_dir, "fit")
+    let mut figures: Vec<(String, String)> = crate::process::png_figures(&out.out_dir, "fit")
         .into_iter()
         .map(|rel| (rel.clone(), format!("session/out/{rel}")))
         .collect();
+    if out.out_dir.join(crate::process::RENDER_FIGURE).is_file() {
+        figures.insert(
+            0,
+            (
+                "head rendered with a Lambertian BRDF (left) and the fitted one (right), the method's Figures 7 and 10".into(),
+                format!("session/out/{}", crate::process::RENDER_FIGURE),
+            ),
+        );
+    }
     crate::report::html_page("skinbrdf demo", &h, &out.report, &figures)
 }
 
@@ -316,6 +325,12 @@ fn demo_markdown(
                 m.bound
             ));
         }
+    }
+    if out.out_dir.join(crate::process::RENDER_FIGURE).is_file() {
+        md.push_str(&format!(
+            "\n## Head rendering (the method's Figures 7 and 10)\n\nLambertian (left) against the fitted BRDF (right), same light and exposure:\n\n![head](session/out/{})\n",
+            crate::process::RENDER_FIGURE
+        ));
     }
     if let Some(f) = &out.fit {
         md.push_str("\n## Figures\n\n");

@@ -415,8 +415,11 @@ pub fn process(
     }
     ledger.save(&out_dir)?;
 
+    // --- rendering (Figures 7 and 10): part of the report stage ----------------------------
+    let t_render = Instant::now();
+    let render_note = render_head(&session, &out_dir, fit_out.is_some());
+
     // --- report ----------------------------------------------------------------------------
-    let t = Instant::now();
     let mut final_plan = Plan::derive(&facts, &cfg.plan);
     final_plan.convexity_pending = false;
     let mut report = RunReport {
@@ -427,16 +430,25 @@ pub fn process(
     };
     report.total_time_s = t0.elapsed().as_secs_f64();
     let md = format!(
-        "# skinbrdf process: {}\n\n{}\n## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the same report with the figures inline: `report.html`.\n",
+        "# skinbrdf process: {}\n\n{}\n## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the head rendering (Lambertian vs fitted): `render/head_comparison.png`; the same report with the figures inline: `report.html`.\n",
         dir.display(),
         "```text\n".to_string() + &report.plan.to_text() + "```\n",
         report.to_markdown()
     );
     write_atomic(&out_dir.join("report.md"), md.as_bytes())?;
-    let figures: Vec<(String, String)> = png_figures(&out_dir, "fit")
+    let mut figures: Vec<(String, String)> = png_figures(&out_dir, "fit")
         .into_iter()
         .map(|rel| (rel.clone(), rel))
         .collect();
+    if out_dir.join(RENDER_FIGURE).is_file() {
+        figures.insert(
+            0,
+            (
+                "head rendered with a Lambertian BRDF (left) and the fitted one (right), the method's Figures 7 and 10".into(),
+                RENDER_FIGURE.into(),
+            ),
+        );
+    }
     let html = crate::report::html_page(
         &format!("skinbrdf process: {}", dir.display()),
         "",
@@ -444,7 +456,29 @@ pub fn process(
         &figures,
     );
     write_atomic(&out_dir.join("report.html"), html.as_bytes())?;
-    let r = StageReport::ran(Stage::Report, t.elapsed().as_secs_f64());
+    // The report stage's time includes the head rendering.
+    let mut r = StageReport::ran(Stage::Report, t_render.elapsed().as_secs_f64());
+    match render_note {
+        Ok(Some(stats)) => {
+            r.metrics.push(Metric::new(
+                "render_rays",
+                stats.rays as f64,
+                "",
+                MetricKind::Cost,
+            ));
+            r.metrics.push(Metric::new(
+                "render_time",
+                t_render.elapsed().as_secs_f64(),
+                "s",
+                MetricKind::Cost,
+            ));
+            r.notes.push(format!(
+                "{RENDER_FIGURE}: the scan rendered with a Lambertian BRDF and with the fitted model"
+            ));
+        }
+        Ok(None) => {}
+        Err(note) => r.notes.push(note),
+    }
     on_event(Event::Finished(&r));
     report.stages.push(r);
     let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
@@ -454,6 +488,43 @@ pub fn process(
         out_dir,
         fit: fit_out,
     })
+}
+
+/// The head rendering (Lambertian against the fitted BRDF), relative to the output directory.
+pub const RENDER_FIGURE: &str = "render/head_comparison.png";
+
+/// Renders the scan with a Lambertian BRDF and with the fitted model side by side (the method's
+/// Figures 7 and 10) into `out/render/`. `Ok(None)`: nothing to do (not a scan, or the figure
+/// is current); `Err`: why it could not be drawn (reported as a note, never fatal).
+fn render_head(
+    session: &Session,
+    out_dir: &Path,
+    fit_ran: bool,
+) -> Result<Option<skinbrdf_render::RenderStats>, String> {
+    let GeometrySpec::Scan { file, units } = &session.file.geometry else {
+        return Ok(None);
+    };
+    if !fit_ran && out_dir.join(RENDER_FIGURE).is_file() {
+        return Ok(None);
+    }
+    let model = skinbrdf_render::load_model(&out_dir.join("fit/params.json"))
+        .map_err(|e| format!("head rendering skipped: {e}"))?;
+    let mesh = skinbrdf_mesh::load_mesh(
+        &session.path(file),
+        &skinbrdf_mesh::LoadOptions {
+            unit: skinbrdf_mesh::LengthUnit::Custom(units.to_m()),
+            ..Default::default()
+        },
+    )
+    .map_err(|e| format!("head rendering skipped: {e}"))?;
+    let cfg = skinbrdf_render::RenderConfig::default();
+    let img = skinbrdf_render::render_comparison(&mesh.mesh, &model, &cfg)
+        .map_err(|e| format!("head rendering failed: {e}"))?;
+    let dir = out_dir.join("render");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    img.write(&dir.join("head_comparison"), &cfg.labels)
+        .map_err(|e| format!("head rendering not written: {e}"))?;
+    Ok(Some(img.stats))
 }
 
 /// The PNG figures in `base/sub`, as paths relative to `base` (`sub/name.png`), sorted.

@@ -47,6 +47,10 @@ fn demo_runs_end_to_end_and_process_resumes() {
         html.contains("<img src=\"session/out/fit/"),
         "figures inline"
     );
+    assert!(
+        html.contains("<img src=\"session/out/render/head_comparison.png\""),
+        "the head rendering is in the report"
+    );
     for fig in html.split("<img src=\"").skip(1) {
         let rel = fig.split('"').next().unwrap();
         assert!(
