@@ -73,6 +73,12 @@ pub enum Diagnostic {
     },
     /// Only one target was used: its pose may be ambiguous (planar flip).
     SingleTarget,
+    /// The points are nearly collinear (second singular value of the centred points over the
+    /// first): the rotation about their line is weakly determined.
+    NearCollinear {
+        /// The spread ratio (collinear = 0; refused below `pnp::COLLINEAR_RATIO`).
+        spread_ratio: f64,
+    },
     /// A stage was skipped because the session gives the quantity.
     Skipped {
         /// What was skipped and why.

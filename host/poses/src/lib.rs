@@ -6,7 +6,10 @@
 //! * [`session::estimate_session`]: every pose of a session (camera per image, head per
 //!   measurement image, flash, reference standard), the entry point of the pipeline.
 //! * [`lm`]: the dense robust Levenberg-Marquardt solver they share.
+//! * [`bundle::bundle_adjust`]: the joint, block-sparse, robust bundle adjustment over the
+//!   whole session that [`session::estimate_session`] ends with.
 
+pub mod bundle;
 pub mod calib;
 pub mod error;
 pub mod geometry;
@@ -14,6 +17,7 @@ pub mod lm;
 pub mod pnp;
 pub mod session;
 
+pub use bundle::{BundleConfig, BundleReport, RobustLoss};
 pub use error::{Diagnostic, PoseError};
 pub use pnp::{estimate_pose, PnpConfig, PointObs, PoseEstimate};
 pub use session::{estimate_session, PoseConfig, SessionPoses};

@@ -200,7 +200,41 @@ fn dlt_hypothesis(cam: &CameraModel, pts: &[PointObs]) -> Option<Pose> {
 /// Relative planarity below which points are treated as coplanar.
 const PLANAR_RATIO: f64 = 1e-3;
 /// Relative spread below which points are collinear (no pose).
-const COLLINEAR_RATIO: f64 = 1e-3;
+pub const COLLINEAR_RATIO: f64 = 1e-3;
+/// Relative spread below which a pose is returned with a [`Diagnostic::NearCollinear`] warning
+/// (a row of targets: the rotation about the row is then several times less certain).
+pub const NEAR_COLLINEAR_RATIO: f64 = 0.05;
+
+/// Hypotheses refined by local optimisation (the best by score).
+const LO_HYPOTHESES: usize = 6;
+/// Refine-and-rescore rounds per hypothesis.
+const LO_ROUNDS: usize = 4;
+/// A short robust LM for the local optimisation.
+const LO_LM: LmConfig = LmConfig {
+    max_iterations: 8,
+    ..LmConfig::DEFAULT
+};
+
+/// LM refinement of a pose on `pts` (parameters `[δ, C]` around `base`).
+fn refine(
+    cam: &CameraModel,
+    base: &Pose,
+    pts: &[PointObs],
+    floor: f64,
+    lm_cfg: &LmConfig,
+) -> Option<(Pose, crate::lm::LmResult)> {
+    let x0 = DVector::from_vec(vec![
+        0.0,
+        0.0,
+        0.0,
+        base.translation_m.x,
+        base.translation_m.y,
+        base.translation_m.z,
+    ]);
+    let f = |x: &DVector<f64>| residuals(cam, &pose_from_params(base, x.as_slice()), pts, floor);
+    let res = minimize(f, x0, lm_cfg)?;
+    Some((pose_from_params(base, res.x.as_slice()), res))
+}
 
 /// Estimates `frame_from_camera` from point observations. `initial` (if any) is used as an
 /// extra hypothesis (e.g. the previous image's pose or a known pose).
@@ -230,6 +264,12 @@ pub fn estimate_pose(
         });
     }
     let planar = sv[2] < PLANAR_RATIO * sv[0];
+    let mut diagnostics = Vec::new();
+    if sv[1] < NEAR_COLLINEAR_RATIO * sv[0] {
+        diagnostics.push(Diagnostic::NearCollinear {
+            spread_ratio: sv[1] / sv[0].max(1e-300),
+        });
+    }
     // Hypotheses.
     let mut hyps: Vec<Pose> = Vec::new();
     hyps.extend(initial);
@@ -263,23 +303,51 @@ pub fn estimate_pose(
         }
         (n, total)
     };
-    let mut best: Option<(Pose, (usize, f64))> = None;
-    for h in hyps {
-        if !h.is_finite() {
-            continue;
+    let better = |a: (usize, f64), b: (usize, f64)| a.0 > b.0 || (a.0 == b.0 && a.1 < b.1);
+    let mut scored: Vec<(Pose, (usize, f64))> = hyps
+        .into_iter()
+        .filter(|h| h.is_finite())
+        .map(|h| (h, score(&h)))
+        .collect();
+    scored.sort_by(|a, b| b.1 .0.cmp(&a.1 .0).then(a.1 .1.total_cmp(&b.1 .1)));
+    // Local optimisation (LO-RANSAC): the best few hypotheses are refined on their inlier
+    // targets and rescored while that gains targets. A single small tag's pose predicts far
+    // targets poorly; refined on itself and its neighbours it recruits the rest.
+    let mut best: Option<(Pose, (usize, f64))> = scored.first().copied();
+    for (h, s) in scored.iter().take(LO_HYPOTHESES) {
+        let (mut pose, mut sc) = (*h, *s);
+        for _ in 0..LO_ROUNDS {
+            let errs = reproj_errors(cam, &pose, pts);
+            let inl: Vec<PointObs> = ids
+                .iter()
+                .filter(|id| {
+                    pts.iter()
+                        .zip(&errs)
+                        .filter(|(p, _)| p.target == **id)
+                        .all(|(_, e)| *e < cfg.inlier_px)
+                })
+                .flat_map(|id| pts.iter().copied().filter(move |p| p.target == *id))
+                .collect();
+            if inl.len() < 4 {
+                break;
+            }
+            let Some((refined, _)) = refine(cam, &pose, &inl, cfg.sigma_floor_px, &LO_LM) else {
+                break;
+            };
+            let s2 = score(&refined);
+            if !better(s2, sc) {
+                break;
+            }
+            pose = refined;
+            sc = s2;
         }
-        let s = score(&h);
-        if best
-            .as_ref()
-            .is_none_or(|(_, b)| s.0 > b.0 || (s.0 == b.0 && s.1 < b.1))
-        {
-            best = Some((h, s));
+        if best.as_ref().is_none_or(|(_, b)| better(sc, *b)) {
+            best = Some((pose, sc));
         }
     }
     // With no target within `inlier_px` of any hypothesis, all targets are refined from the
     // best-effort hypothesis and LM decides.
     let (mut pose, (n_in, _)) = best.ok_or(PoseError::NoConsensus { targets: ids.len() })?;
-    let mut diagnostics = Vec::new();
     // Grazing angles with the hypothesis.
     let mut rejected: Vec<u32> = Vec::new();
     let centre = pose.translation_m;
@@ -342,27 +410,12 @@ pub fn estimate_pose(
                 needed: cfg.min_targets.max(1),
             });
         }
-        let base = pose;
-        let x0 = DVector::from_vec(vec![
-            0.0,
-            0.0,
-            0.0,
-            base.translation_m.x,
-            base.translation_m.y,
-            base.translation_m.z,
-        ]);
-        let f = |x: &DVector<f64>| {
-            residuals(
-                cam,
-                &pose_from_params(&base, x.as_slice()),
-                &inl,
-                cfg.sigma_floor_px,
-            )
-        };
-        let res = minimize(f, x0, &lm_cfg).ok_or(PoseError::NoConsensus {
-            targets: used.len(),
-        })?;
-        pose = pose_from_params(&base, res.x.as_slice());
+        let (refined, res) = refine(cam, &pose, &inl, cfg.sigma_floor_px, &lm_cfg).ok_or(
+            PoseError::NoConsensus {
+                targets: used.len(),
+            },
+        )?;
+        pose = refined;
         // Outlier targets.
         let errs = reproj_errors(cam, &pose, &inl);
         let mut bad: Vec<u32> = Vec::new();
@@ -588,16 +641,108 @@ mod tests {
     #[test]
     fn grazing_targets_are_reported() {
         let cam = camera();
-        // Camera looking almost along the plane: 78 degrees from the normal.
-        let eye =
-            DVec3::new(0.0, 0.0, -0.6) + DVec3::new(0.0, -0.6 * 78f64.to_radians().tan(), 0.0);
-        let truth = Pose::look_at(eye, DVec3::ZERO, DVec3::new(0.0, 0.0, -1.0)).expect("valid");
-        let pts = observe(&cam, &truth, &field(true), 0.05, 7);
-        if let Ok(est) = estimate_pose(&cam, &pts, None, &PnpConfig::DEFAULT) {
-            assert!(est
-                .diagnostics
+        // A planar field seen from `deg` off its normal (rotating about the x axis).
+        let view = |deg: f64| {
+            let a = deg.to_radians();
+            let eye = DVec3::new(0.0, -0.7 * a.sin(), -0.7 * a.cos());
+            Pose::look_at(eye, DVec3::ZERO, DVec3::new(0.0, 0.0, -1.0)).expect("valid")
+        };
+        let grazing = |est: &PoseEstimate, used: bool| -> Vec<f64> {
+            est.diagnostics
                 .iter()
-                .any(|d| matches!(d, Diagnostic::GrazingTarget { .. })));
+                .filter_map(|d| match d {
+                    Diagnostic::GrazingTarget {
+                        angle_deg, used: u, ..
+                    } if *u == used => Some(*angle_deg),
+                    _ => None,
+                })
+                .collect()
+        };
+        // 40 degrees: nothing to report.
+        let pts = observe(&cam, &view(40.0), &field(true), 0.05, 7);
+        let est = estimate_pose(&cam, &pts, None, &PnpConfig::DEFAULT).expect("pose");
+        assert!(grazing(&est, true).is_empty() && grazing(&est, false).is_empty());
+        // 76 degrees: every target reported, still used, with its angle.
+        let pts = observe(&cam, &view(76.0), &field(true), 0.05, 7);
+        let est = estimate_pose(&cam, &pts, None, &PnpConfig::DEFAULT).expect("pose");
+        let used = grazing(&est, true);
+        assert_eq!(used.len(), 25, "{:?}", est.diagnostics);
+        assert!(used.iter().all(|a| (70.0..82.0).contains(a)), "{used:?}");
+        assert!(est.targets_rejected.is_empty());
+        // 86 degrees: all beyond the limit: refused, with the reason.
+        let pts = observe(&cam, &view(86.0), &field(true), 0.05, 7);
+        match estimate_pose(&cam, &pts, None, &PnpConfig::DEFAULT) {
+            Err(PoseError::TooFewTargets { found: 0, .. }) => {}
+            other => panic!("expected TooFewTargets, got {other:?}"),
         }
+    }
+
+    #[test]
+    fn too_few_targets_error_counts_what_was_seen() {
+        let cam = camera();
+        let pts = observe(&cam, &truth_pose(), &field(false), 0.05, 8);
+        let two: Vec<PointObs> = pts.iter().copied().filter(|p| p.target < 2).collect();
+        let cfg = PnpConfig {
+            min_targets: 3,
+            ..PnpConfig::DEFAULT
+        };
+        assert_eq!(
+            estimate_pose(&cam, &two, None, &cfg).err(),
+            Some(PoseError::TooFewTargets {
+                found: 2,
+                points: 8,
+                needed: 3
+            })
+        );
+    }
+
+    #[test]
+    fn a_row_of_targets_is_reported_near_collinear_and_its_uncertainty_says_so() {
+        let cam = camera();
+        // Small targets along one line: the spread across the row is the tag size only.
+        let row: Vec<(u32, [DVec3; 4], DVec3)> = (0..7)
+            .map(|i| {
+                let c = DVec3::new(-0.18 + 0.06 * i as f64, 0.0, 0.0);
+                let s = 0.012;
+                (
+                    i,
+                    [
+                        c + DVec3::new(-s / 2.0, s / 2.0, 0.0),
+                        c + DVec3::new(s / 2.0, s / 2.0, 0.0),
+                        c + DVec3::new(s / 2.0, -s / 2.0, 0.0),
+                        c + DVec3::new(-s / 2.0, -s / 2.0, 0.0),
+                    ],
+                    DVec3::new(0.0, 0.0, -1.0),
+                )
+            })
+            .collect();
+        let truth = truth_pose();
+        let pts = observe(&cam, &truth, &row, 0.1, 9);
+        let est = estimate_pose(&cam, &pts, None, &PnpConfig::DEFAULT).expect("pose");
+        let ratio = est.diagnostics.iter().find_map(|d| match d {
+            Diagnostic::NearCollinear { spread_ratio } => Some(*spread_ratio),
+            _ => None,
+        });
+        let ratio = ratio.expect("near-collinear reported");
+        assert!(
+            ratio > COLLINEAR_RATIO && ratio < NEAR_COLLINEAR_RATIO,
+            "{ratio}"
+        );
+        // The same number of points on a 2-D field is far better determined: the stated
+        // orientation uncertainty of the row is several times larger, and still honest.
+        let grid = observe(&cam, &truth, &field(true), 0.1, 9);
+        let g = estimate_pose(&cam, &grid, None, &PnpConfig::DEFAULT).expect("pose");
+        assert!(est.orientation_sigma_rad() > 3.0 * g.orientation_sigma_rad());
+        let err = est.frame_from_camera.angle_to_rad(&truth);
+        assert!(
+            err < 4.0 * est.orientation_sigma_rad(),
+            "{err} vs {}",
+            est.orientation_sigma_rad()
+        );
+        // A full field is not flagged.
+        assert!(!g
+            .diagnostics
+            .iter()
+            .any(|d| matches!(d, Diagnostic::NearCollinear { .. })));
     }
 }

@@ -11,7 +11,14 @@
 //! covariance is propagated to first order through the composition (numerical Jacobian), with
 //! the two estimates independent (they use disjoint targets). The flash position is the
 //! inverse-covariance-weighted mean over the light-position images.
+//!
+//! Finally (unless [`PoseConfig::bundle`] disables it) a joint bundle adjustment
+//! ([`crate::bundle`]) refines every estimated pose together, with a robust loss and exact
+//! marginal covariances; its cost before and after is in [`SessionPoses::bundle`]. It never
+//! returns a worse result than the per-image estimates (in its robust cost); when it cannot run
+//! (singular system), the per-image estimates stand and the reason is in `skipped`.
 
+use crate::bundle::{bundle_adjust, BundleConfig, BundleImage, BundleProblem, BundleReport, Frame};
 use crate::calib::{calibrate, guess_camera, CalibConfig, Calibration};
 use crate::error::{Diagnostic, PoseError};
 use crate::pnp::{estimate_pose, exp_so3, target_points, PnpConfig, PointObs, PoseEstimate};
@@ -40,6 +47,9 @@ pub struct PoseConfig {
     pub calib: CalibConfig,
     /// Recalibrate even a calibrated camera from the reference field.
     pub recalibrate: bool,
+    /// The final joint bundle adjustment.
+    #[serde(default)]
+    pub bundle: BundleConfig,
 }
 
 impl PoseConfig {
@@ -49,6 +59,7 @@ impl PoseConfig {
         pnp: PnpConfig::DEFAULT,
         calib: CalibConfig::DEFAULT,
         recalibrate: false,
+        bundle: BundleConfig::DEFAULT,
     };
 }
 
@@ -153,6 +164,9 @@ pub struct SessionPoses {
     pub skipped: Vec<String>,
     /// Total wall time, milliseconds.
     pub total_ms: f64,
+    /// The joint bundle adjustment's report (None when it did not run).
+    #[serde(default)]
+    pub bundle: Option<BundleReport>,
 }
 
 /// Which layout a tag belongs to, with its geometry.
@@ -295,6 +309,16 @@ struct Detected {
 
 /// Estimates every pose of the session from its images.
 pub fn estimate_session(session: &Session, cfg: &PoseConfig) -> Result<SessionPoses, PoseError> {
+    estimate_session_stages(session, cfg).map(|(_, last)| last)
+}
+
+/// Like [`estimate_session`], also returning the per-image estimates as they were before the
+/// joint bundle adjustment (the same value twice when it is disabled or cannot run), to
+/// measure what the adjustment brings.
+pub fn estimate_session_stages(
+    session: &Session,
+    cfg: &PoseConfig,
+) -> Result<(SessionPoses, SessionPoses), PoseError> {
     let t0 = Instant::now();
     let file = &session.file;
     let table = layout_table(session);
@@ -506,7 +530,7 @@ pub fn estimate_session(session: &Session, cfg: &PoseConfig) -> Result<SessionPo
             .filter_map(|i| i.world_from_standard.clone())
             .min_by(|a, b| a.position_sigma_m().total_cmp(&b.position_sigma_m()))
     };
-    Ok(SessionPoses {
+    let mut out = SessionPoses {
         camera,
         calibration,
         images,
@@ -515,8 +539,139 @@ pub fn estimate_session(session: &Session, cfg: &PoseConfig) -> Result<SessionPo
         world_from_flash,
         world_from_standard,
         skipped,
-        total_ms: t0.elapsed().as_secs_f64() * 1e3,
-    })
+        total_ms: 0.0,
+        bundle: None,
+    };
+    out.total_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let per_image = out.clone();
+    if cfg.bundle.enabled {
+        let mut bcfg = cfg.bundle;
+        bcfg.refine_intrinsics |= out.calibration.is_some();
+        run_bundle(&mut out, &detected, &table, light_centre, &bcfg);
+    } else {
+        out.skipped
+            .push("bundle adjustment (disabled in the configuration)".into());
+    }
+    out.total_ms = t0.elapsed().as_secs_f64() * 1e3;
+    Ok((per_image, out))
+}
+
+/// The light point (flash frame `light_centre`) of a flash pose with its 3 x 3 covariance.
+fn light_point(p: &PoseWithCov, light_centre: DVec3) -> (DVec3, Vec<f64>) {
+    let pos = p.pose.transform_point(light_centre);
+    if p.covariance.len() != 36 {
+        return (pos, Vec::new());
+    }
+    let c = |i: usize, j: usize| p.covariance[i * 6 + j];
+    let arm = p.pose.rotation * light_centre;
+    let skew = Matrix3::new(0.0, arm.z, -arm.y, -arm.z, 0.0, arm.x, arm.y, -arm.x, 0.0);
+    let crr = Matrix3::from_fn(c);
+    let ctt = Matrix3::from_fn(|i, j| c(3 + i, 3 + j));
+    let crt = Matrix3::from_fn(|i, j| c(i, 3 + j));
+    // δp = δt − [arm]× δθ  (world-frame rotation increment).
+    let cov = ctt + skew * crr * skew.transpose() + skew * crt + crt.transpose() * skew.transpose();
+    (pos, cov.transpose().as_slice().to_vec())
+}
+
+/// Runs the joint bundle adjustment on the per-image estimates and writes its results back.
+fn run_bundle(
+    out: &mut SessionPoses,
+    detected: &[Detected],
+    table: &HashMap<u32, (Layout, Target)>,
+    light_centre: DVec3,
+    cfg: &BundleConfig,
+) {
+    let est = |p: &Option<PoseWithCov>| p.as_ref().map(|p| (p.pose, p.source == "estimated"));
+    let flash = out
+        .world_from_flash
+        .as_ref()
+        .map(|p| (p.pose, p.source == "estimated"));
+    let standard = est(&out.world_from_standard);
+    let mut index = Vec::new();
+    let mut images = Vec::new();
+    for (i, (im, det)) in out.images.iter().zip(detected).enumerate() {
+        let Some((wc, cam_free)) = est(&im.world_from_camera) else {
+            continue;
+        };
+        let head = est(&im.world_from_head);
+        let mut points = Vec::new();
+        for (frame, name, on) in [
+            (Frame::World, "reference", true),
+            (Frame::Head, "headdress", head.is_some()),
+            (Frame::Flash, "flash", flash.is_some()),
+            (Frame::Standard, "standard", standard.is_some()),
+        ] {
+            if on {
+                points.extend(
+                    points_for(&det.dets, table, name)
+                        .into_iter()
+                        .map(|p| (frame, p)),
+                );
+            }
+        }
+        index.push(i);
+        images.push(BundleImage {
+            world_from_camera: wc,
+            camera_free: cam_free,
+            world_from_head: head.map(|h| h.0),
+            head_free: head.is_some_and(|h| h.1),
+            points,
+        });
+    }
+    let problem = BundleProblem {
+        camera: out.camera,
+        images,
+        world_from_flash: flash,
+        world_from_standard: standard,
+    };
+    let Some(r) = bundle_adjust(&problem, cfg) else {
+        out.skipped.push(
+            "bundle adjustment (nothing to adjust, or singular normal matrix): per-image estimates kept"
+                .into(),
+        );
+        return;
+    };
+    let set = |slot: &mut Option<PoseWithCov>, pose: Pose, cov: Vec<f64>| {
+        if let Some(p) = slot.as_mut().filter(|p| p.source == "estimated") {
+            p.pose = pose;
+            if cov.len() == 36 {
+                p.covariance = cov;
+            }
+        }
+    };
+    for (k, &i) in index.iter().enumerate() {
+        let ((wc, cc), head) = r.images[k].clone();
+        let im = &mut out.images[i];
+        set(&mut im.world_from_camera, wc, cc);
+        if let Some((wh, hc)) = head {
+            set(&mut im.world_from_head, wh, hc);
+        }
+        if let Some((wf, fc)) = &r.world_from_flash {
+            set(&mut im.world_from_flash, *wf, fc.clone());
+        }
+        if let Some((ws, sc)) = &r.world_from_standard {
+            set(&mut im.world_from_standard, *ws, sc.clone());
+        }
+    }
+    if let Some((wf, fc)) = r.world_from_flash {
+        set(&mut out.world_from_flash, wf, fc);
+        if let Some(f) = out
+            .world_from_flash
+            .as_ref()
+            .filter(|p| p.source == "estimated")
+        {
+            let (pos, cov) = light_point(f, light_centre);
+            out.light_position_m = Some(pos);
+            out.light_position_cov_m2 = cov;
+        }
+    }
+    if let Some((ws, sc)) = r.world_from_standard {
+        set(&mut out.world_from_standard, ws, sc);
+    }
+    if r.report.intrinsics_refined {
+        out.camera = r.camera;
+    }
+    out.bundle = Some(r.report);
 }
 
 /// Errors of the estimated poses against `truth.json`.

@@ -1,0 +1,84 @@
+//! The whole pose stage on a rendered session of the default scene (3 measurement images
+//! instead of 30, to keep it short; the scene's 2 x 2 rays per pixel: one ray per pixel aliases
+//! tag edges onto pixel boundaries, ±0.5 px): every image posed, the bounds met, the joint
+//! bundle adjustment never worse than the per-image estimates, covariances everywhere.
+
+use skinbrdf_poses::session::{compare_truth, estimate_session_stages, median};
+use skinbrdf_poses::PoseConfig;
+use skinbrdf_session::{ImageRole, Session};
+use skinbrdf_synth::{generate, Scene, SynthOptions};
+
+/// A directory removed when dropped.
+struct TempDir(std::path::PathBuf);
+
+impl TempDir {
+    fn new(name: &str) -> Self {
+        let p = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
+        std::fs::create_dir_all(&p).expect("temp dir");
+        Self(p)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The bounds (medians over the images).
+const CAMERA_POSITION_MAX_M: f64 = 1e-3;
+const CAMERA_ORIENTATION_MAX_DEG: f64 = 0.02;
+const HEAD_POSITION_MAX_M: f64 = 0.5e-3;
+const FLASH_POSITION_MAX_M: f64 = 2e-3;
+
+#[test]
+fn default_scene_poses_meet_the_bounds_and_the_bundle_adjustment_helps() {
+    let dir = TempDir::new("skinbrdf-poses-session");
+    let mut scene = Scene::load("default").expect("scene");
+    scene.session.measurement_images = 3;
+    generate(&scene, &SynthOptions::default(), &dir.0).expect("rendered");
+    let session = Session::load(&dir.0).expect("session");
+    let truth = session.load_truth().expect("truth").expect("truth present");
+    let (before, after) = estimate_session_stages(&session, &PoseConfig::default()).expect("poses");
+    let e = compare_truth(&after, &truth);
+    let e0 = compare_truth(&before, &truth);
+    for im in &after.images {
+        let cam = im
+            .world_from_camera
+            .as_ref()
+            .unwrap_or_else(|| panic!("{}: no camera pose: {:?}", im.file, im.errors));
+        assert_eq!(cam.covariance.len(), 36, "{}", im.file);
+        if im.role == ImageRole::Measurement {
+            let head = im
+                .world_from_head
+                .as_ref()
+                .unwrap_or_else(|| panic!("{}: no head pose: {:?}", im.file, im.errors));
+            assert_eq!(head.covariance.len(), 36, "{}", im.file);
+        }
+    }
+    let cp = median(&e.camera_position_error_m);
+    let co = median(&e.camera_orientation_error_deg);
+    let hp = median(&e.head_position_error_m);
+    let fl = e.light_position_error_m.expect("flash located");
+    eprintln!(
+        "camera {:.3} mm {:.4} deg, head {:.3} mm (per image {:.3} mm), flash {:.3} mm, bundle {:?}",
+        cp * 1e3,
+        co,
+        hp * 1e3,
+        median(&e0.head_position_error_m) * 1e3,
+        fl * 1e3,
+        after.bundle
+    );
+    assert!(cp < CAMERA_POSITION_MAX_M, "camera position {cp}");
+    assert!(co < CAMERA_ORIENTATION_MAX_DEG, "camera orientation {co}");
+    assert!(hp < HEAD_POSITION_MAX_M, "head position {hp}");
+    assert!(fl < FLASH_POSITION_MAX_M, "flash {fl}");
+    let b = after.bundle.as_ref().expect("bundle adjustment ran");
+    assert!(b.final_cost <= b.initial_cost, "{b:?}");
+    assert!(b.observations > 500 && b.parameters > 40, "{b:?}");
+    // The flash's stated uncertainty covers its actual error.
+    let c = &after.light_position_cov_m2;
+    assert_eq!(c.len(), 9);
+    let sigma = (c[0] + c[4] + c[8]).sqrt();
+    assert!(fl < 5.0 * sigma + 1e-4, "flash error {fl} vs sigma {sigma}");
+}
