@@ -82,7 +82,14 @@ pub struct BundleConfig {
     /// Refine the intrinsics too (always done when the camera was calibrated from the
     /// session's own images).
     pub refine_intrinsics: bool,
+    /// A target of an image whose worst corner is off by more than this many sigmas (and
+    /// [`GATE_MIN_PX`]) at the input is left out (the per-image estimates' outlier rule: those
+    /// targets were not used there either).
+    pub gate_sigma: f64,
 }
+
+/// Floor of the input gate, pixels.
+pub const GATE_MIN_PX: f64 = 1.0;
 
 impl BundleConfig {
     /// Defaults: Huber at 3 sigma, intrinsics fixed when given.
@@ -93,6 +100,7 @@ impl BundleConfig {
         sigma_floor_px: 0.05,
         max_iterations: 30,
         refine_intrinsics: false,
+        gate_sigma: 6.0,
     };
 }
 
@@ -160,6 +168,8 @@ pub struct BundleReport {
     pub observations: usize,
     /// Corners beyond the loss threshold at the result (down-weighted).
     pub downweighted: usize,
+    /// Targets (per image) left out by the input gate.
+    pub gated_targets: usize,
     /// Parameters adjusted.
     pub parameters: usize,
     /// Accepted LM iterations.
@@ -608,6 +618,32 @@ fn row_major(m: &DMatrix<f64>, off: usize, n: usize, scale: f64) -> Vec<f64> {
 /// its per-image estimates).
 pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResult> {
     let t0 = std::time::Instant::now();
+    // Input gate: drop per-image targets the per-image estimates would call outliers.
+    let mut gated_targets = 0;
+    let mut gated = p.clone();
+    {
+        let st0 = State {
+            camera: p.camera,
+            cams: p.images.iter().map(|im| im.world_from_camera).collect(),
+            heads: p.images.iter().map(|im| im.world_from_head).collect(),
+            flash: p.world_from_flash.map(|f| f.0),
+            standard: p.world_from_standard.map(|f| f.0),
+        };
+        for (i, im) in gated.images.iter_mut().enumerate() {
+            let mut bad: Vec<(Frame, u32)> = Vec::new();
+            for (f, o) in &im.points {
+                let off = project(&st0, i, *f, o.object_m)
+                    .map_or(f64::INFINITY, |q| q.distance(o.image_px));
+                let limit = (cfg.gate_sigma * o.sigma_px.max(cfg.sigma_floor_px)).max(GATE_MIN_PX);
+                if off > limit && !bad.contains(&(*f, o.target)) {
+                    bad.push((*f, o.target));
+                }
+            }
+            gated_targets += bad.len();
+            im.points.retain(|(f, o)| !bad.contains(&(*f, o.target)));
+        }
+    }
+    let p = &gated;
     let lay = layout(p, cfg.refine_intrinsics);
     let n_params = lay.local.iter().map(|l| l.2).sum::<usize>() + lay.n_global;
     if n_params == 0 {
@@ -695,6 +731,7 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
         final_rms_px: (e1.sum_sq_px / e1.count as f64).sqrt(),
         observations: e1.count,
         downweighted: e1.downweighted,
+        gated_targets,
         parameters: n_params,
         iterations,
         variance_factor: vf,
@@ -854,6 +891,12 @@ mod tests {
         )
     }
 
+    /// These problems start 1 mm / 0.06° off: no input gate.
+    const UNGATED: BundleConfig = BundleConfig {
+        gate_sigma: f64::INFINITY,
+        ..BundleConfig::DEFAULT
+    };
+
     fn max_head_error(r: &BundleResult, heads: &[Pose]) -> f64 {
         r.images
             .iter()
@@ -868,7 +911,7 @@ mod tests {
     #[test]
     fn converges_from_perturbed_poses_and_lowers_the_cost() {
         let (p, cams, heads) = problem(0.05, false, 1);
-        let r = bundle_adjust(&p, &BundleConfig::DEFAULT).expect("adjusted");
+        let r = bundle_adjust(&p, &UNGATED).expect("adjusted");
         assert!(r.report.final_cost < r.report.initial_cost);
         assert!(r.report.final_rms_px < 0.2, "{:?}", r.report);
         for (im, t) in r.images.iter().zip(&cams) {
@@ -908,12 +951,30 @@ mod tests {
             let (p, _cams, heads) = problem(0.05, true, 3);
             let cfg = BundleConfig {
                 loss,
+                gate_sigma: f64::INFINITY,
                 ..BundleConfig::DEFAULT
             };
             let r = bundle_adjust(&p, &cfg).expect("adjusted");
-            assert!(r.report.downweighted >= 4, "{loss:?}: {:?}", r.report);
+            assert!(
+                r.report.downweighted >= 4 || r.report.gated_targets >= 1,
+                "{loss:?}: {:?}",
+                r.report
+            );
             assert!(max_head_error(&r, &heads) < 1e-3, "{loss:?}");
         }
+    }
+
+    #[test]
+    fn the_input_gate_leaves_out_a_wrong_target() {
+        let (mut p, cams, heads) = problem(0.05, true, 3);
+        // From the per-image estimates' accuracy (here: the truth), as in a session.
+        for (im, (c, h)) in p.images.iter_mut().zip(cams.iter().zip(&heads)) {
+            im.world_from_camera = *c;
+            im.world_from_head = Some(*h);
+        }
+        let r = bundle_adjust(&p, &BundleConfig::DEFAULT).expect("adjusted");
+        assert!(r.report.gated_targets >= 1, "{:?}", r.report);
+        assert!(max_head_error(&r, &heads) < 1e-3);
     }
 
     #[test]
@@ -924,7 +985,7 @@ mod tests {
         p.camera.fy_px *= 1.01;
         let cfg = BundleConfig {
             refine_intrinsics: true,
-            ..BundleConfig::DEFAULT
+            ..UNGATED
         };
         let r = bundle_adjust(&p, &cfg).expect("adjusted");
         assert!(r.report.intrinsics_refined);

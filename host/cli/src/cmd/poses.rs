@@ -180,8 +180,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(b) = &est.bundle {
         println!(
-            "bundle adjustment: {} corners, {} parameters, robust cost {:.1} -> {:.1} ({:.2}% lower), rms {:.3} -> {:.3} px, {} down-weighted, {} iterations, {:.0} ms",
+            "bundle adjustment: {} corners ({} targets gated out), {} parameters, robust cost {:.1} -> {:.1} ({:.2}% lower), rms {:.3} -> {:.3} px, {} down-weighted, {} iterations, {:.0} ms",
             b.observations,
+            b.gated_targets,
             b.parameters,
             b.initial_cost,
             b.final_cost,
