@@ -47,7 +47,7 @@ def homography(c, s, ang, g, h):
                      [g, h, 1.0]])
 
 
-def paint(img, H, grid, ss=4):
+def paint(img, H, grid, ss=4, white=1.0):
     """Anti-aliased tag through H (tag frame -> pixels, pixel-centre convention)."""
     Hi = np.linalg.inv(H)
     pts = np.array([[-1.25, -1.25, 1], [1.25, -1.25, 1], [1.25, 1.25, 1], [-1.25, 1.25, 1]]).T
@@ -71,26 +71,26 @@ def paint(img, H, grid, ss=4):
     col = np.floor((u + 1) / 0.25 + 1).astype(int)
     row = np.floor((v + 1) / 0.25 + 1).astype(int)
     inside = (col >= 0) & (col < 10) & (row >= 0) & (row < 10)
-    val = np.where(grid[np.clip(row, 0, 9), np.clip(col, 0, 9)], 1.0, 0.0)
+    val = np.where(grid[np.clip(row, 0, 9), np.clip(col, 0, 9)], white, 0.0)
     region = img[y0:y1 + 1, x0:x1 + 1]
     frac = inside.mean(axis=(2, 3))
     tagval = np.where(inside, val, 0).sum(axis=(2, 3)) / (ss * ss)
     img[y0:y1 + 1, x0:x1 + 1] = region * (1 - frac) + tagval
 
 
-def make_image(rng, cds, w=1200, h=900, blur=0.8, noise=0.01):
-    img = np.full((h, w), 0.55)
+def make_image(rng, cds, w=1200, h=900, blur=0.8, noise=0.01, sides=(24, 140), bg=0.55, white=1.0):
+    img = np.full((h, w), bg)
     truth = []
     placed = []
     for _ in range(60):
-        s = rng.uniform(12, 70)  # half side in px -> sides 24..140
+        s = rng.uniform(sides[0] / 2, sides[1] / 2)  # half side of the black square, px
         c = rng.uniform([s * 1.6 + 5, s * 1.6 + 5], [w - s * 1.6 - 5, h - s * 1.6 - 5])
         if any(np.hypot(*(c - q)) < 1.7 * (s + r) for q, r in placed):
             continue
         placed.append((c, s))
         tid = int(rng.integers(0, 587))
         H = homography(c, s, rng.uniform(0, 2 * np.pi), rng.uniform(-0.6, 0.6) / (w), rng.uniform(-0.6, 0.6) / w)
-        paint(img, H, bits(cds[tid]))
+        paint(img, H, bits(cds[tid]), white=white)
         cs = np.array([[-1, 1, 1], [1, 1, 1], [1, -1, 1], [-1, -1, 1]]).T
         p = H @ cs
         truth.append((tid, (p[:2] / p[2]).T))
@@ -105,9 +105,12 @@ def make_image(rng, cds, w=1200, h=900, blur=0.8, noise=0.01):
     return np.clip(img * 255 + 0.5, 0, 255).astype(np.uint8), truth
 
 
+OURS_ARGS = []
+
+
 def run_ours(files):
     exe = os.path.join(os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target")), "release", "examples", "detect_json")
-    out = subprocess.run([exe] + files, capture_output=True, text=True, check=True).stdout
+    out = subprocess.run([exe] + OURS_ARGS + files, capture_output=True, text=True, check=True).stdout
     return [json.loads(l) for l in out.splitlines()]
 
 
@@ -135,17 +138,32 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--images", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--sides", type=float, nargs=2, default=(24, 140), help="black-square side range, px")
+    ap.add_argument("--bg", type=float, default=0.55, help="background level outside the white ring (0..1)")
+    ap.add_argument("--white", type=float, default=1.0, help="level of the tag's white cells (0..1)")
+    ap.add_argument("--jpeg", type=int, default=0, help="save as JPEG of this quality (0: PNG)")
+    ap.add_argument("--no-real", action="store_true", help="skip the real photos")
+    ap.add_argument("--binary-boundary", action="store_true",
+                    help="ours with CornerModel::BinaryBoundary (the reference's unrefined quad fit)")
     args = ap.parse_args()
+    if args.binary_boundary:
+        OURS_ARGS.append("--binary-boundary")
     rng = np.random.default_rng(args.seed)
     cds = codes()
     det = pupil_apriltags.Detector(families="tag36h11", quad_decimate=1.0, refine_edges=1, decode_sharpening=0.25)
+    det0 = pupil_apriltags.Detector(families="tag36h11", quad_decimate=1.0, refine_edges=0, decode_sharpening=0.25)
     tmp = tempfile.mkdtemp()
     cases = []
     for k in range(args.images):
         cfg = [(0.6, 0.005), (1.0, 0.01), (1.5, 0.02)][k % 3]
-        img, truth = make_image(rng, cds, blur=cfg[0], noise=cfg[1])
-        f = os.path.join(tmp, f"img{k:03}.png")
-        cv2.imwrite(f, img)
+        img, truth = make_image(rng, cds, blur=cfg[0], noise=cfg[1], sides=args.sides, bg=args.bg, white=args.white)
+        if args.jpeg:
+            f = os.path.join(tmp, f"img{k:03}.jpg")
+            cv2.imwrite(f, img, [cv2.IMWRITE_JPEG_QUALITY, args.jpeg])
+            img = cv2.imread(f, cv2.IMREAD_GRAYSCALE)
+        else:
+            f = os.path.join(tmp, f"img{k:03}.png")
+            cv2.imwrite(f, img)
         cases.append((f, img, truth, cfg))
     ours = run_ours([c[0] for c in cases])
     res = {}
@@ -154,8 +172,12 @@ def main():
         c_dets = det.detect(img)
         c_ms = (time.perf_counter() - t0) * 1e3
         c = [(d.tag_id, (np.array(d.corners) - 0.5).tolist()) for d in c_dets]
+        t0 = time.perf_counter()
+        c0_dets = det0.detect(img)
+        c0_ms = (time.perf_counter() - t0) * 1e3
+        c0 = [(d.tag_id, (np.array(d.corners) - 0.5).tolist()) for d in c0_dets]
         m = [(d["id"], d["corners"]) for d in o["detections"]]
-        for name, dets, ms in [("apriltag-C", c, c_ms), ("skinbrdf-targets", m, o["ms"])]:
+        for name, dets, ms in [("apriltag-C", c, c_ms), ("apriltag-C unrefined", c0, c0_ms), ("skinbrdf-targets", m, o["ms"])]:
             e, found = errors(dets, truth)
             r = res.setdefault((name, cfg), dict(err=[], found=0, total=0, ms=[], extra=0))
             r["err"] += e
@@ -168,6 +190,8 @@ def main():
     for (name, cfg), r in sorted(res.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         s = stats(r["err"])
         print(f"| {name} | {cfg[0]} | {cfg[1]} | {r['found']}/{r['total']} | {r['extra']} | {s['rms']:.3f} | {s['median']:.3f} | {s['max']:.3f} | {np.median(r['ms']):.1f} |")
+    if args.no_real:
+        return 0
     # Real photos: ours vs the reference .txt.
     d = os.path.join(ROOT, "..", "shared", "data", "apriltag")
     if not os.path.isdir(d):

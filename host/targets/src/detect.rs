@@ -29,6 +29,10 @@
 //!    match within [`DetectorConfig::max_hamming`] wins. Quads whose black border is not dark are
 //!    rejected before decoding.
 //!
+//! [`DetectorConfig::corner_model`] can instead report the reference library's unrefined quad
+//! ([`CornerModel::BinaryBoundary`]: lines through the dark/light boundary of the threshold),
+//! for comparing with that library's `refine_edges = 0` output; it is less accurate.
+//!
 //! # Output convention
 //!
 //! Corners are in the project's pixel convention (integer = pixel centre), in the reference
@@ -81,6 +85,24 @@ pub struct DetectorConfig {
     /// Maximum deviation of the traced contour from the fitted side lines, as a fraction of the
     /// side length (plus one pixel for the pixel grid).
     pub max_side_deviation: f64,
+    /// Which corner estimate is reported.
+    #[serde(default)]
+    pub corner_model: CornerModel,
+}
+
+/// The corner estimator.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CornerModel {
+    /// Edge refinement on the grey image (step 4 of the method): the accurate one.
+    #[default]
+    EdgeGradient,
+    /// The reference C library's unrefined quad (`refine_edges = 0`): lines fitted to the
+    /// dark/light boundary of the adaptive threshold, gradient-weighted. For comparing with
+    /// that library's output only: it inherits the threshold's bias where the local maximum
+    /// is not the white of the tag (a white ring darker than its surroundings pushes the
+    /// boundary outward) and the half-pixel quantisation of the boundary, so it is less
+    /// accurate (docs/benchmarks-poses.md). The covariance reported is the edge refinement's.
+    BinaryBoundary,
 }
 
 impl DetectorConfig {
@@ -92,6 +114,7 @@ impl DetectorConfig {
         min_side_px: 8.0,
         min_margin: 0.1,
         max_side_deviation: 0.08,
+        corner_model: CornerModel::EdgeGradient,
     };
 }
 
@@ -176,10 +199,17 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
             continue;
         };
         stats.quads += 1;
-        let Some(refined) = refine_quad(img, quad) else {
+        let Some(mut refined) = refine_quad(img, quad) else {
             stats.rejected_decode += 1;
             continue;
         };
+        if cfg.corner_model == CornerModel::BinaryBoundary {
+            let Some(b) = boundary_fit(img, &dark, comp, &quad) else {
+                stats.rejected_decode += 1;
+                continue;
+            };
+            refined.corners = b;
+        }
         match decode(img, &refined, cfg) {
             Some(det) => out.push(det),
             None => stats.rejected_decode += 1,
@@ -212,6 +242,8 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
 struct Binary {
     /// Union-find parent per pixel for dark pixels, `u32::MAX` for others.
     labels: Vec<u32>,
+    /// Pixels classified light (enough local contrast and above the local mid-level).
+    light: Vec<bool>,
 }
 
 fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
@@ -257,6 +289,7 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
         }
     }
     let mut labels = vec![u32::MAX; w * h];
+    let mut light = vec![false; w * h];
     for y in 0..h {
         let ty = y / ts;
         for x in 0..w {
@@ -268,6 +301,8 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
             let v = img.data[y * w + x];
             if v <= 0.5 * (lo + hi) {
                 labels[y * w + x] = (y * w + x) as u32;
+            } else {
+                light[y * w + x] = true;
             }
         }
     }
@@ -302,7 +337,7 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
             labels[i] = find(&mut labels, i as u32);
         }
     }
-    Binary { labels }
+    Binary { labels, light }
 }
 
 fn find(p: &mut [u32], mut i: u32) -> u32 {
@@ -333,6 +368,8 @@ fn union(p: &mut [u32], a: u32, b: u32) {
 struct Component {
     root: u32,
     count: usize,
+    /// Bounding box `(x0, x1, y0, y1)`, inclusive.
+    bbox: (usize, usize, usize, usize),
 }
 
 impl Component {
@@ -379,7 +416,11 @@ fn components(b: &Binary, w: usize, h: usize, cfg: &DetectorConfig) -> Vec<Compo
                 && bw < w as f64
                 && bh < h as f64
         })
-        .map(|(root, (n, ..))| Component { root, count: n })
+        .map(|(root, (n, x0, x1, y0, y1))| Component {
+            root,
+            count: n,
+            bbox: (x0, x1, y0, y1),
+        })
         .collect();
     comps.sort_by_key(|c| c.root);
     comps
@@ -633,6 +674,83 @@ fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
         q.reverse();
     }
     Some(q)
+}
+
+/// Half-width of the band around each side of the contour's quad in which boundary points are
+/// assigned to that side, pixels: the contour quad is within about a pixel of the boundary.
+const BOUNDARY_BAND_PX: f64 = 1.5;
+
+/// The reference library's quad fit on the binary image: the points half-way between each dark
+/// pixel of the component and each light 8-neighbour (the dark/light boundary at the pixel
+/// grid's half steps), weighted by the grey gradient magnitude there (plus one, in 8-bit units),
+/// a weighted total-least-squares line per side, corners at the intersections. Each point is
+/// given to the side of `q` (the contour's quad) nearest to it if it is within
+/// [`BOUNDARY_BAND_PX`] of it and its light pixel lies outward, so the inner edge of a thin
+/// black border is not used.
+fn boundary_fit(img: &GrayF32, b: &Binary, comp: &Component, q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
+    let (w, h) = (img.width, img.height);
+    let (x0, x1, y0, y1) = comp.bbox;
+    let sides: [(DVec2, DVec2, f64, DVec2); 4] = std::array::from_fn(|k| {
+        let (a, e) = (q[k], q[(k + 1) % 4]);
+        let len = a.distance(e).max(1e-9);
+        let dir = (e - a) / len;
+        (a, dir, len, DVec2::new(dir.y, -dir.x))
+    });
+    let mut pts: [Vec<(DVec2, f64)>; 4] = Default::default();
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            if b.labels[y * w + x] != comp.root {
+                continue;
+            }
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    if (dx == 0 && dy == 0) || nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64
+                    {
+                        continue;
+                    }
+                    if !b.light[ny as usize * w + nx as usize] {
+                        continue;
+                    }
+                    let m = DVec2::new(x as f64 + 0.5 * dx as f64, y as f64 + 0.5 * dy as f64);
+                    let step = DVec2::new(dx as f64, dy as f64);
+                    let mut best: Option<(usize, f64)> = None;
+                    for (k, &(a, dir, len, out)) in sides.iter().enumerate() {
+                        let t = (m - a).dot(dir);
+                        let d = (m - a).dot(out).abs();
+                        if t < -1.0 || t > len + 1.0 || step.dot(out) <= 0.0 || d > BOUNDARY_BAND_PX
+                        {
+                            continue;
+                        }
+                        if best.is_none_or(|(_, bd)| d < bd) {
+                            best = Some((k, d));
+                        }
+                    }
+                    let Some((k, _)) = best else { continue };
+                    let (ix, iy) = ((m.x + 0.5).floor() as isize, (m.y + 0.5).floor() as isize);
+                    let gx = img.at(ix + 1, iy) - img.at(ix - 1, iy);
+                    let gy = img.at(ix, iy + 1) - img.at(ix, iy - 1);
+                    let wgt = 255.0 * f64::from(gx.hypot(gy)) + 1.0;
+                    pts[k].push((m, wgt));
+                }
+            }
+        }
+    }
+    let mut lines = Vec::with_capacity(4);
+    for p in &pts {
+        if p.len() < 3 {
+            return None;
+        }
+        lines.push(fit_line(p)?);
+    }
+    let mut out = [DVec2::ZERO; 4];
+    for k in 0..4 {
+        out[k] = lines[(k + 3) % 4].intersect(&lines[k])?;
+        if out[k].distance(q[k]) > 3.0 {
+            return None;
+        }
+    }
+    is_convex(&out).then_some(out)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1051,6 +1169,43 @@ mod tests {
             }
             assert_eq!(d.hamming, 0);
         }
+    }
+
+    #[test]
+    fn binary_boundary_corners_are_coarser_than_edge_refined_ones() {
+        let mut img = blank(640, 480, 0.5);
+        let cases = [
+            (3usize, DVec2::new(160.0, 140.0), 40.0, 0.3, 0.0004, 0.0),
+            (42, DVec2::new(450.0, 300.0), 50.0, 1.7, 0.0, 0.0006),
+        ];
+        for &(id, c, s, a, g, h) in &cases {
+            assert!(paint_tag(&mut img, &tag_h(c, s, a, g, h), id, 0.08, 0.9, 8));
+        }
+        let boundary = DetectorConfig {
+            corner_model: CornerModel::BinaryBoundary,
+            ..DetectorConfig::default()
+        };
+        let rms = |cfg: &DetectorConfig| {
+            let dets = detect(&img, cfg);
+            assert_eq!(dets.len(), cases.len(), "{dets:?}");
+            let mut s2 = 0.0;
+            for &(id, c, s, a, g, h) in &cases {
+                let truth = truth_corners(&tag_h(c, s, a, g, h));
+                let d = dets.iter().find(|d| d.id == id as u32).expect("tag found");
+                for k in 0..4 {
+                    s2 += d.corners_px[k].distance_squared(truth[k]);
+                }
+            }
+            (s2 / (4 * cases.len()) as f64).sqrt()
+        };
+        let (edge, binary) = (rms(&DetectorConfig::default()), rms(&boundary));
+        // The boundary of the threshold sits on the half-pixel grid: a few tenths of a pixel,
+        // not the edge refinement's few hundredths.
+        assert!(binary < 0.3, "binary boundary RMS {binary}");
+        assert!(
+            edge < 0.5 * binary,
+            "edge {edge} vs binary boundary {binary}"
+        );
     }
 
     #[test]

@@ -11,5 +11,5 @@ pub mod render;
 pub mod sheet;
 pub mod tag36h11;
 
-pub use detect::{detect, DetectStats, Detection, DetectorConfig};
+pub use detect::{detect, CornerModel, DetectStats, Detection, DetectorConfig};
 pub use image::{GrayF32, ImageError};

@@ -5,9 +5,22 @@
 //! reproduces exactly with `refine_edges = 0` (unrefined quad corners, see
 //! `scripts/peers/apriltag_reference_fixture.py`), and the same library with edge refinement
 //! (`tests/data/apriltag_c_refined.json`), which is the like-for-like sub-pixel comparison.
+//!
+//! Why the `.txt` corners are not held to 0.5 px (docs/benchmarks-poses.md, "Real photos"): they
+//! are the dark/light boundary of the C library's adaptive threshold, whose threshold is the
+//! mid-level of the local minimum and maximum. Above most of these tags the white ring (~180 of
+//! 255) is darker than the background beyond it (~250), so the maximum is the background, the
+//! threshold sits above the black/ring mid-level and the boundary moves outward: the top
+//! edges of the `.txt` are 0.26 px above our edge-refined ones on average, the other three sides
+//! agree within 0.05 px. Our own implementation of that estimator
+//! ([`CornerModel::BinaryBoundary`]) reproduces the `.txt` (median 0.12 px, top edges +0.004 px),
+//! and on synthetic tiny JPEG tags with known truth it is 2.5..6 times less accurate than the
+//! edge refinement (RMS 0.25 / 0.35 / 0.57 px against 0.09 / 0.23 / 0.41); with a darker ring it
+//! is 0.8 px off. Even the true corners of such tags are up to 0.6..1.5 px from the C library's
+//! unrefined ones, so no accurate detector meets 0.5 px against the `.txt`.
 
 use glam::DVec2;
-use skinbrdf_targets::{detect, Detection, DetectorConfig, GrayF32};
+use skinbrdf_targets::{detect, CornerModel, Detection, DetectorConfig, GrayF32};
 use std::path::{Path, PathBuf};
 
 struct RefTag {
@@ -81,18 +94,88 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-#[test]
-fn real_photos_match_the_reference_library() {
-    let mut err_txt = Vec::new();
-    let mut err_refined = Vec::new();
+/// Like for like (both libraries refine edges), median: well below the issue's 0.5 px. Measured
+/// 0.153 px; the JPEG tags of 10..33 px leave both libraries a tenth of a pixel of noise.
+const MEDIAN_VS_REFINED_PX: f64 = 0.2;
+
+/// Like for like, 90th percentile: set by 10..15 px tags where neither library is sure to 0.5 px
+/// (the C library's ±3 px search reaches the next edge, our window stays within a cell).
+/// Measured 0.550 px.
+const P90_VS_REFINED_PX: f64 = 0.6;
+
+/// Against the unrefined `.txt` corners, median (measured 0.382 px): the C library itself
+/// differs from them by 0.27 / 0.39 px when it refines edges; see the module docs for the top
+/// edges' 0.26 px threshold bias.
+const MEDIAN_VS_TXT_PX: f64 = 0.42;
+
+/// Against the `.txt`, worst corner (measured 1.27 px, a 19 px tag's top corner: 0.49 px of the
+/// C library's own refinement plus the threshold bias). A corner is the intersection of two
+/// edges, so an edge offset of `d` moves it by up to `d / sin(angle)`.
+const MAX_VS_TXT_PX: f64 = 1.35;
+
+/// [`CornerModel::BinaryBoundary`] against the `.txt` it imitates, median (measured 0.120 px):
+/// the same estimator on our threshold (relative contrast floor, 8-connected boundary points,
+/// nearest-side assignment near the corners instead of the C library's own segmentation).
+const MEDIAN_BOUNDARY_VS_TXT_PX: f64 = 0.15;
+
+/// Same, worst corner (measured 0.664 px): a pixel more or less in the binary boundary of a
+/// 17 px tag's corner.
+const MAX_BOUNDARY_VS_TXT_PX: f64 = 0.75;
+
+/// The issue's bound, reported (not asserted, see the module docs).
+const ISSUE_BOUND_PX: f64 = 0.5;
+
+/// Mean outward offset of each side (the side whose outward normal is closest to up, left,
+/// down, right in the image) of `d` from the reference `r`.
+fn side_offsets(d: &[DVec2; 4], r: &[DVec2; 4]) -> [(usize, f64); 4] {
+    let c = centre(r);
+    std::array::from_fn(|k| {
+        let (a, b) = (r[k], r[(k + 1) % 4]);
+        let mid = 0.5 * (a + b);
+        let mut n = (b - a).perp().normalize();
+        if n.dot(mid - c) < 0.0 {
+            n = -n;
+        }
+        let dir = (n.y.atan2(n.x) / std::f64::consts::FRAC_PI_2).round() as i64;
+        // atan2 quarter turns: -1 up, 0 right, 1 down, 2 / -2 left.
+        let slot = match dir {
+            -1 => 0,
+            1 => 2,
+            0 => 3,
+            _ => 1,
+        };
+        (slot, (0.5 * (d[k] + d[(k + 1) % 4]) - mid).dot(n))
+    })
+}
+
+struct Errors {
+    txt: Vec<f64>,
+    refined: Vec<f64>,
+    /// Sum and count of outward side offsets against the `.txt`: up, left, down, right.
+    sides: [(f64, usize); 4],
+}
+
+fn run(cfg: &DetectorConfig) -> Errors {
+    let mut e = Errors {
+        txt: Vec::new(),
+        refined: Vec::new(),
+        sides: [(0.0, 0); 4],
+    };
     let mut misses = Vec::new();
     for stem in STEMS {
         let img = GrayF32::load(&data_dir().join(format!("{stem}.jpg"))).expect("photo loads");
-        let dets = detect(&img, &DetectorConfig::default());
+        let dets = detect(&img, cfg);
         let refs = parse_txt(&data_dir().join(format!("{stem}.txt")));
         for r in &refs {
             match find(&dets, r) {
-                Some(d) => err_txt.extend((0..4).map(|k| d.corners_px[k].distance(r.corners[k]))),
+                Some(d) => {
+                    e.txt
+                        .extend((0..4).map(|k| d.corners_px[k].distance(r.corners[k])));
+                    for (slot, off) in side_offsets(&d.corners_px, &r.corners) {
+                        e.sides[slot].0 += off;
+                        e.sides[slot].1 += 1;
+                    }
+                }
                 None => misses.push(format!("{stem}: tag {} at {}", r.id, centre(&r.corners))),
             }
         }
@@ -116,36 +199,70 @@ fn real_photos_match_the_reference_library() {
         assert!(extra.len() <= 1, "{stem}: {} extra detections", extra.len());
         for r in &parse_fixture(stem) {
             let d = find(&dets, r).expect("every refined-reference tag is found");
-            err_refined.extend((0..4).map(|k| d.corners_px[k].distance(r.corners[k])));
+            e.refined
+                .extend((0..4).map(|k| d.corners_px[k].distance(r.corners[k])));
         }
     }
     assert!(misses.is_empty(), "not found: {misses:#?}");
-    let (m_txt, p90_txt, max_txt) = (
-        percentile(&mut err_txt, 0.5),
-        percentile(&mut err_txt, 0.9),
-        percentile(&mut err_txt, 1.0),
-    );
-    let (m_ref, p90_ref, max_ref) = (
-        percentile(&mut err_refined, 0.5),
-        percentile(&mut err_refined, 0.9),
-        percentile(&mut err_refined, 1.0),
-    );
+    e
+}
+
+/// Median, 90th percentile and maximum, printed with the count over the issue's bound.
+fn summary(label: &str, v: &mut [f64]) -> (f64, f64, f64) {
+    let (m, p90, max) = (percentile(v, 0.5), percentile(v, 0.9), percentile(v, 1.0));
+    let over = v.iter().filter(|&&x| x >= ISSUE_BOUND_PX).count();
     eprintln!(
-        "vs .txt (unrefined): {} corners, median {m_txt:.3} px, p90 {p90_txt:.3}, max {max_txt:.3}",
-        err_txt.len()
+        "{label}: {} corners, median {m:.3} px, p90 {p90:.3}, max {max:.3}, {over} at or over {ISSUE_BOUND_PX} px",
+        v.len()
     );
+    (m, p90, max)
+}
+
+fn print_sides(label: &str, sides: &[(f64, usize); 4]) {
+    let mean = |i: usize| sides[i].0 / sides[i].1.max(1) as f64;
     eprintln!(
-        "vs C library with refine_edges: {} corners, median {m_ref:.3} px, p90 {p90_ref:.3}, max {max_ref:.3}",
-        err_refined.len()
+        "{label}: mean outward side offset vs .txt: up {:+.3} px, left {:+.3}, down {:+.3}, right {:+.3}",
+        mean(0),
+        mean(1),
+        mean(2),
+        mean(3)
     );
-    // Like for like (both refine edges): median well below 0.5 px.
-    assert!(m_ref < 0.2, "median vs refined reference {m_ref}");
-    // The 90th percentile is set by 10..15 px JPEG tags where neither library is sure to
-    // 0.5 px; the narrow gradient we use for cells under 3 px (unbiased on synthetic images with
-    // known truth) departs most from the C library's wider one there.
-    assert!(p90_ref < 0.6, "p90 vs refined reference {p90_ref}");
-    // Against the unrefined .txt corners (the C library itself differs from them by a median of
-    // 0.27 / 0.39 px when it refines edges): median below 0.5 px.
-    assert!(m_txt < 0.5, "median vs .txt {m_txt}");
-    assert!(max_txt < 1.5, "max vs .txt {max_txt}");
+}
+
+#[test]
+fn real_photos_match_the_reference_library() {
+    let mut e = run(&DetectorConfig::default());
+    let (m_txt, _, max_txt) = summary("edge-refined vs .txt (unrefined)", &mut e.txt);
+    let (m_ref, p90_ref, _) = summary(
+        "edge-refined vs C library with refine_edges",
+        &mut e.refined,
+    );
+    print_sides("edge-refined", &e.sides);
+    assert!(
+        m_ref < MEDIAN_VS_REFINED_PX,
+        "median vs refined reference {m_ref}"
+    );
+    assert!(
+        p90_ref < P90_VS_REFINED_PX,
+        "p90 vs refined reference {p90_ref}"
+    );
+    assert!(m_txt < MEDIAN_VS_TXT_PX, "median vs .txt {m_txt}");
+    assert!(max_txt < MAX_VS_TXT_PX, "max vs .txt {max_txt}");
+}
+
+#[test]
+fn the_reference_estimator_reproduces_the_txt_corners() {
+    let cfg = DetectorConfig {
+        corner_model: CornerModel::BinaryBoundary,
+        ..DetectorConfig::default()
+    };
+    let mut e = run(&cfg);
+    let (m_txt, _, max_txt) = summary("binary boundary vs .txt (unrefined)", &mut e.txt);
+    summary(
+        "binary boundary vs C library with refine_edges",
+        &mut e.refined,
+    );
+    print_sides("binary boundary", &e.sides);
+    assert!(m_txt < MEDIAN_BOUNDARY_VS_TXT_PX, "median vs .txt {m_txt}");
+    assert!(max_txt < MAX_BOUNDARY_VS_TXT_PX, "max vs .txt {max_txt}");
 }
