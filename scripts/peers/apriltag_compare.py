@@ -114,7 +114,7 @@ def run_ours(files):
     return [json.loads(l) for l in out.splitlines()]
 
 
-def errors(dets, truth):
+def errors(dets, truth, radial=None):
     errs, found = [], 0
     for tid, corners in truth:
         c = corners.mean(0)
@@ -126,6 +126,9 @@ def errors(dets, truth):
         if best is not None:
             found += 1
             errs.extend(np.hypot(*(best - corners).T))
+            if radial is not None:
+                u = (corners - c) / np.linalg.norm(corners - c, axis=1)[:, None]
+                radial.extend(((best - corners) * u).sum(1))
     return errs, found
 
 
@@ -178,18 +181,18 @@ def main():
         c0 = [(d.tag_id, (np.array(d.corners) - 0.5).tolist()) for d in c0_dets]
         m = [(d["id"], d["corners"]) for d in o["detections"]]
         for name, dets, ms in [("apriltag-C", c, c_ms), ("apriltag-C unrefined", c0, c0_ms), ("skinbrdf-targets", m, o["ms"])]:
-            e, found = errors(dets, truth)
-            r = res.setdefault((name, cfg), dict(err=[], found=0, total=0, ms=[], extra=0))
+            r = res.setdefault((name, cfg), dict(err=[], found=0, total=0, ms=[], extra=0, rad=[]))
+            e, found = errors(dets, truth, r["rad"])
             r["err"] += e
             r["found"] += found
             r["total"] += len(truth)
             r["ms"].append(ms)
             r["extra"] += len(dets) - found
-    print("| detector | blur sigma px | noise | tags found | false pos. | RMS px | median px | max px | ms/image (1200x900) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| detector | blur sigma px | noise | tags found | false pos. | RMS px | median px | max px | mean outward px | ms/image (1200x900) |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for (name, cfg), r in sorted(res.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         s = stats(r["err"])
-        print(f"| {name} | {cfg[0]} | {cfg[1]} | {r['found']}/{r['total']} | {r['extra']} | {s['rms']:.3f} | {s['median']:.3f} | {s['max']:.3f} | {np.median(r['ms']):.1f} |")
+        print(f"| {name} | {cfg[0]} | {cfg[1]} | {r['found']}/{r['total']} | {r['extra']} | {s['rms']:.3f} | {s['median']:.3f} | {s['max']:.3f} | {np.mean(r['rad']):+.3f} | {np.median(r['ms']):.1f} |")
     if args.no_real:
         return 0
     # Real photos: ours vs the reference .txt.

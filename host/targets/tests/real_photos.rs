@@ -14,9 +14,9 @@
 //! edges of the `.txt` are 0.26 px above our edge-refined ones on average, the other three sides
 //! agree within 0.05 px. Our own implementation of that estimator
 //! ([`CornerModel::BinaryBoundary`]) reproduces the `.txt` (median 0.12 px, top edges +0.004 px),
-//! and on synthetic tiny JPEG tags with known truth it is 2.5..6 times less accurate than the
-//! edge refinement (RMS 0.25 / 0.35 / 0.57 px against 0.09 / 0.23 / 0.41); with a darker ring it
-//! is 0.8 px off. Even the true corners of such tags are up to 0.6..1.5 px from the C library's
+//! and on synthetic tiny JPEG tags with known truth it is less accurate than the edge refinement
+//! (RMS 0.25 / 0.35 / 0.57 px against 0.09 / 0.23 / 0.41 at blur 0.6 / 1.0 / 1.5 px; with a ring
+//! darker than its surroundings 0.48 / 0.84 / 1.29 against 0.12 / 0.36 / 0.74). Even the true corners of such tags are up to 0.6..1.5 px from the C library's
 //! unrefined ones, so no accurate detector meets 0.5 px against the `.txt`.
 
 use glam::DVec2;
@@ -108,9 +108,10 @@ const P90_VS_REFINED_PX: f64 = 0.6;
 /// edges' 0.26 px threshold bias.
 const MEDIAN_VS_TXT_PX: f64 = 0.42;
 
-/// Against the `.txt`, worst corner (measured 1.27 px, a 19 px tag's top corner: 0.49 px of the
-/// C library's own refinement plus the threshold bias). A corner is the intersection of two
-/// edges, so an edge offset of `d` moves it by up to `d / sin(angle)`.
+/// Against the `.txt`, worst corner (measured 1.270 px: the top-right corner of a 19 px tag at
+/// (309, 400) in the second photo, whose ring (~150) is much darker than the white above it
+/// (~255), so the reference's threshold (~132 against a black/ring mid-level of ~85) puts its top
+/// edge about a pixel too high there).
 const MAX_VS_TXT_PX: f64 = 1.35;
 
 /// [`CornerModel::BinaryBoundary`] against the `.txt` it imitates, median (measured 0.120 px):
