@@ -47,6 +47,48 @@ pub struct Sheet {
     pub tags: Vec<SheetTag>,
     /// Circle outline (centre = sheet origin), diameter mm.
     pub circle_diameter_mm: Option<f64>,
+    /// For cut-out sheets ([`Sheet::cutouts`]): this page's number and the page count. Each
+    /// tag then has a dashed cut line at its paper's edge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cutout_page: Option<(usize, usize)>,
+}
+
+/// Half extent of a cut-out target's paper in units of half the tag's black square: the black
+/// border ends at 1, the tag's white ring at 1.25, and a quarter cell more of paper keeps the
+/// ring clear of the mount's edge. The synthetic renderer paints targets with the same paper
+/// (`skinbrdf_synth::render::PAPER_HALF_EXTENT`), so a printed rig matches the scenes.
+pub const CUTOUT_PAPER_HALF_EXTENT: f64 = 1.5;
+/// Space between neighbouring cut-outs, mm (room for scissors).
+const CUTOUT_GAP_MM: f64 = 4.0;
+/// Height of the ID label under each cut-out, mm.
+const CUTOUT_LABEL_MM: f64 = 4.0;
+/// Page margins of cut-out sheets, mm: sides and top; the bottom keeps 22 mm for the scale bar
+/// and the title.
+const CUTOUT_MARGIN_MM: f64 = 10.0;
+const CUTOUT_BOTTOM_MM: f64 = 22.0;
+
+/// Why a set of tags cannot be laid out as cut-outs.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SheetError {
+    /// A tag (with its paper) does not fit on an A4 page.
+    #[error("tag {id}: {size_mm} mm does not fit on an A4 page with its paper")]
+    TooLarge {
+        /// The tag.
+        id: u32,
+        /// Its black square, mm.
+        size_mm: f64,
+    },
+    /// A size that is not a positive finite number.
+    #[error("tag {id}: size {size_mm} mm is not positive")]
+    BadSize {
+        /// The tag.
+        id: u32,
+        /// The size given.
+        size_mm: f64,
+    },
+    /// An ID outside the tag36h11 family.
+    #[error("tag {0} is not in tag36h11 (IDs 0..587)")]
+    BadId(u32),
 }
 
 /// A4 portrait.
@@ -96,6 +138,91 @@ impl Sheet {
             height_mm: A4.1,
             tags,
             circle_diameter_mm: circle,
+            cutout_page: None,
+        }
+    }
+
+    /// Tags to cut out and mount one by one (a reference cage, a headdress of separate tags),
+    /// `(id, black square edge in mm)` each, packed in rows on as many A4 pages as needed (in
+    /// the order given). Each tag has a dashed cut line at its paper's edge
+    /// ([`CUTOUT_PAPER_HALF_EXTENT`]) and its ID below; the layout file says where it goes.
+    pub fn cutouts(kind: SheetKind, tags: &[(u32, f64)]) -> Result<Vec<Self>, SheetError> {
+        let (w, h) = A4;
+        let usable_w = w - 2.0 * CUTOUT_MARGIN_MM;
+        let usable_h = h - CUTOUT_MARGIN_MM - CUTOUT_BOTTOM_MM;
+        let mut pages: Vec<Vec<SheetTag>> = vec![Vec::new()];
+        // Cursor: left edge of the next cut-out, top of the current row, row height (page mm).
+        let (mut x, mut top, mut row_h) = (0.0, 0.0, 0.0f64);
+        for &(id, size_mm) in tags {
+            if !(size_mm.is_finite() && size_mm > 0.0) {
+                return Err(SheetError::BadSize { id, size_mm });
+            }
+            if id as usize >= tag36h11::NUM_TAGS {
+                return Err(SheetError::BadId(id));
+            }
+            let paper = 2.0 * CUTOUT_PAPER_HALF_EXTENT * 0.5 * size_mm;
+            let (cw, ch) = (paper, paper + CUTOUT_LABEL_MM);
+            if cw > usable_w || ch > usable_h {
+                return Err(SheetError::TooLarge { id, size_mm });
+            }
+            if x + cw > usable_w {
+                (x, top, row_h) = (0.0, top + row_h + CUTOUT_GAP_MM, 0.0);
+            }
+            if top + ch > usable_h {
+                pages.push(Vec::new());
+                (x, top, row_h) = (0.0, 0.0, 0.0);
+            }
+            // Sheet frame: origin at the page centre, y up.
+            let (px, py) = (
+                CUTOUT_MARGIN_MM + x + 0.5 * paper,
+                CUTOUT_MARGIN_MM + top + 0.5 * paper,
+            );
+            if let Some(page) = pages.last_mut() {
+                page.push(SheetTag {
+                    id,
+                    centre_mm: [px - 0.5 * w, 0.5 * h - py],
+                    size_mm,
+                });
+            }
+            x += cw + CUTOUT_GAP_MM;
+            row_h = row_h.max(ch);
+        }
+        let n = pages.len();
+        Ok(pages
+            .into_iter()
+            .enumerate()
+            .map(|(i, tags)| Self {
+                kind,
+                width_mm: w,
+                height_mm: h,
+                tags,
+                circle_diameter_mm: None,
+                cutout_page: Some((i + 1, n)),
+            })
+            .collect())
+    }
+
+    /// Dashed cut lines of a cut-out sheet: page squares `(x, y, edge)` in mm (y down).
+    fn cut_squares(&self) -> Vec<(f64, f64, f64)> {
+        if self.cutout_page.is_none() {
+            return Vec::new();
+        }
+        self.tags
+            .iter()
+            .map(|t| {
+                let half = CUTOUT_PAPER_HALF_EXTENT * 0.5 * t.size_mm;
+                let (cx, cy) = self.page(t.centre_mm[0], t.centre_mm[1]);
+                (cx - half, cy - half, 2.0 * half)
+            })
+            .collect()
+    }
+
+    /// Where a tag's ID label goes (page mm, y down: the label's baseline).
+    fn label_y(&self, t: &SheetTag, cy: f64) -> f64 {
+        if self.cutout_page.is_some() {
+            cy + CUTOUT_PAPER_HALF_EXTENT * 0.5 * t.size_mm + 3.0
+        } else {
+            cy + 0.5 * t.size_mm * 1.25 + 3.0
         }
     }
 
@@ -139,10 +266,16 @@ impl Sheet {
     }
 
     fn title(&self) -> String {
-        format!(
-            "skinbrdf {:?} targets, tag36h11, print at 100 % (scale bar = 100 mm)",
-            self.kind
-        )
+        match self.cutout_page {
+            Some((i, n)) => format!(
+                "skinbrdf {:?} targets to cut out, page {i} of {n}, tag36h11, print at 100 % (scale bar = 100 mm)",
+                self.kind
+            ),
+            None => format!(
+                "skinbrdf {:?} targets, tag36h11, print at 100 % (scale bar = 100 mm)",
+                self.kind
+            ),
+        }
     }
 
     /// The sheet as SVG at true scale (`width="210mm"`, user units = mm).
@@ -169,8 +302,14 @@ impl Sheet {
             let _ = writeln!(
                 s,
                 r#"<text x="{cx:.3}" y="{:.3}" font-family="Helvetica" font-size="2.5" text-anchor="middle">{}</text>"#,
-                cy + 0.5 * t.size_mm * 1.25 + 3.0,
+                self.label_y(t, cy),
                 t.id
+            );
+        }
+        for (x, y, e) in self.cut_squares() {
+            let _ = writeln!(
+                s,
+                r#"<rect x="{x:.3}" y="{y:.3}" width="{e:.3}" height="{e:.3}" fill="none" stroke="gray" stroke-width="0.15" stroke-dasharray="1.5 1"/>"#
             );
         }
         if let Some(d) = self.circle_diameter_mm {
@@ -198,8 +337,13 @@ impl Sheet {
 
     /// The sheet as a one-page PDF at true scale (vector rectangles, Helvetica text).
     pub fn to_pdf(&self) -> Vec<u8> {
+        pdf_document(std::slice::from_ref(self))
+    }
+
+    /// The page's PDF content stream (points, y up).
+    fn pdf_content(&self) -> String {
         let pt = 72.0 / 25.4;
-        let (pw, ph) = (self.width_mm * pt, self.height_mm * pt);
+        let ph = self.height_mm * pt;
         let mut content = String::new();
         content.push_str("0 g\n");
         // PDF y is up from the bottom.
@@ -235,10 +379,25 @@ impl Sheet {
             text(
                 &mut content,
                 cx - 2.0,
-                cy + 0.5 * t.size_mm * 1.25 + 3.0,
+                self.label_y(t, cy),
                 2.5,
                 &t.id.to_string(),
             );
+        }
+        let cuts = self.cut_squares();
+        if !cuts.is_empty() {
+            content.push_str("q 0.5 G 0.4 w [4 3] 0 d\n");
+            for (x, y, e) in cuts {
+                let _ = writeln!(
+                    content,
+                    "{:.3} {:.3} {:.3} {:.3} re S",
+                    x * pt,
+                    ph - (y + e) * pt,
+                    e * pt,
+                    e * pt
+                );
+            }
+            content.push_str("Q\n");
         }
         text(&mut content, 10.0, self.height_mm - 5.0, 3.0, &self.title());
         if let Some(d) = self.circle_diameter_mm {
@@ -259,42 +418,119 @@ impl Sheet {
                 c2 = cx + k,
             );
         }
-        let objects = [
-            "<< /Type /Catalog /Pages 2 0 R >>".to_string(),
-            "<< /Type /Pages /Kids [3 0 R] /Count 1 >>".to_string(),
-            format!(
-                "<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {pw:.3} {ph:.3}] /Contents 4 0 R /Resources << /Font << /F1 5 0 R >> >> >>"
-            ),
-            format!(
-                "<< /Length {} >>\nstream\n{content}endstream",
-                content.len()
-            ),
-            "<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica >>".to_string(),
-        ];
-        let mut out = b"%PDF-1.4\n".to_vec();
-        let mut offsets = Vec::new();
-        for (i, o) in objects.iter().enumerate() {
-            offsets.push(out.len());
-            out.extend_from_slice(format!("{} 0 obj\n{o}\nendobj\n", i + 1).as_bytes());
-        }
-        let xref = out.len();
-        let mut x = format!("xref\n0 {}\n0000000000 65535 f \n", objects.len() + 1);
-        for off in offsets {
-            let _ = writeln!(x, "{off:010} 00000 n ");
-        }
-        let _ = write!(
-            x,
-            "trailer\n<< /Size {} /Root 1 0 R >>\nstartxref\n{xref}\n%%EOF\n",
-            objects.len() + 1
-        );
-        out.extend_from_slice(x.as_bytes());
-        out
+        content
     }
+}
+
+/// Sheets as one PDF, a page each (A4, true scale).
+pub fn pdf_document(sheets: &[Sheet]) -> Vec<u8> {
+    let pt = 72.0 / 25.4;
+    // Objects: 1 catalog, 2 pages, 3 font, then (page, content) per sheet.
+    let kids: Vec<String> = (0..sheets.len())
+        .map(|i| format!("{} 0 R", 4 + 2 * i))
+        .collect();
+    let mut objects = vec![
+        "<< /Type /Catalog /Pages 2 0 R >>".to_string(),
+        format!(
+            "<< /Type /Pages /Kids [{}] /Count {} >>",
+            kids.join(" "),
+            sheets.len()
+        ),
+        "<< /Type /Font /Subtype /Type1 /BaseFont /Helvetica >>".to_string(),
+    ];
+    for (i, sh) in sheets.iter().enumerate() {
+        let (pw, ph) = (sh.width_mm * pt, sh.height_mm * pt);
+        let content = sh.pdf_content();
+        objects.push(format!(
+            "<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {pw:.3} {ph:.3}] /Contents {} 0 R /Resources << /Font << /F1 3 0 R >> >> >>",
+            5 + 2 * i
+        ));
+        objects.push(format!(
+            "<< /Length {} >>\nstream\n{content}endstream",
+            content.len()
+        ));
+    }
+    let mut out = b"%PDF-1.4\n".to_vec();
+    let mut offsets = Vec::new();
+    for (i, o) in objects.iter().enumerate() {
+        offsets.push(out.len());
+        out.extend_from_slice(format!("{} 0 obj\n{o}\nendobj\n", i + 1).as_bytes());
+    }
+    let xref = out.len();
+    let mut x = format!("xref\n0 {}\n0000000000 65535 f \n", objects.len() + 1);
+    for off in offsets {
+        let _ = writeln!(x, "{off:010} 00000 n ");
+    }
+    let _ = write!(
+        x,
+        "trailer\n<< /Size {} /Root 1 0 R >>\nstartxref\n{xref}\n%%EOF\n",
+        objects.len() + 1
+    );
+    out.extend_from_slice(x.as_bytes());
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cutouts_pack_every_tag_once_on_the_page_without_overlap() {
+        // A cage of 40 tags of 35 mm and a few of 25 mm: several pages.
+        let tags: Vec<(u32, f64)> = (0..40)
+            .map(|i| (i, 35.0))
+            .chain((100..106).map(|i| (i, 25.0)))
+            .collect();
+        let pages = Sheet::cutouts(SheetKind::Reference, &tags).expect("cutouts");
+        assert!(pages.len() >= 3, "{} pages", pages.len());
+        let mut seen: Vec<u32> = Vec::new();
+        for (i, p) in pages.iter().enumerate() {
+            assert_eq!(p.cutout_page, Some((i + 1, pages.len())));
+            let cuts = p.cut_squares();
+            assert_eq!(cuts.len(), p.tags.len());
+            for (k, &(x, y, e)) in cuts.iter().enumerate() {
+                // On the page, clear of the scale bar and title.
+                assert!(x >= 5.0 && x + e <= p.width_mm - 5.0, "{:?}", p.tags[k]);
+                assert!(
+                    y >= 5.0 && y + e + 4.0 <= p.height_mm - 20.0,
+                    "{:?}",
+                    p.tags[k]
+                );
+                // No two papers (with their labels) overlap.
+                for &(x2, y2, e2) in &cuts[..k] {
+                    let apart =
+                        x + e <= x2 || x2 + e2 <= x || y + e + 4.0 <= y2 || y2 + e2 + 4.0 <= y;
+                    assert!(apart, "page {i}: {x},{y} and {x2},{y2}");
+                }
+            }
+            seen.extend(p.tags.iter().map(|t| t.id));
+            assert!(p.to_svg().contains("stroke-dasharray"));
+        }
+        assert_eq!(seen, tags.iter().map(|t| t.0).collect::<Vec<_>>());
+        let pdf = pdf_document(&pages);
+        let text = String::from_utf8_lossy(&pdf);
+        assert!(text.contains(&format!("/Count {}", pages.len())));
+        assert_eq!(text.matches("/Type /Page ").count(), pages.len());
+        // Bad input is named.
+        assert_eq!(
+            Sheet::cutouts(SheetKind::Reference, &[(3, 400.0)]),
+            Err(SheetError::TooLarge {
+                id: 3,
+                size_mm: 400.0
+            })
+        );
+        assert_eq!(
+            Sheet::cutouts(SheetKind::Reference, &[(3, f64::NAN)])
+                .map(|_| ())
+                .unwrap_err()
+                .to_string(),
+            "tag 3: size NaN mm is not positive"
+        );
+        assert_eq!(
+            Sheet::cutouts(SheetKind::Reference, &[(900, 20.0)]),
+            Err(SheetError::BadId(900))
+        );
+    }
 
     #[test]
     fn sheets_fit_the_page_with_unique_ids() {

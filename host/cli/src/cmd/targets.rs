@@ -3,6 +3,14 @@
 //! the session format, in the sheet's frame: origin at the sheet centre / flash disc centre, x
 //! right, y up on the page, z out of the paper, metres).
 //!
+//! `skinbrdf targets --scene NAME --layout reference|headdress|flash --out FILE.svg|pdf` prints
+//! the targets a scene's rig uses (a built-in scene or a scene TOML: the reference cage, the
+//! headdress tags, the flash ring) as cut-outs at their true sizes with their IDs, on as many A4
+//! pages as needed (`FILE.pdf` has them all; SVG gets one file per page, `FILE-2.svg`, ...), and
+//! the layout file with each target where the scene places it (reference: world frame,
+//! headdress: head frame, flash: flash frame), as the scene's `session.toml` lists them: build
+//! the rig to that file and a real session uses the same layout as the synthetic one.
+//!
 //! `skinbrdf targets --detect IMAGE...` instead prints the tags found in images (JSON lines).
 
 use anyhow::Context;
@@ -22,6 +30,10 @@ pub struct Args {
     /// Output file: `.svg` or `.pdf`.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Print the targets of this scene's rig (built-in name or scene TOML) as cut-outs, with the
+    /// scene's layout, instead of the standard sheet.
+    #[arg(long)]
+    pub scene: Option<String>,
     /// Detect tags in these images instead (prints one JSON line per image).
     #[arg(long, num_args = 1..)]
     pub detect: Vec<PathBuf>,
@@ -79,6 +91,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Layout::Flash => SheetKind::Flash,
         Layout::Board => SheetKind::Board,
     };
+    if let Some(scene) = &args.scene {
+        return scene_cutouts(scene, kind, &out);
+    }
     let sheet = Sheet::standard(kind);
     let ext = out
         .extension()
@@ -131,4 +146,118 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         layout_path.display()
     );
     Ok(())
+}
+
+/// `--scene`: the scene rig's targets of one kind as cut-outs, and their layout.
+fn scene_cutouts(scene_name: &str, kind: SheetKind, out: &std::path::Path) -> anyhow::Result<()> {
+    let scene = skinbrdf_synth::Scene::load(scene_name)
+        .with_context(|| format!("loading scene `{scene_name}`"))?;
+    let rig = skinbrdf_synth::layout::build_rig(&scene);
+    let (targets, section, frame) = match kind {
+        SheetKind::Reference => (&rig.reference, "targets.reference", "world frame"),
+        SheetKind::Headdress => (&rig.headdress, "targets.headdress", "head (scan) frame"),
+        SheetKind::Flash => (&rig.flash_targets, "flash.targets", "flash frame"),
+        SheetKind::Board => anyhow::bail!(
+            "--scene: scenes have no calibration board (their intrinsics are given); use --layout reference, headdress or flash"
+        ),
+    };
+    anyhow::ensure!(
+        !targets.is_empty(),
+        "scene `{}` has no {kind:?} targets",
+        scene.name
+    );
+    let tags: Vec<(u32, f64)> = targets.iter().map(|t| (t.id, t.size_m * 1e3)).collect();
+    let pages =
+        Sheet::cutouts(kind, &tags).map_err(|e| anyhow::anyhow!("scene `{}`: {e}", scene.name))?;
+    let ext = out
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let mut written = Vec::new();
+    match ext.as_deref() {
+        Some("pdf") => {
+            write_atomic(out, &skinbrdf_targets::sheet::pdf_document(&pages))
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            written.push(out.to_path_buf());
+        }
+        Some("svg") => {
+            for (i, p) in pages.iter().enumerate() {
+                let path = if i == 0 {
+                    out.to_path_buf()
+                } else {
+                    let stem = out
+                        .file_stem()
+                        .and_then(|s| s.to_str())
+                        .unwrap_or("targets");
+                    out.with_file_name(format!("{stem}-{}.svg", i + 1))
+                };
+                write_atomic(&path, p.to_svg().as_bytes()).map_err(|e| anyhow::anyhow!("{e}"))?;
+                written.push(path);
+            }
+        }
+        _ => anyhow::bail!("{}: the output must end in .svg or .pdf", out.display()),
+    }
+    let layout_path = out.with_extension("layout.toml");
+    let text = toml::to_string(&LayoutFile {
+        section: section.into(),
+        targets: targets.clone(),
+    })
+    .context("serialising the layout")?;
+    let header = format!(
+        "# Target layout of scene `{}` ({frame}, metres): where each cut-out of {} goes.\n# Copy `targets` into session.toml under [{section}]; measure and correct positions after\n# mounting.\n",
+        scene.name,
+        out.display(),
+    );
+    write_atomic(&layout_path, format!("{header}{text}").as_bytes())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
+    println!(
+        "wrote {} ({} tags of scene `{}` on {} page(s)) and {}",
+        names.join(", "),
+        tags.len(),
+        scene.name,
+        pages.len(),
+        layout_path.display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(serde::Deserialize)]
+    struct LayoutIn {
+        section: String,
+        targets: Vec<Target>,
+    }
+
+    #[test]
+    fn scene_cutouts_carry_the_scene_rigs_layout() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let out = dir.path().join("headdress.svg");
+        scene_cutouts("default", SheetKind::Headdress, &out).expect("cutouts");
+        let text = std::fs::read_to_string(out.with_extension("layout.toml")).expect("layout");
+        let layout: LayoutIn = toml::from_str(&text).expect("parse");
+        assert_eq!(layout.section, "targets.headdress");
+        let scene = skinbrdf_synth::Scene::load("default").expect("scene");
+        let rig = skinbrdf_synth::layout::build_rig(&scene);
+        assert_eq!(layout.targets.len(), rig.headdress.len());
+        for (a, b) in layout.targets.iter().zip(&rig.headdress) {
+            assert_eq!(a.id, b.id);
+            assert!((a.size_m - b.size_m).abs() < 1e-12);
+            for (p, q) in a.corners_m.iter().zip(&b.corners_m) {
+                assert!(p.distance(*q) < 1e-12, "tag {}", a.id);
+            }
+        }
+        // Every tag is on the printed page(s) once, with its ID.
+        let svg = std::fs::read_to_string(&out).expect("svg");
+        for t in &rig.headdress {
+            assert!(svg.contains(&format!(">{}</text>", t.id)), "tag {}", t.id);
+        }
+        // A board has no place in a scene: a clear error.
+        let err = scene_cutouts("default", SheetKind::Board, &dir.path().join("b.pdf"))
+            .expect_err("board");
+        assert!(err.to_string().contains("calibration board"), "{err}");
+    }
 }
