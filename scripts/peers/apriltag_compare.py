@@ -10,7 +10,14 @@ C library's corners are converted by subtracting 0.5 px.
     cargo build --release -p skinbrdf-targets --example detect_json
     python3 scripts/peers/apriltag_compare.py [--images 20] [--seed 1]
 
-Also checks the real photos of shared/data/apriltag against their reference .txt files.
+Scene options (docs/benchmarks-poses.md, "Which estimator is right"): --sides A B (black-square
+side range, px), --bg L (level beyond the tag's white ring), --white L (level of the white
+cells), --jpeg Q (JPEG quality); --binary-boundary runs ours with CornerModel::BinaryBoundary.
+Rows: the C library with and without refine_edges, and ours; the mean outward column is the
+mean radial offset of the corners from the truth (+ = too far out).
+
+Also checks the real photos of shared/data/apriltag against their reference .txt files
+(skip with --no-real).
 """
 import argparse, json, os, subprocess, sys, tempfile, time
 import numpy as np
