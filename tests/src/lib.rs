@@ -208,8 +208,9 @@ pub fn sim_options() -> CaptureOptions {
     CaptureOptions {
         // 20 ms wall = 1 s device: the keep-alive stays well inside the watchdog.
         keepalive: Duration::from_millis(20),
-        // 300 s of device time = 6 s of wall time: a loaded CI machine never trips it.
-        watchdog_us: Some(300_000_000),
+        // Host time (converted with the fitted clock rate: 500 s of device time at 50x): a
+        // loaded CI machine never trips it.
+        watchdog_us: Some(10_000_000),
         // Generous: a loaded CI machine may not schedule the simulator thread for a while.
         request_timeout: Duration::from_secs(2),
         initial_clock_reads: 8,
@@ -344,7 +345,8 @@ impl Backend for EmulatorBackend {
     fn options(&self) -> CaptureOptions {
         CaptureOptions {
             keepalive: Duration::from_millis(50),
-            // The emulator's clock runs at an unknown multiple of wall time: no watchdog.
+            // The emulator's clock runs at a load-dependent multiple of wall time that may
+            // change after the rate is fitted: no watchdog.
             watchdog_us: Some(0),
             request_timeout: Duration::from_secs(3),
             initial_clock_reads: 4,

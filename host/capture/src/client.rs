@@ -6,13 +6,30 @@
 //! version mismatch (reported by the device, or a frame whose CRC is right but whose content
 //! does not decode), a transport error.
 //!
-//! Every request gets a fresh sequence number; [`Client::request`] writes it and reads until
-//! the response with that number arrives, queueing the events that arrive meanwhile (read them
-//! with [`Client::next_event`]). Responses to other sequence numbers (answers to requests that
-//! timed out earlier) are dropped. Frames that fail to decode are counted and skipped: the
+//! Every request gets a fresh sequence number (from a process-wide counter seeded from the
+//! clock, so a reconnected client never reuses a number an earlier conversation may still have
+//! an answer in flight for); [`Client::request`] writes it and reads until the response with
+//! that number arrives, queueing the events that arrive meanwhile (read them with
+//! [`Client::next_event`]).
+//!
+//! **Re-sends.** A frame lost either way (line noise, a truncated frame) would otherwise cost
+//! the whole response timeout. While no response has arrived, the client re-sends the *same*
+//! frame (same `seq`) every [`Client::resend_interval`] ([`RESEND_INTERVAL`]) until the overall
+//! budget [`Client::request_timeout`] runs out. The device executes a request once and answers
+//! a repeated `seq` from its cache (`docs/protocol.md`, section 3; `firmware/sequencer`,
+//! `on_request`), so re-sending is safe for every request. Every copy is preceded by a lone
+//! `0x00`, which ends whatever partial frame the device holds (a corrupted delimiter would
+//! otherwise glue the copy to garbage); the protocol's decoder skips empty frames.
+//!
+//! **Stale answers.** Re-sends mean a request can be answered more than once, and an answer
+//! can arrive after its request gave up. A response is matched by `seq` only: one with another
+//! `seq` (a duplicate answer to an earlier request, the answer to a request that timed out) is
+//! counted as stray and dropped. Frames that fail to decode are counted and skipped: the
 //! protocol's decoder resynchronises on the next delimiter.
 
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use skinbrdf_protocol::{
@@ -24,13 +41,23 @@ use skinbrdf_session::capture::DeviceIdentity;
 use crate::clock::{host_now_us, ClockRead};
 use crate::transport::{Transport, TransportError};
 
-/// Default time a request waits for its response.
+/// Default time a request waits for its response, all re-sends included: the budget after
+/// which the link counts as failed (and the session re-handshakes). 1.5 s is ~1000 round trips
+/// of a healthy USB link, and 7 copies at [`RESEND_INTERVAL`].
 pub const DEFAULT_REQUEST_TIMEOUT: Duration = Duration::from_millis(1500);
 
-/// Times a request is re-sent (same `seq`) when its response does not arrive in time; the
-/// device answers a repeated `seq` from its cache without executing the request again, so this
-/// is safe for every request (`docs/protocol.md`, section 3).
-pub const DEFAULT_RETRIES: u32 = 2;
+/// Interval between copies of a request whose response has not arrived (same `seq`; the device
+/// answers a repeated `seq` from its cache without executing the request again, so this is safe
+/// for every request, `docs/protocol.md` section 3).
+///
+/// Why 200 ms: a healthy round trip is far shorter (a pseudo-terminal well under 1 ms, USB full
+/// speed 1-2 ms for its 1 ms frames, the rp2040js emulator a few ms), so a copy is almost only
+/// sent when a frame was really lost, and a needless copy costs one duplicate answer that is
+/// dropped. It is short enough that the 1.5 s default budget holds 7 copies: with 20 % of the
+/// frames lost each way plus 10 % truncated (a round trip survives ~55 % of the time) all 7
+/// fail with probability ~0.4 %, where one copy per 1.5 s (the old scheme) failed 45 % of the
+/// time and fell into reconnects.
+pub const RESEND_INTERVAL: Duration = Duration::from_millis(200);
 
 /// Handshake attempts before the device is declared silent (the first `Hello` may be lost
 /// while a USB device finishes enumerating).
@@ -120,10 +147,32 @@ pub struct LinkStats {
     pub frames: u64,
     /// Frames rejected (CRC, COBS, oversized, undecodable).
     pub bad_frames: u64,
-    /// Responses whose sequence number matched no outstanding request.
+    /// Responses whose sequence number matched no outstanding request (duplicate answers to
+    /// re-sent requests, answers that arrived after their request gave up).
     pub stray_responses: u64,
     /// Bytes received.
     pub bytes: u64,
+    /// Requests sent (first copies).
+    pub requests: u64,
+    /// Extra copies of requests whose response was late (same `seq`).
+    pub resends: u64,
+    /// Requests that got no response within their budget.
+    pub timeouts: u64,
+}
+
+/// A fresh request sequence number, unique within this process (wrapping after 2^32).
+///
+/// The counter starts at a clock-derived value, so a new process talking to a device whose
+/// link still holds answers of an earlier conversation is unlikely to reuse their numbers.
+pub fn fresh_seq() -> u32 {
+    static NEXT: OnceLock<AtomicU32> = OnceLock::new();
+    NEXT.get_or_init(|| {
+        // Low bits of the microsecond clock mixed with the process id.
+        let t = host_now_us();
+        let seed = (t as u32) ^ ((t >> 32) as u32) ^ std::process::id().rotate_left(16);
+        AtomicU32::new(seed)
+    })
+    .fetch_add(1, Ordering::Relaxed)
 }
 
 /// Name of a request for messages.
@@ -164,21 +213,19 @@ pub struct Client<T: Transport> {
     decoder: Box<FrameDecoder<MAX_FRAME_LEN>>,
     pending: Vec<u8>,
     events: VecDeque<Event>,
-    next_seq: u32,
     info: Option<DeviceInfo>,
     stats: LinkStats,
     last_frame_error: Option<FrameError>,
-    /// How long a request waits for its response (per attempt).
+    /// How long a request waits for its response, all copies included.
     pub request_timeout: Duration,
-    /// Re-sends of a request whose response is late (same `seq`).
-    pub retries: u32,
+    /// Interval between copies of a request whose response is late (same `seq`).
+    pub resend_interval: Duration,
 }
 
 impl<T: Transport> std::fmt::Debug for Client<T> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Client")
             .field("port", &self.port)
-            .field("next_seq", &self.next_seq)
             .field("stats", &self.stats)
             .finish_non_exhaustive()
     }
@@ -194,12 +241,11 @@ impl<T: Transport> Client<T> {
             decoder: Box::new(FrameDecoder::new()),
             pending: Vec::new(),
             events: VecDeque::new(),
-            next_seq: 1,
             info: None,
             stats: LinkStats::default(),
             last_frame_error: None,
             request_timeout: DEFAULT_REQUEST_TIMEOUT,
-            retries: DEFAULT_RETRIES,
+            resend_interval: RESEND_INTERVAL,
         }
     }
 
@@ -235,13 +281,11 @@ impl<T: Transport> Client<T> {
     pub fn handshake(&mut self) -> Result<DeviceInfo, ClientError> {
         let bytes_before = self.stats.bytes;
         for _ in 0..HANDSHAKE_ATTEMPTS {
-            self.transport.write_all(&[0])?;
-            let body = RequestBody::Hello {
+            // `request` re-sends within the attempt; `Hello` is not cached by the device but
+            // is idempotent, so a copy answered twice is harmless (the second answer is stray).
+            let answer = self.request(RequestBody::Hello {
                 protocol_version: PROTOCOL_VERSION,
-            };
-            let retries = std::mem::replace(&mut self.retries, 0);
-            let answer = self.request(body);
-            self.retries = retries;
+            });
             match answer {
                 Ok(ResponseBody::Hello(info)) => {
                     if info.protocol_version != PROTOCOL_VERSION {
@@ -298,38 +342,51 @@ impl<T: Transport> Client<T> {
         }
     }
 
-    /// Sends a request and waits for its response (events arriving meanwhile are queued).
+    /// Sends a request and waits for its response (events arriving meanwhile are queued),
+    /// re-sending the same frame every [`Client::resend_interval`] until the response arrives
+    /// or [`Client::request_timeout`] has passed since the first copy.
     pub fn request(&mut self, body: RequestBody) -> Result<ResponseBody, ClientError> {
         let name = request_name(&body);
-        let seq = self.next_seq;
-        self.next_seq = self.next_seq.wrapping_add(1);
-        let frame = encode_to_vec(&Request { seq, body }).map_err(|e| ClientError::Unexpected {
-            port: self.port.clone(),
-            request: name,
-            got: format!("cannot encode the request: {e}"),
-        })?;
-        let mut attempt = 0;
+        let seq = fresh_seq();
+        let encoded =
+            encode_to_vec(&Request { seq, body }).map_err(|e| ClientError::Unexpected {
+                port: self.port.clone(),
+                request: name,
+                got: format!("cannot encode the request: {e}"),
+            })?;
+        // A lone delimiter first ends whatever partial frame the device holds (see the module
+        // docs); every copy is written in one piece.
+        let mut frame = Vec::with_capacity(encoded.len() + 1);
+        frame.push(0);
+        frame.extend_from_slice(&encoded);
+        let first = Instant::now();
+        let deadline = first + self.request_timeout;
+        // A zero interval would spin: at least one copy per millisecond.
+        let interval = self.resend_interval.max(Duration::from_millis(1));
+        self.stats.requests += 1;
         self.transport.write_all(&frame)?;
-        let mut deadline = Instant::now() + self.request_timeout;
+        let mut next_copy = first + interval;
+        let mut copies: u32 = 1;
         loop {
             let now = Instant::now();
             if now >= deadline {
-                if attempt >= self.retries {
-                    return Err(ClientError::Timeout {
-                        port: self.port.clone(),
-                        request: name,
-                        timeout_ms: self.request_timeout.as_millis(),
-                    });
-                }
-                attempt += 1;
-                tracing::debug!(seq, attempt, request = name, "late response: re-sending");
-                // A lone delimiter first ends whatever partial frame the device holds.
-                self.transport.write_all(&[0])?;
+                self.stats.timeouts += 1;
+                tracing::debug!(seq, copies, request = name, "no response: giving up");
+                return Err(ClientError::Timeout {
+                    port: self.port.clone(),
+                    request: name,
+                    timeout_ms: self.request_timeout.as_millis(),
+                });
+            }
+            if now >= next_copy {
+                copies += 1;
+                self.stats.resends += 1;
+                tracing::debug!(seq, copies, request = name, "late response: re-sending");
                 self.transport.write_all(&frame)?;
-                deadline = Instant::now() + self.request_timeout;
+                next_copy = now + interval;
                 continue;
             }
-            match self.read_message(deadline - now)? {
+            match self.read_message(next_copy.min(deadline) - now)? {
                 Some(DeviceMessage::Response(r)) if r.seq == seq => {
                     return r.result.map_err(|error| ClientError::Device {
                         port: self.port.clone(),
@@ -339,7 +396,7 @@ impl<T: Transport> Client<T> {
                 }
                 Some(DeviceMessage::Response(r)) => {
                     self.stats.stray_responses += 1;
-                    tracing::debug!(seq = r.seq, "stray response dropped");
+                    tracing::debug!(seq = r.seq, waiting_for = seq, "stale response dropped");
                 }
                 Some(DeviceMessage::Event(e)) => self.events.push_back(e),
                 None => {}
@@ -433,7 +490,7 @@ mod tests {
     /// A scripted device: answers each decoded request with `answer(request)`.
     fn fake_device(
         mut port: crate::transport::MemoryTransport,
-        answer: impl Fn(&Request) -> Vec<Vec<u8>> + Send + 'static,
+        mut answer: impl FnMut(&Request) -> Vec<Vec<u8>> + Send + 'static,
     ) -> std::thread::JoinHandle<()> {
         std::thread::spawn(move || {
             let mut dec: FrameDecoder<MAX_FRAME_LEN> = FrameDecoder::new();
@@ -521,6 +578,111 @@ mod tests {
         assert!(err.to_string().contains("refused Run"), "{err}");
         drop(c);
         t.join().expect("device thread");
+    }
+
+    /// The first copy of every `Ping` goes unanswered (its response "lost"); the second copy
+    /// is answered twice (a duplicate); before answering the next `ReadClock` the device replays
+    /// the last `Ping` answer (a late, stale response). The client must re-send after its
+    /// interval, not after its whole budget, and match responses by `seq` only.
+    #[test]
+    fn lost_responses_are_re_sent_and_stale_answers_dropped() {
+        let (host, dev) = memory_pair();
+        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::<(u32, &str)>::new()));
+        let log = seen.clone();
+        let mut copies = std::collections::HashMap::<u32, u32>::new();
+        let mut last_ping: Option<u32> = None;
+        let t = fake_device(dev, move |req| {
+            let name = request_name(&req.body);
+            log.lock().expect("log").push((req.seq, name));
+            let n = copies.entry(req.seq).or_insert(0);
+            *n += 1;
+            match req.body {
+                RequestBody::Hello { .. } => vec![respond(
+                    req.seq,
+                    Ok(ResponseBody::Hello(info(PROTOCOL_VERSION))),
+                )],
+                RequestBody::Ping if *n == 1 => Vec::new(),
+                RequestBody::Ping => {
+                    last_ping = Some(req.seq);
+                    let pong = respond(req.seq, Ok(ResponseBody::Pong { device_us: 7 }));
+                    vec![pong.clone(), pong]
+                }
+                RequestBody::ReadClock => {
+                    let mut out = Vec::new();
+                    if let Some(p) = last_ping.take() {
+                        out.push(respond(p, Ok(ResponseBody::Pong { device_us: 8 })));
+                    }
+                    out.push(respond(req.seq, Ok(ResponseBody::Clock { device_us: 42 })));
+                    out
+                }
+                _ => vec![respond(req.seq, Err(DeviceError::NoPlan))],
+            }
+        });
+        let mut c = Client::connect(host, Duration::from_secs(5)).expect("connect");
+        c.resend_interval = Duration::from_millis(50);
+        let started = Instant::now();
+        let pong = c.request(RequestBody::Ping).expect("ping");
+        let took = started.elapsed();
+        assert_eq!(pong, ResponseBody::Pong { device_us: 7 });
+        assert_eq!(c.stats().resends, 1, "{:?}", c.stats());
+        assert!(
+            took < Duration::from_secs(1),
+            "re-sent after the interval, not the budget: {took:?}"
+        );
+        // The duplicate Pong and the replayed stale Pong are both dropped; the clock read gets
+        // its own answer, not a Pong (which would be an `Unexpected` error).
+        let clock = c.read_clock().expect("clock");
+        assert_eq!(clock.device_us, 42);
+        assert_eq!(c.stats().stray_responses, 2, "{:?}", c.stats());
+        assert_eq!(c.stats().timeouts, 0);
+        drop(c);
+        t.join().expect("device thread");
+        let seen = seen.lock().expect("log");
+        let pings: Vec<u32> = seen
+            .iter()
+            .filter(|(_, n)| *n == "Ping")
+            .map(|(s, _)| *s)
+            .collect();
+        assert_eq!(pings.len(), 2, "{seen:?}");
+        assert_eq!(pings[0], pings[1], "a copy keeps its seq");
+        let seqs: std::collections::HashSet<u32> = seen.iter().map(|(s, _)| *s).collect();
+        assert_eq!(seqs.len(), seen.len() - 1, "every new request a fresh seq");
+    }
+
+    #[test]
+    fn unanswered_request_is_re_sent_until_the_budget_ends() {
+        let (host, dev) = memory_pair();
+        let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::<u32>::new()));
+        let log = seen.clone();
+        let t = fake_device(dev, move |req| match req.body {
+            RequestBody::Hello { .. } => vec![respond(
+                req.seq,
+                Ok(ResponseBody::Hello(info(PROTOCOL_VERSION))),
+            )],
+            _ => {
+                log.lock().expect("log").push(req.seq);
+                Vec::new()
+            }
+        });
+        let mut c = Client::connect(host, Duration::from_secs(5)).expect("connect");
+        c.request_timeout = Duration::from_millis(500);
+        c.resend_interval = Duration::from_millis(100);
+        let started = Instant::now();
+        let err = c.request(RequestBody::GetStatus).expect_err("silent");
+        let took = started.elapsed();
+        assert!(matches!(err, ClientError::Timeout { .. }), "{err}");
+        assert!(
+            took >= Duration::from_millis(500) && took < Duration::from_millis(1500),
+            "{took:?}"
+        );
+        let stats = c.stats();
+        assert!((3..=5).contains(&stats.resends), "{stats:?}");
+        assert_eq!(stats.timeouts, 1);
+        drop(c);
+        t.join().expect("device thread");
+        let seen = seen.lock().expect("log");
+        assert_eq!(seen.len() as u64, stats.resends + 1);
+        assert!(seen.iter().all(|&s| s == seen[0]), "same seq: {seen:?}");
     }
 
     #[test]

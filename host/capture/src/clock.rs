@@ -18,6 +18,13 @@
 //! ([`MIN_DRIFT_SPAN_US`]), drift is reported as zero and only the offset is fitted.
 //! The residual RMS (microseconds) is reported with the model: it bounds how well an exposure's
 //! device time can be placed on the host clock.
+//!
+//! **Clock rate.** [`device_rate`] is the coarse counterpart of the drift: device microseconds
+//! per host microsecond, fitted over a host-time span of at least [`MIN_RATE_SPAN_US`]. A real
+//! board's rate is 1 within its crystal's tolerance; a simulator run with `--time-scale 20`
+//! spends device time twenty times faster (rate 20). The capture session converts host
+//! durations it sets on the device (the host watchdog) through this rate, so the same settings
+//! hold on a board, a time-scaled simulator and an emulator.
 
 use skinbrdf_session::capture::ClockModel;
 
@@ -135,6 +142,55 @@ pub fn select_reads(reads: &[ClockRead]) -> Vec<ClockRead> {
         .collect()
 }
 
+/// Shortest host-time span (between the first and last midpoint) over which [`device_rate`]
+/// estimates the device clock's rate: 20 ms. A read's midpoint is uncertain by half its round
+/// trip (under 1 ms on USB full speed, tens of microseconds on a pseudo-terminal), so over 20 ms
+/// the rate is known to a few per cent: ample for converting a watchdog of seconds, while a
+/// time-scaled simulator differs from a board by whole factors.
+pub const MIN_RATE_SPAN_US: u64 = 20_000;
+
+/// Host-time span covered by the midpoints of `reads`, microseconds (0 for fewer than 2).
+pub fn host_span_us(reads: &[ClockRead]) -> u64 {
+    let mids = reads
+        .iter()
+        .map(|r| r.host_send_us / 2 + r.host_recv_us / 2);
+    match (mids.clone().min(), mids.max()) {
+        (Some(lo), Some(hi)) => hi - lo,
+        _ => 0,
+    }
+}
+
+/// Device microseconds per host microsecond: least squares of device time on host midpoint over
+/// the reads whose round trip is not an outlier ([`select_reads`]). `None` when those reads span
+/// less than [`MIN_RATE_SPAN_US`] of host time or the fit is not a positive finite rate (a
+/// device clock that does not advance).
+pub fn device_rate(reads: &[ClockRead]) -> Option<f64> {
+    let kept = select_reads(reads);
+    if host_span_us(&kept) < MIN_RATE_SPAN_US {
+        return None;
+    }
+    let first = kept.first()?;
+    let (h0, d0) = (first.host_send_us as i128, first.device_us as i128);
+    let xs: Vec<f64> = kept
+        .iter()
+        .map(|r| ((r.host_send_us as i128 - h0) + (r.host_recv_us as i128 - h0)) as f64 / 2.0)
+        .collect();
+    let ys: Vec<f64> = kept
+        .iter()
+        .map(|r| (r.device_us as i128 - d0) as f64)
+        .collect();
+    let n = xs.len() as f64;
+    let x_mean = xs.iter().sum::<f64>() / n;
+    let y_mean = ys.iter().sum::<f64>() / n;
+    let (mut sxx, mut sxy) = (0.0, 0.0);
+    for (x, y) in xs.iter().zip(&ys) {
+        sxx += (x - x_mean) * (x - x_mean);
+        sxy += (x - x_mean) * (y - y_mean);
+    }
+    let rate = sxy / sxx;
+    (rate.is_finite() && rate > 0.0).then_some(rate)
+}
+
 /// Host Unix time now, in microseconds.
 pub fn host_now_us() -> u64 {
     std::time::SystemTime::now()
@@ -222,6 +278,35 @@ mod tests {
             .collect();
         let m = fit_clock(&reads).expect("fit");
         assert!((m.residual_rms_us - 10.0).abs() < 1.5, "{m:?}");
+    }
+
+    #[test]
+    fn rate_needs_a_host_span() {
+        // Reads 1 ms of host time apart on a device running 20x faster.
+        let reads: Vec<_> = (0..30)
+            .map(|i| {
+                let send = 1_700_000_000_000_000 + 1_000 * i;
+                ClockRead {
+                    host_send_us: send,
+                    device_us: 5_000_000 + 20 * (1_000 * i + 50),
+                    host_recv_us: send + 100,
+                }
+            })
+            .collect();
+        assert_eq!(device_rate(&reads[..10]), None, "9 ms is too short");
+        let rate = device_rate(&reads).expect("29 ms");
+        assert!((rate - 20.0).abs() < 1e-6, "{rate}");
+        assert_eq!(host_span_us(&reads), 29_000);
+        assert_eq!(host_span_us(&reads[..1]), 0);
+    }
+
+    #[test]
+    fn rate_of_a_real_board_is_one() {
+        let reads: Vec<_> = (0..8)
+            .map(|i| read(2_000_000 + 10_000 * i, 1.7e15, 30.0, 400, 0))
+            .collect();
+        let rate = device_rate(&reads).expect("70 ms");
+        assert!((rate - 1.0).abs() < 1e-3, "{rate}");
     }
 
     proptest! {

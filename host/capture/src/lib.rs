@@ -14,7 +14,7 @@ pub mod ports;
 pub mod store;
 pub mod transport;
 
-pub use clock::{fit_clock, ClockError, ClockRead};
+pub use clock::{device_rate, fit_clock, ClockError, ClockRead};
 pub use plan::{load_plan, parse_plan, validate_plan, PlanError};
 pub use ports::{list_ports, PortListing};
 /// The wire protocol crate, re-exported for observers and tests.

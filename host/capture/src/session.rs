@@ -20,6 +20,19 @@
 //! model is refitted over all reads before every write, and every exposure's `host_time_us` is
 //! mapped through the latest model.
 //!
+//! **Watchdog in host time.** The keep-alive cadence is host time, the device's watchdog is
+//! device time, and the two clocks need not run at the same rate (a simulator at
+//! `--time-scale 20` spends twenty device seconds per host second). So
+//! [`CaptureOptions::watchdog_us`] is given in host microseconds and converted to device
+//! microseconds with the clock rate fitted over the initial clock reads
+//! ([`crate::clock::device_rate`], taken over at least [`crate::clock::MIN_RATE_SPAN_US`] of host
+//! time): the watchdog then means the same wall time on a board (rate ~1), a time-scaled
+//! simulator and an emulator.
+//!
+//! **Noisy links.** Each request is re-sent (same `seq`) while its answer is late
+//! ([`crate::client`]); lost records are fetched again in rounds that stop as soon as the
+//! records stop coming, and only rounds that bring nothing count towards giving up.
+//!
 //! **Abort.** When [`CaptureOptions::abort`] is set (Ctrl-C) or the observer declines a group,
 //! the host sends `Abort` (the device releases every output), collects the records taken so
 //! far, writes `capture.json` with `complete: false` and returns [`CaptureError::Aborted`].
@@ -40,8 +53,13 @@ use skinbrdf_session::capture::{
     CAPTURE_FORMAT_VERSION,
 };
 
-use crate::client::{identity, Client, ClientError, DEFAULT_REQUEST_TIMEOUT};
-use crate::clock::{fit_clock, host_now_us, select_reads, ClockError, ClockRead};
+use crate::client::{
+    identity, Client, ClientError, LinkStats, DEFAULT_REQUEST_TIMEOUT, RESEND_INTERVAL,
+};
+use crate::clock::{
+    device_rate, fit_clock, host_now_us, host_span_us, select_reads, ClockError, ClockRead,
+    MIN_RATE_SPAN_US,
+};
 use crate::plan::{validate_plan, PlanError};
 use crate::store::{CaptureWriter, StoreError};
 use crate::transport::{SerialTransport, Transport, TransportError};
@@ -97,18 +115,36 @@ impl<T: Transport + 'static> Connector for OnceConnector<T> {
     }
 }
 
+/// Default host watchdog, host microseconds: 10 s, the firmware's own default on a board
+/// (`skinbrdf_sequencer::DEFAULT_WATCHDOG_US`), long enough for a USB re-enumeration and a few
+/// request budgets, short enough that a crashed host does not leave a session shooting.
+pub const DEFAULT_WATCHDOG_US: u64 = 10_000_000;
+
+/// Fetch rounds in a row that bring no new record before the link counts as failed.
+pub const FETCH_ROUNDS_WITHOUT_PROGRESS: u32 = 3;
+
+/// Pause between the extra clock reads that stretch the initial reads over
+/// [`MIN_RATE_SPAN_US`] of host time (so the clock rate can be fitted): a few reads per
+/// millisecond would add nothing but traffic.
+const RATE_READ_PAUSE: Duration = Duration::from_millis(2);
+
 /// Settings of a capture run.
 #[derive(Debug, Clone)]
 pub struct CaptureOptions {
     /// Session directory for `capture.json` (`None`: keep the record in memory only).
     pub out_dir: Option<PathBuf>,
-    /// How long a request waits for its response.
+    /// How long a request waits for its response, all re-sends included.
     pub request_timeout: Duration,
-    /// Clock reads before the session starts (more reads: a better initial offset).
+    /// Interval between copies of a request whose response is late (same `seq`).
+    pub resend_interval: Duration,
+    /// Clock reads before the session starts (more reads: a better initial offset). When a
+    /// watchdog is set, reads continue until they span [`MIN_RATE_SPAN_US`] of host time.
     pub initial_clock_reads: u32,
     /// Interval of `GetStatus` keep-alives (also clock reads) while waiting for events.
     pub keepalive: Duration,
-    /// Host watchdog to set on the device, device microseconds (`None`: leave the device's).
+    /// Host watchdog, **host** microseconds (wall time without a valid request after which the
+    /// device stops a running session; 0 disables it; `None`: leave the device's own, which is
+    /// in device time). Converted to device microseconds with the fitted clock rate.
     pub watchdog_us: Option<u64>,
     /// How long to keep trying to reconnect after the link fails.
     pub reconnect_window: Duration,
@@ -127,9 +163,10 @@ impl Default for CaptureOptions {
         Self {
             out_dir: None,
             request_timeout: DEFAULT_REQUEST_TIMEOUT,
+            resend_interval: RESEND_INTERVAL,
             initial_clock_reads: 16,
             keepalive: Duration::from_millis(500),
-            watchdog_us: None,
+            watchdog_us: Some(DEFAULT_WATCHDOG_US),
             reconnect_window: Duration::from_secs(30),
             reconnect_pause: Duration::from_millis(100),
             flash_trigger_pulse_us: 1_000,
@@ -182,7 +219,7 @@ pub struct RunSummary {
     pub elapsed_s: f64,
     /// Exposures recorded.
     pub exposures: usize,
-    /// Successful reconnects.
+    /// Successful reconnects (handshakes again after a link failure).
     pub reconnects: u32,
     /// Records the device resent on `FetchRecords` (missed live: link down, queue overflow).
     pub fetched: u32,
@@ -192,6 +229,17 @@ pub struct RunSummary {
     pub bad_frames: u64,
     /// Requests sent (handshakes and clock reads excluded).
     pub requests: u64,
+    /// Extra copies of late requests (same `seq`), handshakes and clock reads included.
+    pub resends: u64,
+    /// Requests that got no answer within their budget (each led to a re-handshake).
+    pub timeouts: u64,
+    /// Answers dropped as stale or duplicate (their `seq` was not the one awaited).
+    pub stale_responses: u64,
+    /// Device watchdog set, device microseconds (0: none or disabled).
+    pub watchdog_device_us: u64,
+    /// Device microseconds per host microsecond, fitted over the initial clock reads (0: not
+    /// fitted).
+    pub device_rate: f64,
 }
 
 /// An observer that continues every group and reports nothing.
@@ -356,7 +404,8 @@ struct Runner<'a, C: Connector, O: CaptureObserver> {
     aborting: bool,
     summary: RunSummary,
     started: Instant,
-    bad_frames_closed: u64,
+    /// Link counters of clients closed so far.
+    closed_stats: LinkStats,
 }
 
 /// Runs `plan` on the device behind `connector`, writing `capture.json` after every exposure
@@ -375,7 +424,7 @@ pub fn run_capture<C: Connector, O: CaptureObserver>(
     };
     let mut connector = connector;
     let transport = connector.connect().map_err(ClientError::from)?;
-    let client = Client::connect(transport, options.request_timeout)?;
+    let client = open_client(transport, options)?;
     let device = client
         .info()
         .map(identity)
@@ -413,12 +462,39 @@ pub fn run_capture<C: Connector, O: CaptureObserver>(
         aborting: false,
         summary: RunSummary::default(),
         started: Instant::now(),
-        bad_frames_closed: 0,
+        closed_stats: LinkStats::default(),
     };
     let result = runner.run(&proto_plan);
     let summary = runner.finish_summary();
+    tracing::info!(
+        exposures = summary.exposures,
+        elapsed_s = summary.elapsed_s,
+        requests = summary.requests,
+        resends = summary.resends,
+        timeouts = summary.timeouts,
+        reconnects = summary.reconnects,
+        fetched = summary.fetched,
+        duplicates = summary.duplicates,
+        stale_responses = summary.stale_responses,
+        bad_frames = summary.bad_frames,
+        watchdog_device_us = summary.watchdog_device_us,
+        device_rate = summary.device_rate,
+        "capture run finished"
+    );
     runner.observer.finished(&summary);
     result
+}
+
+/// Handshakes on `transport` with the request budget and re-send interval of `options`.
+fn open_client(
+    transport: Box<dyn Transport>,
+    options: &CaptureOptions,
+) -> Result<Client<Box<dyn Transport>>, ClientError> {
+    let mut client = Client::new(transport);
+    client.request_timeout = options.request_timeout;
+    client.resend_interval = options.resend_interval;
+    client.handshake()?;
+    Ok(client)
 }
 
 impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
@@ -433,16 +509,28 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
     /// Drops the client, keeping its counters.
     fn close_client(&mut self) {
         if let Some(c) = self.client.take() {
-            self.bad_frames_closed += c.stats().bad_frames;
+            self.keep_stats(c.stats());
         }
     }
 
+    fn keep_stats(&mut self, s: LinkStats) {
+        let k = &mut self.closed_stats;
+        k.bad_frames += s.bad_frames;
+        k.resends += s.resends;
+        k.timeouts += s.timeouts;
+        k.stray_responses += s.stray_responses;
+    }
+
     fn finish_summary(&mut self) -> RunSummary {
+        let live = self.client.as_ref().map(Client::stats).unwrap_or_default();
+        let k = self.closed_stats;
         RunSummary {
             elapsed_s: self.started.elapsed().as_secs_f64(),
             exposures: self.shots(),
-            bad_frames: self.bad_frames_closed
-                + self.client.as_ref().map_or(0, |c| c.stats().bad_frames),
+            bad_frames: k.bad_frames + live.bad_frames,
+            resends: k.resends + live.resends,
+            timeouts: k.timeouts + live.timeouts,
+            stale_responses: k.stray_responses + live.stray_responses,
             ..self.summary
         }
     }
@@ -485,24 +573,28 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                 return self.abort();
             }
             let gi = u32::try_from(g).unwrap_or(u32::MAX);
-            self.run_end = None;
             self.with_reconnect(|r| {
                 match r.request(RequestBody::Run {
                     first_group: gi,
                     last_group: gi,
                 }) {
-                    Ok(_) => Ok(()),
+                    Ok(_) => {}
                     // A retried `Run` whose first copy reached the device: it runs (or ran).
                     Err(ClientError::Device {
                         error: DeviceError::Busy,
                         ..
-                    }) => Ok(()),
+                    }) => {}
                     Err(ClientError::Device {
                         error: DeviceError::BadGroupRange { next_group, .. },
                         ..
-                    }) if next_group > gi => Ok(()),
-                    Err(e) => Err(e.into()),
+                    }) if next_group > gi => {}
+                    Err(e) => return Err(e.into()),
                 }
+                // Only now: a reconnect while `Run` was unanswered may have read a status from
+                // before the run (the previous group's end). A run that already ended is seen
+                // by the next keep-alive's status.
+                r.run_end = None;
+                Ok(())
             })?;
             match self.wait_run()? {
                 RunEnd::Groups { .. } => self.observer.group_done(g),
@@ -553,15 +645,63 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                 Err(e) => return Err(e.into()),
             }
         }
-        if let Some(timeout_us) = self.options.watchdog_us {
-            self.request(RequestBody::SetWatchdog { timeout_us })?;
-        }
-        for _ in 0..self.options.initial_clock_reads.max(1) {
+        // Clock reads first: the watchdog is converted to device time with the rate they give.
+        let wants_rate = self.options.watchdog_us.is_some_and(|w| w > 0);
+        let first = self.reads.len();
+        let planned = self.options.initial_clock_reads.max(1);
+        // Bound the stretching: at RATE_READ_PAUSE per read this is far beyond the span.
+        let limit =
+            planned.saturating_add(u32::try_from(MIN_RATE_SPAN_US / 1000).unwrap_or(u32::MAX));
+        for n in 1..=limit {
             let read = self.client()?.read_clock()?;
             self.reads.push(read);
+            if n >= planned {
+                if !wants_rate || host_span_us(&self.reads[first..]) >= MIN_RATE_SPAN_US {
+                    break;
+                }
+                std::thread::sleep(RATE_READ_PAUSE);
+            }
+        }
+        if let Some(host_us) = self.options.watchdog_us {
+            let timeout_us = self.device_watchdog_us(host_us);
+            self.request(RequestBody::SetWatchdog { timeout_us })?;
+            self.summary.watchdog_device_us = timeout_us;
         }
         self.drain_queued()?;
         Ok(())
+    }
+
+    /// A host-time watchdog in device microseconds, through the fitted clock rate.
+    fn device_watchdog_us(&mut self, host_us: u64) -> u64 {
+        if host_us == 0 {
+            return 0;
+        }
+        let rate = match device_rate(&self.reads) {
+            Some(rate) => rate,
+            None => {
+                self.observer.log(
+                    LogLevel::Warn,
+                    "the clock reads span too little host time to fit the device clock's rate: \
+                     setting the watchdog as if device and host clocks ran at the same rate",
+                );
+                1.0
+            }
+        };
+        self.summary.device_rate = rate;
+        let device_us = (host_us as f64 * rate).round();
+        // At least 1 us: 0 would disable the watchdog.
+        let device_us = if device_us >= u64::MAX as f64 {
+            u64::MAX
+        } else {
+            (device_us as u64).max(1)
+        };
+        tracing::info!(
+            host_ms = host_us / 1000,
+            device_ms = device_us / 1000,
+            rate,
+            "host watchdog in device time"
+        );
+        device_us
     }
 
     fn status(&mut self) -> Result<Status, ClientError> {
@@ -647,19 +787,13 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         Ok(())
     }
 
-    /// Makes sure every record below `n` is held, fetching what is missing.
+    /// Makes sure every record below `n` is held, fetching what is missing. A round waits
+    /// for the records that follow `Fetching` until they stop coming (no record for one re-send
+    /// interval) or the request budget ends; a round that brings nothing new counts towards
+    /// [`FETCH_ROUNDS_WITHOUT_PROGRESS`], after which the link counts as failed.
     fn ensure_records(&mut self, n: u32) -> Result<(), CaptureError> {
-        let mut tries = 0;
+        let mut fruitless = 0;
         while self.next_index() < n {
-            tries += 1;
-            if tries > 3 {
-                return Err(ClientError::Timeout {
-                    port: self.client()?.port().to_string(),
-                    request: "FetchRecords (records did not arrive)",
-                    timeout_ms: self.options.request_timeout.as_millis(),
-                }
-                .into());
-            }
             let from_index = self.next_index();
             match self.request(RequestBody::FetchRecords { from_index })? {
                 ResponseBody::Fetching { count } => {
@@ -668,11 +802,34 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                 }
                 other => return Err(self.unexpected("FetchRecords", &other).into()),
             }
+            let quiet = self.options.resend_interval.max(Duration::from_millis(1));
             let deadline = Instant::now() + self.options.request_timeout;
-            while self.next_index() < n && Instant::now() < deadline {
-                let left = deadline.saturating_duration_since(Instant::now());
+            let mut quiet_until = Instant::now() + quiet;
+            while self.next_index() < n {
+                let now = Instant::now();
+                if now >= deadline || now >= quiet_until {
+                    break;
+                }
+                let left = deadline.min(quiet_until) - now;
                 if let Some(e) = self.client()?.next_event(left)? {
+                    let record = matches!(e, Event::Record(_));
                     self.handle_event(e)?;
+                    if record {
+                        quiet_until = Instant::now() + quiet;
+                    }
+                }
+            }
+            if self.next_index() > from_index {
+                fruitless = 0;
+            } else {
+                fruitless += 1;
+                if fruitless >= FETCH_ROUNDS_WITHOUT_PROGRESS {
+                    return Err(ClientError::Timeout {
+                        port: self.client()?.port().to_string(),
+                        request: "FetchRecords (records did not arrive)",
+                        timeout_ms: self.options.request_timeout.as_millis(),
+                    }
+                    .into());
                 }
             }
         }
@@ -791,7 +948,25 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         }
     }
 
+    /// Re-establishes the link after `error` and catches up with the device (status, missed
+    /// records). A link failure while catching up (a noisy line) is another loss: handled the
+    /// same way, within the same reconnect window.
     fn reconnect(&mut self, error: ClientError) -> Result<(), CaptureError> {
+        let deadline = Instant::now() + self.options.reconnect_window;
+        let mut error = error;
+        loop {
+            self.reestablish(error, deadline)?;
+            match self.catch_up() {
+                Ok(()) => return Ok(()),
+                Err(CaptureError::Client(e)) if is_link_failure(&e) => error = e,
+                Err(e) => return Err(e),
+            }
+        }
+    }
+
+    /// Handshakes again (on the same link after silence, else on a reopened one) before
+    /// `deadline`.
+    fn reestablish(&mut self, error: ClientError, deadline: Instant) -> Result<(), CaptureError> {
         self.observer.link_lost(&error);
         // A silent link (timeouts) may come back on its own: handshake again on it first. A
         // dead link is closed before reopening (a serial port is opened exclusively).
@@ -808,7 +983,6 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             self.close_client();
             None
         };
-        let deadline = Instant::now() + self.options.reconnect_window;
         let mut last_error = error.to_string();
         loop {
             if self.options.abort.load(Ordering::SeqCst) {
@@ -833,7 +1007,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                     }
                     Err(e @ ClientError::VersionMismatch { .. }) => return Err(e.into()),
                     // The link is dead: fall through and reopen it.
-                    Err(ClientError::Transport(_)) => {}
+                    Err(ClientError::Transport(_)) => self.keep_stats(c.stats()),
                     Err(e) => {
                         last_error = e.to_string();
                         keep = Some(c);
@@ -842,7 +1016,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                 }
             }
             match self.connector.connect() {
-                Ok(t) => match Client::connect(t, self.options.request_timeout) {
+                Ok(t) => match open_client(t, self.options) {
                     Ok(c) => {
                         self.client = Some(c);
                         break;
@@ -854,6 +1028,12 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             }
             std::thread::sleep(self.options.reconnect_pause);
         }
+        self.summary.reconnects += 1;
+        Ok(())
+    }
+
+    /// After a reconnect: reads the status and fetches every record missed meanwhile.
+    fn catch_up(&mut self) -> Result<(), CaptureError> {
         let before = self.next_index();
         let status = self.status()?;
         self.drain_queued()?;
@@ -861,7 +1041,6 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         if self.run_end.is_none() && status.state != SessionState::Running {
             self.run_end = Some(run_end_from_status(&status));
         }
-        self.summary.reconnects += 1;
         self.observer.reconnected(self.next_index() - before);
         Ok(())
     }
