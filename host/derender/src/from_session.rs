@@ -13,16 +13,18 @@
 //! * **geometry**: the scan (units from `session.toml`, validated and repaired), or a
 //!   tessellated sphere/cylinder at about [`SHAPE_EDGE_M`] edge length;
 //! * **masks**: a per-image user mask (`images[].mask`), and the printed targets of the
-//!   headdress, the reference structure and the flash projected into each image (each tag's
-//!   square grown by [`TARGET_MASK_GROWTH`] to cover its white border).
+//!   headdress, the reference structure and the flash projected into each image
+//!   ([`target_depths`]: each printed square with its white ring, plus
+//!   [`TARGET_MASK_MARGIN_PX`]); a target masks a pixel only where it lies in front of the
+//!   surface the pixel sees (a target behind the head hides nothing).
 
 use std::path::Path;
 use std::time::Instant;
 
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 use serde::Serialize;
-use skinbrdf_core::{CameraModel, Pose};
-use skinbrdf_mesh::{load_mesh, LengthUnit, LoadOptions, MeshReport};
+use skinbrdf_core::Pose;
+use skinbrdf_mesh::{load_mesh, CameraRays, LengthUnit, LoadOptions, MeshReport};
 use skinbrdf_session::{GeometrySpec, ImageRole, Session, Target, Truth};
 
 use crate::geometry::{Geometry, Roi};
@@ -35,9 +37,6 @@ use crate::{truth_error, DerenderConfig, DerenderError};
 /// Edge length of tessellated ideal shapes (1 mm: the sagitta error on an 8 cm sphere is
 /// 1.6 µm, far below any effect on D or the normal).
 pub const SHAPE_EDGE_M: f64 = 0.001;
-/// A tag36h11 tag's printed white border adds one cell of eight each side: 10/8 = 1.25; 1.4
-/// leaves a margin for pose error.
-pub const TARGET_MASK_GROWTH: f64 = 1.4;
 
 /// Which poses to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
@@ -142,61 +141,106 @@ pub fn session_geometry(
     ))
 }
 
-/// Rasterizes the projected target squares into a mask (true = on a target).
-fn target_mask(
-    camera: &CameraModel,
+/// Half extent of a printed tag36h11 target in units of half its black square: the code's
+/// 8 x 8 cells (black border included) plus the one-cell white ring each side, 10/8. The ring
+/// is part of the printed target (the detector needs it), so it is masked with the square.
+pub const TARGET_PRINT_HALF_EXTENT: f64 = 1.25;
+/// Pixels added around each projected printed target (white ring included). Three parts, each
+/// about a pixel at the default framing (0.37 mm per pixel, 25 mm tags):
+///
+/// * **pose uncertainty**: estimated head and camera poses reproject the targets' corners to
+///   within ~0.5–1 px (`docs/benchmarks-poses.md`), the layout's own error adds to that;
+/// * **blur and the pixel footprint**: a pixel whose footprint (half-diagonal 0.71 px) or the
+///   lens blur reaches the paper mixes paper into skin;
+/// * **paper trim**: the paper may extend a quarter cell beyond the white ring (0.8 mm, ~2 px
+///   at the default framing; the synthetic sessions print it so).
+///
+/// The synthetic test `no_kept_sample_sees_a_printed_target` checks the sum against the truth
+/// masks (pixels touching any printed target, paper included).
+pub const TARGET_MASK_MARGIN_PX: f64 = 3.0;
+
+/// Rasterizes the projected printed targets (square and white ring, [`TARGET_PRINT_HALF_EXTENT`],
+/// grown by [`TARGET_MASK_MARGIN_PX`]) into a per-pixel distance from the camera centre to the
+/// nearest target along the pixel's ray, metres (`f32::INFINITY` where no target projects).
+///
+/// The distance is where the pixel's ray meets the target's plane, clamped to the range of
+/// distances of the target's (grown) corners (a ray nearly parallel to the plane, or a pixel in
+/// the margin, gets a distance within the target's own). Derendering drops a pixel as
+/// `on_target` only when that distance is not behind the surface it sees
+/// ([`crate::image::TARGET_DEPTH_TOL_M`]): a target on the far side of the head projects onto the forehead
+/// but hides none of it.
+pub fn target_depths(
+    rays: &CameraRays,
     quads: &[(Pose, &Target)],
     width: u32,
     height: u32,
-) -> Vec<bool> {
-    let mut mask = vec![false; width as usize * height as usize];
+) -> Vec<f32> {
+    let camera = rays.camera();
+    let mut depth = vec![f32::INFINITY; width as usize * height as usize];
     for (cam_from_layout, t) in quads {
         let c = t.centre();
-        let pts: Option<Vec<DVec2>> = t
+        let corners: [DVec3; 4] = t
             .corners_m
-            .iter()
-            .map(|p| {
-                camera.project(cam_from_layout.transform_point(c + (*p - c) * TARGET_MASK_GROWTH))
-            })
-            .collect();
+            .map(|p| cam_from_layout.transform_point(c + (p - c) * TARGET_PRINT_HALF_EXTENT));
+        let pts: Option<Vec<DVec2>> = corners.iter().map(|p| camera.project(*p)).collect();
         let Some(pts) = pts else { continue };
-        let lo = pts
-            .iter()
-            .fold(DVec2::splat(f64::INFINITY), |a, p| a.min(*p));
-        let hi = pts
-            .iter()
-            .fold(DVec2::splat(f64::NEG_INFINITY), |a, p| a.max(*p));
-        let x0 = lo.x.floor().max(0.0) as u32;
-        let y0 = lo.y.floor().max(0.0) as u32;
-        let x1 = (hi.x.ceil().min(width as f64 - 1.0)).max(-1.0);
-        let y1 = (hi.y.ceil().min(height as f64 - 1.0)).max(-1.0);
-        if x1 < 0.0 || y1 < 0.0 {
+        let centre_cam = cam_from_layout.transform_point(c);
+        let normal_cam = (corners[1] - corners[0]).cross(corners[3] - corners[0]);
+        let (d_lo, d_hi) = corners.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), p| {
+            (lo.min(p.length()), hi.max(p.length()))
+        });
+        // Orientation of the projected quad (its edges' inward side).
+        let area2: f64 = (0..4).map(|k| pts[k].perp_dot(pts[(k + 1) % 4])).sum();
+        if area2 == 0.0 || !area2.is_finite() {
             continue;
         }
+        let orient = area2.signum();
+        let m = TARGET_MASK_MARGIN_PX;
+        let lo = pts
+            .iter()
+            .fold(DVec2::splat(f64::INFINITY), |a, p| a.min(*p))
+            - m;
+        let hi = pts
+            .iter()
+            .fold(DVec2::splat(f64::NEG_INFINITY), |a, p| a.max(*p))
+            + m;
+        if hi.x < 0.0 || hi.y < 0.0 || lo.x > width as f64 - 1.0 || lo.y > height as f64 - 1.0 {
+            continue;
+        }
+        let x0 = lo.x.ceil().max(0.0) as u32;
+        let y0 = lo.y.ceil().max(0.0) as u32;
+        let x1 = hi.x.floor().min(width as f64 - 1.0) as u32;
+        let y1 = hi.y.floor().min(height as f64 - 1.0) as u32;
+        // Inside the quad grown by m: no edge has the point more than m outside it.
         let inside = |q: DVec2| {
-            let mut sign = 0.0f64;
-            for k in 0..4 {
+            (0..4).all(|k| {
                 let a = pts[k];
-                let b = pts[(k + 1) % 4];
-                let cr = (b - a).perp_dot(q - a);
-                if cr != 0.0 {
-                    if sign != 0.0 && cr.signum() != sign {
-                        return false;
-                    }
-                    sign = cr.signum();
-                }
-            }
-            true
+                let e = pts[(k + 1) % 4] - a;
+                let len = e.length();
+                len > 0.0 && orient * e.perp_dot(q - a) / len >= -m
+            })
         };
-        for y in y0..=y1 as u32 {
-            for x in x0..=x1 as u32 {
-                if inside(DVec2::new(x as f64, y as f64)) {
-                    mask[(y * width + x) as usize] = true;
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let q = DVec2::new(x as f64, y as f64);
+                if !inside(q) {
+                    continue;
                 }
+                let d = rays.pixel_ray(q).map_or(d_lo, |r| {
+                    let den = r.dot(normal_cam);
+                    let t = centre_cam.dot(normal_cam) / den;
+                    if t.is_finite() && t > 0.0 {
+                        t.clamp(d_lo, d_hi)
+                    } else {
+                        d_lo
+                    }
+                });
+                let cell = &mut depth[(y * width + x) as usize];
+                *cell = cell.min(d as f32);
             }
         }
     }
-    mask
+    depth
 }
 
 /// Resolves every input from the session (and `truth.json` where allowed).
@@ -458,6 +502,7 @@ pub fn derender_session(
         session_inputs(session, truth.as_ref(), opts)?;
     let (geom, mesh_report, mesh_load_s) = session_geometry(session, cfg)?;
     let f = &session.file;
+    let camera_rays = CameraRays::new(&inputs.camera);
     let world_from_flash = f
         .known
         .world_from_flash
@@ -502,7 +547,7 @@ pub fn derender_session(
                 if let Some(wff) = world_from_flash {
                     quads.extend(f.flash.targets.iter().map(|t| (cam_from_world * wff, t)));
                 }
-                Some(target_mask(&inputs.camera, &quads, img.width, img.height))
+                Some(target_depths(&camera_rays, &quads, img.width, img.height))
             }
             _ => None,
         };

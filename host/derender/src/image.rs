@@ -5,8 +5,9 @@
 //! 1. **Which pixels.** The triangles that reach into the region are projected into the image
 //!    (through the lens distortion, [`region_pixels`]); only pixel centres inside one of their
 //!    bounding boxes, grown by [`REGION_MARGIN_PX`], get rays — no ray is spent on pixels that
-//!    cannot see the region. Pixels off the user mask or on a target (when masks are given)
-//!    are dropped before any ray.
+//!    cannot see the region. Pixels off the user mask (when given) are dropped before any ray.
+//!    Pixels under a printed target's projection are traced and dropped when the target lies
+//!    in front of the surface point (within [`TARGET_DEPTH_TOL_M`]) or the ray misses the scan.
 //! 2. **Ray.** The pixel centre is undistorted with the camera's table
 //!    ([`skinbrdf_mesh::CameraRays`]: exact nodes every 8 px, bilinear, one Newton step; equal
 //!    to `CameraModel::pixel_ray` within 1e-9 rad); the ray moves to the head frame by
@@ -38,6 +39,11 @@ use crate::DerenderConfig;
 
 /// Pixels added around the projected region's bounding box (vertex spacing and rounding).
 pub const BBOX_MARGIN_PX: f64 = 3.0;
+/// A printed target hides a pixel's surface point unless it lies at least this far behind it
+/// along the pixel's ray, metres: head pose, target layout and scan registration are good to
+/// about a millimetre; 5 mm keeps a wide margin, while a target on the far side of the head
+/// (tens of millimetres and more behind the forehead) never masks the forehead.
+pub const TARGET_DEPTH_TOL_M: f64 = 0.005;
 /// Offset of a shadow ray's origin along the normal: well above f32 resolution at a metre
 /// (0.1 µm) and below any geometry that matters.
 pub const SHADOW_OFFSET_M: f64 = 1e-5;
@@ -68,8 +74,12 @@ pub struct Measurement<'a> {
     pub world_from_head: Pose,
     /// User mask of the region (true = use), row-major; `None` = no user mask.
     pub mask: Option<&'a [bool]>,
-    /// Pixels on printed targets (true = on a target); `None` = unknown.
-    pub targets: Option<&'a [bool]>,
+    /// Printed targets: per pixel, the distance from the camera centre to the nearest target
+    /// along the pixel's ray, metres (`f32::INFINITY` = no target projects there; 0 = the
+    /// pixel is on a target whatever lies behind it); `None` = unknown. A pixel is dropped as
+    /// `on_target` when the target is not behind the surface it sees by more than
+    /// [`TARGET_DEPTH_TOL_M`] (see `from_session::target_depths`).
+    pub targets: Option<&'a [f32]>,
 }
 
 /// Why pixels were dropped, and how many were kept.
@@ -79,7 +89,8 @@ pub struct FilterCounts {
     pub considered: u64,
     /// Outside the user mask.
     pub off_mask: u64,
-    /// On a printed target.
+    /// On a printed target that lies in front of the surface point (or the ray misses the
+    /// scan, or has no camera ray).
     pub on_target: u64,
     /// Ray hit nothing.
     pub no_surface: u64,
@@ -309,7 +320,6 @@ pub fn derender_image(
 enum PixelState {
     Outside,
     OffMask,
-    OnTarget,
     NoRay,
     Traced,
 }
@@ -364,8 +374,6 @@ pub fn derender_image_with_rays(
                 let idx = y as usize * w + x as usize;
                 srow[k] = if m.mask.is_some_and(|mk| !mk[idx]) {
                     PixelState::OffMask
-                } else if m.targets.is_some_and(|t| t[idx]) {
-                    PixelState::OnTarget
                 } else if let Some(d_cam) = rays.pixel_ray(DVec2::new(x as f64, y as f64)) {
                     drow[k] = head_from_camera.transform_vector(d_cam).as_vec3();
                     PixelState::Traced
@@ -394,20 +402,39 @@ pub fn derender_image_with_rays(
                 match srow[k] {
                     PixelState::Outside => continue,
                     PixelState::OffMask => c.off_mask += 1,
-                    PixelState::OnTarget => c.on_target += 1,
-                    PixelState::NoRay => c.no_ray += 1,
-                    PixelState::Traced => {}
+                    PixelState::NoRay | PixelState::Traced => {}
                 }
                 c.considered += 1;
-                if srow[k] != PixelState::Traced {
+                if srow[k] == PixelState::OffMask {
                     continue;
                 }
                 let idx = y as usize * w + x as usize;
+                // The nearest printed target along the ray, if any.
+                let target_m = m.targets.map_or(f32::INFINITY, |t| t[idx]);
+                if srow[k] == PixelState::NoRay {
+                    if target_m.is_finite() {
+                        c.on_target += 1;
+                    } else {
+                        c.no_ray += 1;
+                    }
+                    continue;
+                }
+                let hidden_by_target = |surface_m: f64| {
+                    target_m.is_finite() && f64::from(target_m) <= surface_m + TARGET_DEPTH_TOL_M
+                };
                 let Some(hit) = hrow[k] else {
+                    if target_m.is_finite() {
+                        c.on_target += 1;
+                        continue;
+                    }
                     c.no_surface += 1;
                     continue;
                 };
                 let d_ray = drow[k].as_dvec3();
+                if hidden_by_target(f64::from(hit.t_m) * d_ray.length()) {
+                    c.on_target += 1;
+                    continue;
+                }
                 let d = d_ray.normalize();
                 let ng = geom
                     .mesh

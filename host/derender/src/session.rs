@@ -49,8 +49,10 @@ pub struct OwnedImage {
     pub saturated: Vec<bool>,
     /// Optional user mask (true = use).
     pub mask: Option<Vec<bool>>,
-    /// Optional target mask (true = on a target).
-    pub targets: Option<Vec<bool>>,
+    /// Optional printed-target depths: distance from the camera centre to the nearest printed
+    /// target along each pixel's ray, metres (`f32::INFINITY` = none; see
+    /// [`crate::image::Measurement::targets`]).
+    pub targets: Option<Vec<f32>>,
 }
 
 impl OwnedImage {
@@ -273,7 +275,9 @@ pub fn derender_with_loader(
     times.rays_s = rays_s;
     times.total_s =
         start.elapsed().as_secs_f64() + times.bvh_s + times.normals_s + times.convexity_s;
-    let primary_rays = counts.considered - counts.off_mask - counts.on_target - counts.no_ray;
+    // Pixels under a target's projection are traced too (the target hides them only when it lies
+    // in front of the surface their ray meets).
+    let primary_rays = counts.considered - counts.off_mask - counts.no_ray;
     Ok(DerenderReport {
         samples,
         counts,

@@ -241,7 +241,11 @@ fn saturation_floor_and_masks_are_counted() {
     let n = img.rgb.len();
     img.saturated = (0..n).map(|i| i % 7 == 0).collect();
     img.mask = Some((0..n).map(|i| i % 5 != 0).collect());
-    img.targets = Some((0..n).map(|i| i % 11 == 0).collect());
+    img.targets = Some(
+        (0..n)
+            .map(|i| if i % 11 == 0 { 0.0 } else { f32::INFINITY })
+            .collect(),
+    );
     let mut inputs = s.inputs.clone();
     inputs.calibration = CalibrationInput::Known(C_TRUE);
     inputs.measurements.truncate(1);
