@@ -36,6 +36,8 @@ use serde::{Deserialize, Serialize};
 pub const PARITY_REL_TOL: f64 = 1e-6;
 /// Relative agreement of standard errors with netlib loess (exact statistics).
 pub const PARITY_SE_REL_TOL: f64 = 1e-3;
+/// Terms of the local quadratic in three predictors (`n_terms(3)`), the most there are.
+const MAX_TERMS: usize = 10;
 /// Eigenvalue cut-off of the local normal equations, relative to the largest.
 const LOCAL_RCOND: f64 = 1e-10;
 
@@ -311,10 +313,10 @@ impl Loess {
         let (idx, d2, h) = self.neighbours(q)?;
         let d = self.dims;
         let p = n_terms(d);
-        let mut xtwx = DMatrix::<f64>::zeros(p, p);
-        let mut b = vec![0.0; p];
-        let mut rows = Vec::with_capacity(idx.len());
-        let mut ws = Vec::with_capacity(idx.len());
+        // Upper triangle of X^T W X, and each neighbour's weight and basis row, on the stack
+        // (no allocation per neighbour: a span of 0.2 of 20k samples is 4,000 neighbours).
+        let mut acc = [[0.0f64; MAX_TERMS]; MAX_TERMS];
+        let mut rows: Vec<(usize, f64, [f64; MAX_TERMS])> = Vec::with_capacity(idx.len());
         for (&j, &dd) in idx.iter().zip(&d2) {
             let r = dd.sqrt() / h;
             if r >= 1.0 {
@@ -324,23 +326,20 @@ impl Loess {
             let w = t * t * t;
             let pj = &self.points[j];
             let u: [f64; 3] = std::array::from_fn(|a| (pj[a] - q[a]) / h);
+            let mut b = [0.0; MAX_TERMS];
             basis(d, &u, &mut b);
             for a in 0..p {
+                let wb = w * b[a];
                 for c in a..p {
-                    xtwx[(a, c)] += w * b[a] * b[c];
+                    acc[a][c] += wb * b[c];
                 }
             }
-            rows.push((j, b.clone()));
-            ws.push(w);
+            rows.push((j, w, b));
         }
         if rows.len() < p {
             return None;
         }
-        for a in 0..p {
-            for c in 0..a {
-                xtwx[(a, c)] = xtwx[(c, a)];
-            }
-        }
+        let xtwx = DMatrix::<f64>::from_fn(p, p, |a, c| acc[a.min(c)][a.max(c)]);
         // Solve X^T W X a = e1 by a truncated eigen-decomposition.
         let eig = xtwx.symmetric_eigen();
         let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
@@ -358,8 +357,12 @@ impl Loess {
         let mut val = 0.0;
         let mut l_self = 0.0;
         let mut l_norm2 = 0.0;
-        for ((j, bj), w) in rows.iter().zip(&ws) {
-            let lj = w * bj.iter().zip(a_vec.iter()).map(|(x, y)| x * y).sum::<f64>();
+        for (j, w, bj) in &rows {
+            let lj = w * bj[..p]
+                .iter()
+                .zip(a_vec.iter())
+                .map(|(x, y)| x * y)
+                .sum::<f64>();
             val += lj * self.y[*j];
             l_norm2 += lj * lj;
             if Some(*j) == self_index {
