@@ -345,7 +345,9 @@ pub fn derender_image_with_rays(
     let [x0, y0, x1, y1] = region.bbox_px;
     let stride = cfg.stride.max(1);
     let cos_limit = cfg.grazing_limit_deg.to_radians().cos();
-    let shadows = cfg.shadows.needs_rays(geom.can_self_shadow);
+    let shadows = cfg
+        .shadows
+        .needs_rays(geom.can_shadow_within(cfg.grazing_limit_deg));
     let w = m.image.width as usize;
     // Aligned to a global grid (x, y multiples of the stride) so images subsample alike.
     let align = |v: u32| v.div_ceil(stride) * stride;

@@ -154,8 +154,11 @@ pub struct DerenderReport {
     pub shadow_rays: bool,
     /// Shadow rays cast.
     pub shadow_rays_cast: u64,
-    /// The convexity verdict.
+    /// The convexity verdict at the configured grazing limit.
     pub region_can_self_shadow: bool,
+    /// Largest elevation of the geometry above the region's tangent planes, degrees (the
+    /// convexity test's measure, see [`crate::geometry`]).
+    pub region_shadow_elevation_deg: f64,
     /// Normal fit radius used, metres (0 for vertex normals).
     pub normal_radius_m: f64,
     /// Poses used.
@@ -285,9 +288,12 @@ pub fn derender_with_loader(
         region_pixels,
         c,
         calibration,
-        shadow_rays: cfg.shadows.needs_rays(geom.can_self_shadow),
+        shadow_rays: cfg
+            .shadows
+            .needs_rays(geom.can_shadow_within(cfg.grazing_limit_deg)),
         shadow_rays_cast,
-        region_can_self_shadow: geom.can_self_shadow,
+        region_can_self_shadow: geom.can_shadow_within(cfg.grazing_limit_deg),
+        region_shadow_elevation_deg: geom.shadow_elevation_deg,
         normal_radius_m: geom.normals.radius_m,
         pose_source: inputs.pose_source,
         config: *cfg,
