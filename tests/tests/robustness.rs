@@ -19,8 +19,9 @@ use skinbrdf_sim::{Faults, SimConfig, SimReport};
 use skinbrdf_tests::{InProcess, SIM_START_US};
 
 /// Reconnects (re-handshakes) a whole noisy session may need. With requests re-sent every
-/// 200 ms within a 1.5 s budget a request fails with probability ~0.5 %, and a session sends
-/// ~150 requests; before the fix the same link cost 18 reconnects.
+/// 200 ms within a 1.5 s budget a request fails with probability ~0.6 % on the 20x link (more
+/// on the harsher one), and a session sends ~100 requests (clock reads included); before the
+/// fix the same link cost 18 reconnects or never got the plan started.
 const MAX_RECONNECTS: u32 = 3;
 
 #[derive(Default)]

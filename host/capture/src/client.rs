@@ -54,9 +54,10 @@ pub const DEFAULT_REQUEST_TIMEOUT: Duration = Duration::from_millis(1500);
 /// speed 1-2 ms for its 1 ms frames, the rp2040js emulator a few ms), so a copy is almost only
 /// sent when a frame was really lost, and a needless copy costs one duplicate answer that is
 /// dropped. It is short enough that the 1.5 s default budget holds 7 copies: with 20 % of the
-/// frames lost each way plus 10 % truncated (a round trip survives ~55 % of the time) all 7
-/// fail with probability ~0.4 %, where one copy per 1.5 s (the old scheme) failed 45 % of the
-/// time and fell into reconnects.
+/// frames corrupted each way plus 10 % truncated (a truncated frame also costs the next one; a
+/// round trip survives ~50 % of the time) all 7 fail with probability ~0.6 %, where a copy
+/// every 1.5 s (3 copies, the old scheme) lost ~11 % of the requests, waited 1.5 s for every
+/// lost frame and fell into reconnects.
 pub const RESEND_INTERVAL: Duration = Duration::from_millis(200);
 
 /// Handshake attempts before the device is declared silent (the first `Hello` may be lost

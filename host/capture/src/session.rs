@@ -4,7 +4,7 @@
 //! runs it group by group (asking the [`CaptureObserver`] before each group, so the CLI can
 //! prompt the operator). Every exposure record is appended to the [`CaptureRecord`], written
 //! atomically to `capture.json` and only *then* acknowledged to the device, so the device
-//! forgets a record only once it is on disk.
+//! forgets a record only once it is on disk (one `AckRecords` per burst of records).
 //!
 //! **No record lost, none duplicated.** Records are accepted strictly in index order: a record
 //! below the next expected index is a duplicate and dropped, one above it is held back and the
@@ -406,6 +406,8 @@ struct Runner<'a, C: Connector, O: CaptureObserver> {
     started: Instant,
     /// Link counters of clients closed so far.
     closed_stats: LinkStats,
+    /// Records below this index are acknowledged to the device.
+    acked: u32,
 }
 
 /// Runs `plan` on the device behind `connector`, writing `capture.json` after every exposure
@@ -463,6 +465,7 @@ pub fn run_capture<C: Connector, O: CaptureObserver>(
         summary: RunSummary::default(),
         started: Instant::now(),
         closed_stats: LinkStats::default(),
+        acked: 0,
     };
     let result = runner.run(&proto_plan);
     let summary = runner.finish_summary();
@@ -609,6 +612,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             }
         }
         self.record.complete = true;
+        self.flush_acks_best_effort();
         self.final_clock_reads();
         self.refit_and_write()?;
         Ok(self.record.clone())
@@ -759,8 +763,10 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                     RunEnd::Session { records, .. } => records,
                 };
                 self.with_reconnect(|r| r.ensure_records(n))?;
+                self.with_reconnect(|r| r.flush_acks())?;
                 return Ok(end);
             }
+            self.with_reconnect(|r| r.flush_acks())?;
         }
     }
 
@@ -892,15 +898,35 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         {
             self.observer.exposure(e, r);
         }
+        // Acknowledged by `flush_acks` once the burst of queued events is handled.
+        Ok(())
+    }
+
+    /// Acknowledges every record written so far, in one `AckRecords` (records arrive in
+    /// bursts, and on a noisy line every request costs re-sends).
+    fn flush_acks(&mut self) -> Result<(), CaptureError> {
         let next_index = self.next_index();
+        if next_index <= self.acked {
+            return Ok(());
+        }
         match self.request(RequestBody::AckRecords { next_index }) {
-            Ok(_) => Ok(()),
+            Ok(_) => {}
             // Acks are an optimisation of the device's memory: a refused ack loses nothing.
-            Err(ClientError::Device { error, .. }) => {
-                tracing::debug!(%error, "ack refused");
-                Ok(())
-            }
-            Err(e) => Err(e.into()),
+            Err(ClientError::Device { error, .. }) => tracing::debug!(%error, "ack refused"),
+            Err(e) => return Err(e.into()),
+        }
+        self.acked = next_index;
+        Ok(())
+    }
+
+    /// [`Self::flush_acks`] where the records are already safe and only the device's memory
+    /// is at stake (the end of a run): a failure is logged, not returned.
+    fn flush_acks_best_effort(&mut self) {
+        if let Err(e) = self.flush_acks() {
+            self.observer.log(
+                LogLevel::Warn,
+                &format!("could not acknowledge the last records: {e}"),
+            );
         }
     }
 
@@ -1062,6 +1088,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                     &format!("could not fetch every record: {e}"),
                 );
             }
+            self.flush_acks_best_effort();
         }
         self.refit_and_write()?;
         Err(CaptureError::Aborted {
@@ -1070,6 +1097,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
     }
 
     fn session_failed(&mut self, outcome: SessionOutcome) -> Result<CaptureRecord, CaptureError> {
+        self.flush_acks_best_effort();
         self.final_clock_reads();
         self.refit_and_write()?;
         let detail = match (outcome, self.last_fault) {
