@@ -21,7 +21,9 @@
 //!    are dropped: `1/cos θ_i` amplifies noise and normal error without bound near grazing
 //!    (a normal error `δ` gives a relative error `tan θ · δ`), so the limit bounds it.
 //! 5. **Shadow.** Only when the geometry can shadow the region (see [`crate::geometry`]), a ray
-//!    from the point (offset [`SHADOW_OFFSET_M`] along the normal) to the light.
+//!    from the point (offset [`SHADOW_OFFSET_M`] along the normal) to the light; all of an
+//!    image's shadow rays at once with the coherent any-hit tracer
+//!    ([`skinbrdf_mesh::MeshBvh::occluded_toward_grid`], the per-ray verdict exactly).
 //! 6. **Value.** The linearized pixel value `V`; saturated pixels and pixels with any channel
 //!    below the noise floor are dropped; `rho_c = C_c · D² · V_c / cos θ_i`.
 //!
@@ -162,6 +164,8 @@ pub struct ImageSamples {
     pub region_pixels: u64,
     /// Wall time of the primary rays (coherent grid tracing), seconds.
     pub rays_s: f64,
+    /// Wall time of the shadow rays (coherent any-hit tracing), seconds.
+    pub shadow_s: f64,
 }
 
 /// Bounding box of the region's vertices projected into the image (grown by
@@ -315,6 +319,23 @@ pub fn derender_image(
     )
 }
 
+/// A surface point that passed every filter before the shadow test.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    /// Column in the ray grid.
+    k: usize,
+    x: u32,
+    y: u32,
+    /// Pixel index in the image.
+    idx: usize,
+    p: DVec3,
+    n: DVec3,
+    wi: DVec3,
+    we: DVec3,
+    dist: f64,
+    cos_i: f64,
+}
+
 /// Why a grid pixel got no ray (or that it got one).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum PixelState {
@@ -390,8 +411,8 @@ pub fn derender_image_with_rays(
         .bvh
         .intersect_grid(origin.as_vec3(), &dirs, gw, f32::INFINITY);
     result.rays_s = t.elapsed().as_secs_f64();
-    // 3. Samples.
-    let per_row: Vec<(Vec<BrdfSample>, FilterCounts, u64)> = hits
+    // 3. Surface points, filtered up to the shadow test.
+    let per_row: Vec<(Vec<Pending>, FilterCounts)> = hits
         .par_chunks(gw)
         .zip(state.par_chunks(gw))
         .zip(dirs.par_chunks(gw))
@@ -399,7 +420,6 @@ pub fn derender_image_with_rays(
         .map(|(((hrow, srow), drow), &y)| {
             let mut out = Vec::new();
             let mut c = FilterCounts::default();
-            let mut shadow_rays = 0u64;
             for (k, &x) in xs.iter().enumerate() {
                 match srow[k] {
                     PixelState::Outside => continue,
@@ -461,12 +481,61 @@ pub fn derender_image_with_rays(
                     c.grazing += 1;
                     continue;
                 }
-                if shadows {
+                out.push(Pending {
+                    k,
+                    x,
+                    y,
+                    idx,
+                    p,
+                    n,
+                    wi,
+                    we,
+                    dist,
+                    cos_i,
+                });
+            }
+            (out, c)
+        })
+        .collect();
+    // 4. Shadow rays, when needed: all of the image's points towards the light at once with the
+    // coherent any-hit tracer (the same verdict as one `occluded` per point).
+    let occluded: Option<Vec<bool>> = shadows.then(|| {
+        let mut origins = vec![Vec3::NAN; gw * ys.len()];
+        for (r, (pending, _)) in per_row.iter().enumerate() {
+            for q in pending {
+                origins[r * gw + q.k] = (q.p + q.n * SHADOW_OFFSET_M).as_vec3();
+            }
+        }
+        let t = std::time::Instant::now();
+        let o =
+            geom.bvh
+                .occluded_toward_grid(light.as_vec3(), &origins, gw, SHADOW_OFFSET_M as f32);
+        result.shadow_s = t.elapsed().as_secs_f64();
+        o
+    });
+    // 5. Samples.
+    let finished: Vec<(Vec<BrdfSample>, FilterCounts, u64)> = per_row
+        .into_par_iter()
+        .enumerate()
+        .map(|(r, (pending, mut c))| {
+            let mut out = Vec::with_capacity(pending.len());
+            let mut shadow_rays = 0u64;
+            for q in pending {
+                let Pending {
+                    k,
+                    x,
+                    y,
+                    idx,
+                    n,
+                    wi,
+                    we,
+                    dist,
+                    cos_i,
+                    ..
+                } = q;
+                if let Some(occ) = &occluded {
                     shadow_rays += 1;
-                    let o = p + n * SHADOW_OFFSET_M;
-                    let len = (light - o).length() - SHADOW_OFFSET_M;
-                    let dir: Vec3 = ((light - o) / (light - o).length()).as_vec3();
-                    if geom.bvh.occluded(o.as_vec3(), dir, len as f32) {
+                    if occ[r * gw + k] {
                         c.shadowed += 1;
                         continue;
                     }
@@ -483,9 +552,9 @@ pub fn derender_image_with_rays(
                     c.below_noise_floor += 1;
                     continue;
                 }
-                let k = dist * dist / cos_i;
+                let kk = dist * dist / cos_i;
                 let rho: [f32; 3] =
-                    std::array::from_fn(|ch| (calibration_c[ch] * k * v[ch] as f64) as f32);
+                    std::array::from_fn(|ch| (calibration_c[ch] * kk * v[ch] as f64) as f32);
                 let angles = BrdfAngles::from_world(n, wi, we);
                 let mut s = BrdfSample::from_angles(&angles, rho);
                 s.image_index = m.image_index;
@@ -496,7 +565,7 @@ pub fn derender_image_with_rays(
             (out, c, shadow_rays)
         })
         .collect();
-    for (s, c, sr) in per_row {
+    for (s, c, sr) in finished {
         result.samples.extend(s);
         result.counts.add(&c);
         result.shadow_rays += sr;

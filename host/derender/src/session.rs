@@ -119,6 +119,8 @@ pub struct StageTimes {
     pub derender_s: f64,
     /// Of which the primary rays (coherent grid tracing), seconds.
     pub rays_s: f64,
+    /// Of which the shadow rays (coherent any-hit tracing), seconds.
+    pub shadow_rays_s: f64,
     /// Everything, seconds.
     pub total_s: f64,
 }
@@ -262,6 +264,7 @@ pub fn derender_with_loader(
                 derender_image_with_rays(geom, &camera_rays, inputs.light_position_m, c, &m, cfg);
             derender_time += t.elapsed();
             rays_s += r.rays_s;
+            times.shadow_rays_s += r.shadow_s;
             region_pixels += r.region_pixels;
             counts.add(&r.counts);
             shadow_rays_cast += r.shadow_rays;

@@ -8,12 +8,15 @@
 //!
 //! Times (best of `reps`): the coherent grid tracer (`intersect_grid`, all rayon threads, and
 //! on one thread), per-ray traversal (`intersect_batch`, all threads, and one thread), and the
-//! build of every quality preset (or only `--quality`).
+//! build of every quality preset (or only `--quality`). Then **shadow rays**: from every hit
+//! (offset 10 µm along the face normal) to a light at (0.25, 0.15, 0.35) m, per ray
+//! (`occluded_batch` / `occluded`, obvhs any-hit traversal) and coherent
+//! (`occluded_toward_grid`), checked identical.
 
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
-use skinbrdf_mesh::{BuildQuality, MeshBvh, MeshRay, TraceScratch};
+use skinbrdf_mesh::{shadow_ray, BuildQuality, MeshBvh, MeshRay, ShadowScratch, TraceScratch};
 
 /// 1500 x 1000 pinhole rays, 30° horizontal field of view, looking down -z (image x = world
 /// +x, image y = world -y).
@@ -101,6 +104,66 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .filter(|r| bvh.intersect(r.origin, r.dir, r.t_max).is_some())
             .count()
     });
+    // Shadow rays from the hits towards one light.
+    let light = Vec3::new(0.25, 0.15, 0.35);
+    let stop_short = 1e-5f32;
+    let origins: Vec<Vec3> = grid
+        .iter()
+        .zip(&dirs)
+        .map(|(h, d)| match h {
+            Some(h) => {
+                let ng = mesh.face_normal_area2(h.triangle as usize).normalize();
+                origin + *d * h.t_m + ng * 1e-5
+            }
+            None => Vec3::NAN,
+        })
+        .collect();
+    let shadow_rays: Vec<MeshRay> = origins
+        .iter()
+        .filter_map(|&o| {
+            let (d, t_max) = shadow_ray(o, light, stop_short)?;
+            Some(MeshRay {
+                origin: o,
+                dir: d,
+                t_max,
+            })
+        })
+        .collect();
+    let ns = shadow_rays.len() as f64;
+    let (sh_batch_s, sh_batch) = best_of(reps, || bvh.occluded_batch(&shadow_rays));
+    let (sh_single_s, _) = best_of(reps.min(3), || {
+        shadow_rays
+            .iter()
+            .filter(|r| bvh.occluded(r.origin, r.dir, r.t_max))
+            .count()
+    });
+    let (sh_grid_s, sh_grid) = best_of(reps, || {
+        bvh.occluded_toward_grid(light, &origins, width, stop_short)
+    });
+    let mut sh_scratch = ShadowScratch::default();
+    let mut sh_out = vec![false; origins.len()];
+    let (sh_grid1_s, _) = best_of(reps, || {
+        bvh.occluded_toward_grid_into(
+            light,
+            &origins,
+            width,
+            stop_short,
+            &mut sh_out,
+            &mut sh_scratch,
+        )
+    });
+    let sh_grid_valid: Vec<bool> = origins
+        .iter()
+        .zip(&sh_grid)
+        .filter(|(o, _)| shadow_ray(**o, light, stop_short).is_some())
+        .map(|(_, b)| *b)
+        .collect();
+    let shadowed = sh_batch.iter().filter(|b| **b).count();
+    let shadow_differ = sh_grid_valid
+        .iter()
+        .zip(&sh_batch)
+        .filter(|(a, b)| a != b)
+        .count();
     let tiles = scratch.tiles + scratch.fallback_tiles;
     let threads = rayon::current_num_threads();
     let mrays = |s: f64| n / s / 1e6;
@@ -110,13 +173,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map(|(q, s)| format!("\"{}\": {s:.4}", q.name()))
             .collect();
         println!(
-            "{{\"triangles\": {}, \"rays\": {}, \"hits\": {hits}, \"per_ray_hits\": {batch_hits}, \"threads\": {threads}, \"quality\": \"{}\", \"build_s\": {{{}}}, \"grid_s\": {grid_s:.4}, \"grid_1_thread_s\": {grid1_s:.4}, \"per_ray_s\": {batch_s:.4}, \"per_ray_1_thread_s\": {single_s:.4}, \"fallback_tiles\": {}, \"tiles\": {tiles}, \"mean_candidates\": {:.1}}}",
+            "{{\"triangles\": {}, \"rays\": {}, \"hits\": {hits}, \"per_ray_hits\": {batch_hits}, \"threads\": {threads}, \"quality\": \"{}\", \"build_s\": {{{}}}, \"grid_s\": {grid_s:.4}, \"grid_1_thread_s\": {grid1_s:.4}, \"per_ray_s\": {batch_s:.4}, \"per_ray_1_thread_s\": {single_s:.4}, \"fallback_tiles\": {}, \"tiles\": {tiles}, \"mean_candidates\": {:.1}, \"shadow_rays\": {}, \"shadowed\": {shadowed}, \"shadow_differ\": {shadow_differ}, \"shadow_grid_s\": {sh_grid_s:.4}, \"shadow_grid_1_thread_s\": {sh_grid1_s:.4}, \"shadow_per_ray_s\": {sh_batch_s:.4}, \"shadow_per_ray_1_thread_s\": {sh_single_s:.4}}}",
             mesh.indices.len(),
             dirs.len(),
             quality.name(),
             b.join(", "),
             scratch.fallback_tiles / reps.max(1) as u64,
             scratch.candidates as f64 / scratch.tiles.max(1) as f64,
+            shadow_rays.len(),
         );
     } else {
         println!(
@@ -148,6 +212,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "tiles {tiles} ({} per ray), mean candidates per tile {:.1}",
             scratch.fallback_tiles,
             scratch.candidates as f64 / scratch.tiles.max(1) as f64
+        );
+        let ms = |s: f64| ns / s / 1e6;
+        println!(
+            "shadow rays: {} towards {light:?}, {shadowed} occluded, coherent differs on {shadow_differ}",
+            shadow_rays.len()
+        );
+        println!(
+            "shadow coherent, {threads} threads  {sh_grid_s:.4} s  {:.2} Mrays/s",
+            ms(sh_grid_s)
+        );
+        println!(
+            "shadow coherent, 1 thread   {sh_grid1_s:.4} s  {:.2} Mrays/s ({} tiles, {} per ray, {:.1} candidates per tile)",
+            ms(sh_grid1_s),
+            sh_scratch.tiles / reps.max(1) as u64,
+            sh_scratch.fallback_tiles / reps.max(1) as u64,
+            sh_scratch.candidates as f64 / sh_scratch.tiles.max(1) as f64
+        );
+        println!(
+            "shadow per ray, {threads} threads   {sh_batch_s:.4} s  {:.2} Mrays/s",
+            ms(sh_batch_s)
+        );
+        println!(
+            "shadow per ray, 1 thread    {sh_single_s:.4} s  {:.2} Mrays/s",
+            ms(sh_single_s)
         );
     }
     Ok(())

@@ -74,13 +74,13 @@ struct Pack {
     slot: [u32; 4],
 }
 
-fn box_in_frustum(lo: Vec3A, hi: Vec3A, planes: &[Vec3A; 4]) -> bool {
+pub(crate) fn box_in_frustum(lo: Vec3A, hi: Vec3A, planes: &[Vec3A; 4]) -> bool {
     planes
         .iter()
         .all(|n| Vec3A::select(n.cmpge(Vec3A::ZERO), hi, lo).dot(*n) >= 0.0)
 }
 
-fn tri_in_frustum(a: Vec3A, b: Vec3A, c: Vec3A, planes: &[Vec3A; 4]) -> bool {
+pub(crate) fn tri_in_frustum(a: Vec3A, b: Vec3A, c: Vec3A, planes: &[Vec3A; 4]) -> bool {
     planes
         .iter()
         .all(|n| n.dot(a) >= 0.0 || n.dot(b) >= 0.0 || n.dot(c) >= 0.0)
@@ -114,6 +114,11 @@ fn gather(
 /// The four planes (through the origin, inward normals) bounding a set of rays, or `None`
 /// when a ray is too far from their mean direction.
 fn frustum(tile: &[(usize, Vec3A)]) -> Option<[Vec3A; 4]> {
+    frustum_with_axis(tile).map(|(planes, _)| planes)
+}
+
+/// [`frustum`] with the unit mean direction `c` of the rays.
+pub(crate) fn frustum_with_axis(tile: &[(usize, Vec3A)]) -> Option<([Vec3A; 4], Vec3A)> {
     let c = tile
         .iter()
         .fold(Vec3A::ZERO, |acc, (_, d)| acc + d.normalize_or_zero())
@@ -139,12 +144,15 @@ fn frustum(tile: &[(usize, Vec3A)]) -> Option<[Vec3A; 4]> {
         b0 = b0.min(b);
         b1 = b1.max(b);
     }
-    Some([
-        u - c * (a0 - FRUSTUM_PAD),
-        c * (a1 + FRUSTUM_PAD) - u,
-        v - c * (b0 - FRUSTUM_PAD),
-        c * (b1 + FRUSTUM_PAD) - v,
-    ])
+    Some((
+        [
+            u - c * (a0 - FRUSTUM_PAD),
+            c * (a1 + FRUSTUM_PAD) - u,
+            v - c * (b0 - FRUSTUM_PAD),
+            c * (b1 + FRUSTUM_PAD) - v,
+        ],
+        c,
+    ))
 }
 
 impl MeshBvh {

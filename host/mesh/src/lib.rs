@@ -21,6 +21,7 @@ pub mod coherent;
 pub mod load;
 pub mod normals;
 pub mod ply;
+pub mod shadow;
 pub mod shapes;
 pub mod validate;
 
@@ -30,6 +31,7 @@ pub use coherent::TraceScratch;
 pub use load::{load_mesh, LengthUnit, LoadOptions, LoadedMesh};
 pub use normals::{estimate_noise, NoiseEstimate, NormalMethod, SurfaceNormals};
 pub use ply::{read_ply, write_ply_binary};
+pub use shadow::{shadow_ray, ShadowScratch};
 pub use validate::{inspect, repair, MeshReport, RepairPolicy};
 
 use std::path::PathBuf;
