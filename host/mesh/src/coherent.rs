@@ -117,11 +117,15 @@ fn frustum(tile: &[(usize, Vec3A)]) -> Option<[Vec3A; 4]> {
     frustum_with_axis(tile).map(|(planes, _)| planes)
 }
 
-/// [`frustum`] with the unit mean direction `c` of the rays.
+/// [`frustum`] with its unit axis `c` (the normalised sum of the ray directions).
 pub(crate) fn frustum_with_axis(tile: &[(usize, Vec3A)]) -> Option<([Vec3A; 4], Vec3A)> {
+    // The axis only has to be some direction every ray is close to: the planes below bound
+    // the rays' slopes about whichever axis is used (for a ray `d` with slope `a = d·u / d·c`
+    // at least `a0`, `(u - c a0)·d = d·c (a - a0) >= 0`). The plain sum of the directions
+    // (unit or nearly so: camera rays) serves and saves a normalisation per ray.
     let c = tile
         .iter()
-        .fold(Vec3A::ZERO, |acc, (_, d)| acc + d.normalize_or_zero())
+        .fold(Vec3A::ZERO, |acc, (_, d)| acc + *d)
         .normalize_or_zero();
     if c == Vec3A::ZERO {
         return None;
@@ -133,12 +137,15 @@ pub(crate) fn frustum_with_axis(tile: &[(usize, Vec3A)]) -> Option<([Vec3A; 4], 
         f32::INFINITY,
         f32::NEG_INFINITY,
     );
+    let min_cos2 = MIN_TILE_COS * MIN_TILE_COS;
     for &(_, d) in tile {
         let k = d.dot(c);
-        if !k.is_finite() || k <= MIN_TILE_COS * d.length() {
+        // k > MIN_TILE_COS |d| without the square root (both sides positive).
+        if !k.is_finite() || k <= 0.0 || k * k <= min_cos2 * d.length_squared() {
             return None;
         }
-        let (a, b) = (d.dot(u) / k, d.dot(v) / k);
+        let ik = 1.0 / k;
+        let (a, b) = (d.dot(u) * ik, d.dot(v) * ik);
         a0 = a0.min(a);
         a1 = a1.max(a);
         b0 = b0.min(b);
