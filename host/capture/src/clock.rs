@@ -64,27 +64,14 @@ pub fn fit_clock(reads: &[ClockRead]) -> Result<ClockModel, ClockError> {
     let first = reads.first().ok_or(ClockError::NoReads)?;
     let d0 = first.device_us;
     let h0 = first.host_send_us;
-    // Exact integer differences first, then f64 (differences are far below 2^53).
-    let xs: Vec<f64> = reads
-        .iter()
-        .map(|r| (r.device_us as i128 - d0 as i128) as f64)
-        .collect();
-    let ys: Vec<f64> = reads
-        .iter()
-        .map(|r| {
-            let send = r.host_send_us as i128 - h0 as i128;
-            let recv = r.host_recv_us as i128 - h0 as i128;
-            (send + recv) as f64 / 2.0
-        })
-        .collect();
+    let (xs, ys) = relative_times(reads);
     let n = reads.len() as f64;
-    let x_mean = xs.iter().sum::<f64>() / n;
-    let y_mean = ys.iter().sum::<f64>() / n;
-    let (mut sxx, mut sxy) = (0.0, 0.0);
-    for (x, y) in xs.iter().zip(&ys) {
-        sxx += (x - x_mean) * (x - x_mean);
-        sxy += (x - x_mean) * (y - y_mean);
-    }
+    let Moments {
+        x_mean,
+        y_mean,
+        sxx,
+        sxy,
+    } = moments(&xs, &ys);
     let (min_d, max_d) = reads.iter().fold((u64::MAX, 0u64), |(lo, hi), r| {
         (lo.min(r.device_us), hi.max(r.device_us))
     });
@@ -169,26 +156,60 @@ pub fn device_rate(reads: &[ClockRead]) -> Option<f64> {
     if host_span_us(&kept) < MIN_RATE_SPAN_US {
         return None;
     }
-    let first = kept.first()?;
-    let (h0, d0) = (first.host_send_us as i128, first.device_us as i128);
-    let xs: Vec<f64> = kept
+    if kept.is_empty() {
+        return None;
+    }
+    // Device time on host midpoint: the roles of `fit_clock`'s axes swapped.
+    let (device, host_mid) = relative_times(&kept);
+    let Moments { sxx, sxy, .. } = moments(&host_mid, &device);
+    let rate = sxy / sxx;
+    (rate.is_finite() && rate > 0.0).then_some(rate)
+}
+
+/// Device times and host midpoints of `reads`, relative to the first read's device time and
+/// host send time, microseconds: exact integer differences first, then f64 (differences are far
+/// below 2^53).
+fn relative_times(reads: &[ClockRead]) -> (Vec<f64>, Vec<f64>) {
+    let Some(first) = reads.first() else {
+        return (Vec::new(), Vec::new());
+    };
+    let (d0, h0) = (first.device_us as i128, first.host_send_us as i128);
+    reads
         .iter()
-        .map(|r| ((r.host_send_us as i128 - h0) + (r.host_recv_us as i128 - h0)) as f64 / 2.0)
-        .collect();
-    let ys: Vec<f64> = kept
-        .iter()
-        .map(|r| (r.device_us as i128 - d0) as f64)
-        .collect();
+        .map(|r| {
+            let send = r.host_send_us as i128 - h0;
+            let recv = r.host_recv_us as i128 - h0;
+            (
+                (r.device_us as i128 - d0) as f64,
+                (send + recv) as f64 / 2.0,
+            )
+        })
+        .unzip()
+}
+
+/// Means and centred second moments of a least-squares line `y` on `x`.
+struct Moments {
+    x_mean: f64,
+    y_mean: f64,
+    sxx: f64,
+    sxy: f64,
+}
+
+fn moments(xs: &[f64], ys: &[f64]) -> Moments {
     let n = xs.len() as f64;
     let x_mean = xs.iter().sum::<f64>() / n;
     let y_mean = ys.iter().sum::<f64>() / n;
     let (mut sxx, mut sxy) = (0.0, 0.0);
-    for (x, y) in xs.iter().zip(&ys) {
+    for (x, y) in xs.iter().zip(ys) {
         sxx += (x - x_mean) * (x - x_mean);
         sxy += (x - x_mean) * (y - y_mean);
     }
-    let rate = sxy / sxx;
-    (rate.is_finite() && rate > 0.0).then_some(rate)
+    Moments {
+        x_mean,
+        y_mean,
+        sxx,
+        sxy,
+    }
 }
 
 /// Host Unix time now, in microseconds.

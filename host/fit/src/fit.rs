@@ -598,16 +598,13 @@ fn fit_channel_with_floor(
         } else {
             solve_to_convergence(model, &best.params, &full, &cfg.lm)
         };
-        let (solves, iterations, evaluations);
-        (best, solves, iterations, evaluations) = match stage {
-            Some(Runs {
-                outcome,
-                solves,
-                iterations,
-                evaluations,
-            }) => (outcome, solves, iterations, evaluations),
-            None => return Err(FitError::NoFiniteStart { channel, starts: 1 }),
-        };
+        let Runs {
+            outcome,
+            solves,
+            iterations,
+            evaluations,
+        } = stage.ok_or(FitError::NoFiniteStart { channel, starts: 1 })?;
+        best = outcome;
         stages.push(StageReport {
             kind: "polish".into(),
             samples: size,

@@ -124,19 +124,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         SheetKind::Reference | SheetKind::Board => "targets.reference",
         SheetKind::Flash => "flash.targets",
     };
-    let layout_path = out.with_extension("layout.toml");
-    let text = toml::to_string(&LayoutFile {
-        section: section.into(),
-        targets,
-    })
-    .context("serialising the layout")?;
     let header = format!(
         "# Target layout of {} (sheet frame: origin at the sheet centre{}, x right, y up on the\n# page, z out of the paper, metres). Copy `targets` into session.toml under [{section}]\n# after mounting; measure and correct positions if the sheet is not flat.\n",
         out.display(),
         if matches!(kind, SheetKind::Flash) { " = flash disc centre" } else { "" }
     );
-    write_atomic(&layout_path, format!("{header}{text}").as_bytes())
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let layout_path = write_layout(&out, section, targets, &header)?;
     println!(
         "wrote {} ({} tags, IDs {}..={}) and {}",
         out.display(),
@@ -146,6 +139,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         layout_path.display()
     );
     Ok(())
+}
+
+/// Writes `OUT.layout.toml`: `header` (comment lines) and the targets under `section`.
+fn write_layout(
+    out: &std::path::Path,
+    section: &str,
+    targets: Vec<Target>,
+    header: &str,
+) -> anyhow::Result<PathBuf> {
+    let layout_path = out.with_extension("layout.toml");
+    let text = toml::to_string(&LayoutFile {
+        section: section.into(),
+        targets,
+    })
+    .context("serialising the layout")?;
+    write_atomic(&layout_path, format!("{header}{text}").as_bytes())
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    Ok(layout_path)
 }
 
 /// `--scene`: the scene rig's targets of one kind as cut-outs, and their layout.
@@ -197,19 +208,12 @@ fn scene_cutouts(scene_name: &str, kind: SheetKind, out: &std::path::Path) -> an
         }
         _ => anyhow::bail!("{}: the output must end in .svg or .pdf", out.display()),
     }
-    let layout_path = out.with_extension("layout.toml");
-    let text = toml::to_string(&LayoutFile {
-        section: section.into(),
-        targets: targets.clone(),
-    })
-    .context("serialising the layout")?;
     let header = format!(
         "# Target layout of scene `{}` ({frame}, metres): where each cut-out of {} goes.\n# Copy `targets` into session.toml under [{section}]; measure and correct positions after\n# mounting.\n",
         scene.name,
         out.display(),
     );
-    write_atomic(&layout_path, format!("{header}{text}").as_bytes())
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let layout_path = write_layout(out, section, targets.clone(), &header)?;
     let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
     println!(
         "wrote {} ({} tags of scene `{}` on {} page(s)) and {}",
