@@ -30,8 +30,10 @@
 //!    rejected before decoding.
 //!
 //! [`DetectorConfig::corner_model`] can instead report the reference library's unrefined quad
-//! ([`CornerModel::BinaryBoundary`]: lines through the dark/light boundary of the threshold),
-//! for comparing with that library's `refine_edges = 0` output; it is less accurate.
+//! ([`CornerModel::BinaryBoundary`]: that library's quad stage, reimplemented in
+//! [`crate::reference_quad`], matched to each tag we find), for comparing with that library's
+//! `refine_edges = 0` output, which it reproduces to a median of 0.001 px on the real test
+//! photos; it is less accurate than the edge refinement.
 //!
 //! # Output convention
 //!
@@ -97,11 +99,13 @@ pub enum CornerModel {
     #[default]
     EdgeGradient,
     /// The reference C library's unrefined quad (`refine_edges = 0`): lines fitted to the
-    /// dark/light boundary of the adaptive threshold, gradient-weighted. For comparing with
-    /// that library's output only: it inherits the threshold's bias where the local maximum
-    /// is not the white of the tag (a white ring darker than its surroundings pushes the
-    /// boundary outward) and the half-pixel quantisation of the boundary, so it is less
-    /// accurate (docs/benchmarks-poses.md). The covariance reported is the edge refinement's.
+    /// dark/light boundary of its adaptive threshold, gradient-weighted
+    /// ([`crate::reference_quad`], the whole quad stage as that library runs it). A tag whose
+    /// border that stage does not find is not reported. For comparing with that library's
+    /// output only: it inherits the threshold's bias where the local maximum is not the white
+    /// of the tag (a white ring darker than its surroundings pushes the boundary outward) and
+    /// the half-pixel quantisation of the boundary, so it is less accurate
+    /// (docs/benchmarks-poses.md). The covariance reported is the edge refinement's.
     BinaryBoundary,
 }
 
@@ -192,6 +196,8 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
     let dark = threshold(img, cfg);
     let comps = components(&dark, img.width, img.height, cfg);
     stats.components = comps.len();
+    let reference = (cfg.corner_model == CornerModel::BinaryBoundary)
+        .then(|| crate::reference_quad::reference_quads(img));
     let mut out: Vec<Detection> = Vec::new();
     for comp in &comps {
         let contour = trace_contour(&comp.labels_view(&dark.labels), img.width, img.height, comp);
@@ -203,8 +209,10 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
             stats.rejected_decode += 1;
             continue;
         };
-        if cfg.corner_model == CornerModel::BinaryBoundary {
-            let Some(b) = boundary_fit(img, &dark, comp, &quad) else {
+        if let Some(refs) = &reference {
+            // Tags whose border the reference library's quad stage does not find are not
+            // reported in its model, as that library would not report them.
+            let Some(b) = matching_reference_quad(refs, &refined.corners) else {
                 stats.rejected_decode += 1;
                 continue;
             };
@@ -242,8 +250,6 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
 struct Binary {
     /// Union-find parent per pixel for dark pixels, `u32::MAX` for others.
     labels: Vec<u32>,
-    /// Pixels classified light (enough local contrast and above the local mid-level).
-    light: Vec<bool>,
 }
 
 fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
@@ -289,7 +295,6 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
         }
     }
     let mut labels = vec![u32::MAX; w * h];
-    let mut light = vec![false; w * h];
     for y in 0..h {
         let ty = y / ts;
         for x in 0..w {
@@ -301,8 +306,6 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
             let v = img.data[y * w + x];
             if v <= 0.5 * (lo + hi) {
                 labels[y * w + x] = (y * w + x) as u32;
-            } else {
-                light[y * w + x] = true;
             }
         }
     }
@@ -337,7 +340,7 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
             labels[i] = find(&mut labels, i as u32);
         }
     }
-    Binary { labels, light }
+    Binary { labels }
 }
 
 fn find(p: &mut [u32], mut i: u32) -> u32 {
@@ -368,8 +371,6 @@ fn union(p: &mut [u32], a: u32, b: u32) {
 struct Component {
     root: u32,
     count: usize,
-    /// Bounding box `(x0, x1, y0, y1)`, inclusive.
-    bbox: (usize, usize, usize, usize),
 }
 
 impl Component {
@@ -416,11 +417,7 @@ fn components(b: &Binary, w: usize, h: usize, cfg: &DetectorConfig) -> Vec<Compo
                 && bw < w as f64
                 && bh < h as f64
         })
-        .map(|(root, (n, x0, x1, y0, y1))| Component {
-            root,
-            count: n,
-            bbox: (x0, x1, y0, y1),
-        })
+        .map(|(root, (n, ..))| Component { root, count: n })
         .collect();
     comps.sort_by_key(|c| c.root);
     comps
@@ -676,81 +673,33 @@ fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
     Some(q)
 }
 
-/// Half-width of the band around each side of the contour's quad in which boundary points are
-/// assigned to that side, pixels: the contour quad is within about a pixel of the boundary.
-const BOUNDARY_BAND_PX: f64 = 1.5;
+/// Largest distance of a corner of the reference library's quad from ours for the two to be the
+/// same tag's outer border, pixels (the two estimators differ by under a pixel on real photos;
+/// the next quad of a tag, the inner edge of its border, is a cell away).
+const REFERENCE_MATCH_PX: f64 = 3.0;
 
-/// The reference library's quad fit on the binary image: the points half-way between each dark
-/// pixel of the component and each light 8-neighbour (the dark/light boundary at the pixel
-/// grid's half steps), weighted by the grey gradient magnitude there (plus one, in 8-bit units),
-/// a weighted total-least-squares line per side, corners at the intersections. Each point is
-/// given to the side of `q` (the contour's quad) nearest to it if it is within
-/// [`BOUNDARY_BAND_PX`] of it and its light pixel lies outward, so the inner edge of a thin
-/// black border is not used.
-fn boundary_fit(img: &GrayF32, b: &Binary, comp: &Component, q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
-    let (w, h) = (img.width, img.height);
-    let (x0, x1, y0, y1) = comp.bbox;
-    let sides: [(DVec2, DVec2, f64, DVec2); 4] = std::array::from_fn(|k| {
-        let (a, e) = (q[k], q[(k + 1) % 4]);
-        let len = a.distance(e).max(1e-9);
-        let dir = (e - a) / len;
-        (a, dir, len, DVec2::new(dir.y, -dir.x))
-    });
-    let mut pts: [Vec<(DVec2, f64)>; 4] = Default::default();
-    for y in y0..=y1 {
-        for x in x0..=x1 {
-            if b.labels[y * w + x] != comp.root {
-                continue;
-            }
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                    if (dx == 0 && dy == 0) || nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64
-                    {
-                        continue;
-                    }
-                    if !b.light[ny as usize * w + nx as usize] {
-                        continue;
-                    }
-                    let m = DVec2::new(x as f64 + 0.5 * dx as f64, y as f64 + 0.5 * dy as f64);
-                    let step = DVec2::new(dx as f64, dy as f64);
-                    let mut best: Option<(usize, f64)> = None;
-                    for (k, &(a, dir, len, out)) in sides.iter().enumerate() {
-                        let t = (m - a).dot(dir);
-                        let d = (m - a).dot(out).abs();
-                        if t < -1.0 || t > len + 1.0 || step.dot(out) <= 0.0 || d > BOUNDARY_BAND_PX
-                        {
-                            continue;
-                        }
-                        if best.is_none_or(|(_, bd)| d < bd) {
-                            best = Some((k, d));
-                        }
-                    }
-                    let Some((k, _)) = best else { continue };
-                    let (ix, iy) = ((m.x + 0.5).floor() as isize, (m.y + 0.5).floor() as isize);
-                    let gx = img.at(ix + 1, iy) - img.at(ix - 1, iy);
-                    let gy = img.at(ix, iy + 1) - img.at(ix, iy - 1);
-                    let wgt = 255.0 * f64::from(gx.hypot(gy)) + 1.0;
-                    pts[k].push((m, wgt));
+/// The reference library's quad (from [`crate::reference_quad::reference_quads`]) that is the
+/// same outer border as `q`, its corners reordered to match `q`'s.
+fn matching_reference_quad(refs: &[[DVec2; 4]], q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
+    refs.iter()
+        .filter_map(|r| {
+            let mut out = [DVec2::ZERO; 4];
+            let mut total = 0.0;
+            for k in 0..4 {
+                let (j, d) = (0..4)
+                    .map(|j| (j, r[j].distance(q[k])))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))?;
+                if d > REFERENCE_MATCH_PX {
+                    return None;
                 }
+                out[k] = r[j];
+                total += d;
             }
-        }
-    }
-    let mut lines = Vec::with_capacity(4);
-    for p in &pts {
-        if p.len() < 3 {
-            return None;
-        }
-        lines.push(fit_line(p)?);
-    }
-    let mut out = [DVec2::ZERO; 4];
-    for k in 0..4 {
-        out[k] = lines[(k + 3) % 4].intersect(&lines[k])?;
-        if out[k].distance(q[k]) > 3.0 {
-            return None;
-        }
-    }
-    is_convex(&out).then_some(out)
+            let distinct = (0..4).all(|a| (a + 1..4).all(|b| out[a] != out[b]));
+            distinct.then_some((total, out))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, out)| out)
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -6,18 +6,25 @@
 //! `scripts/peers/apriltag_reference_fixture.py`), and the same library with edge refinement
 //! (`tests/data/apriltag_c_refined.json`), which is the like-for-like sub-pixel comparison.
 //!
-//! Why the `.txt` corners are not held to 0.5 px (docs/benchmarks-poses.md, "Real photos"): they
-//! are the dark/light boundary of the C library's adaptive threshold, whose threshold is the
-//! mid-level of the local minimum and maximum. Above most of these tags the white ring (~180 of
-//! 255) is darker than the background beyond it (~250), so the maximum is the background, the
-//! threshold sits above the black/ring mid-level and the boundary moves outward: the top
-//! edges of the `.txt` are 0.26 px above our edge-refined ones on average, the other three sides
-//! agree within 0.05 px. Our own implementation of that estimator
-//! ([`CornerModel::BinaryBoundary`]) reproduces the `.txt` (median 0.12 px, top edges +0.004 px),
-//! and on synthetic tiny JPEG tags with known truth it is less accurate than the edge refinement
+//! The issue's bound, every listed tag found with corners within 0.5 px of the reference
+//! library's (median well below), is asserted for the reference library's own corner estimator,
+//! which we reproduce ([`CornerModel::BinaryBoundary`], the library's quad stage reimplemented
+//! in `skinbrdf_targets::reference_quad`): measured median 0.001 px, max 0.275 px against the
+//! `.txt`. The remaining hundredths are JPEG decoding: our luma differs from the library's
+//! decoder by a grey level here and there, which moves a threshold pixel.
+//!
+//! Our default corners (edge refinement) are held to the refined library like for like, and to
+//! the `.txt` with wider named bounds, because the `.txt` corners are biased where the
+//! reference's threshold is (docs/benchmarks-poses.md, "Real photos"): they are the dark/light
+//! boundary of its adaptive threshold, whose threshold is the mid-level of the local minimum and
+//! maximum. Above most of these tags the white ring (~180 of 255) is darker than the background
+//! beyond it (~250), so the maximum is the background, the threshold sits above the black/ring
+//! mid-level and the boundary moves outward: the top edges of the `.txt` are 0.26 px above our
+//! edge-refined ones on average, the other three sides agree within 0.05 px. On synthetic tiny
+//! JPEG tags with known truth the reference estimator is less accurate than the edge refinement
 //! (RMS 0.25 / 0.35 / 0.57 px against 0.09 / 0.23 / 0.41 at blur 0.6 / 1.0 / 1.5 px; with a ring
-//! darker than its surroundings 0.48 / 0.84 / 1.29 against 0.12 / 0.36 / 0.74). Even the true corners of such tags are up to 0.6..1.5 px from the C library's
-//! unrefined ones, so no accurate detector meets 0.5 px against the `.txt`.
+//! darker than its surroundings 0.48 / 0.84 / 1.29 against 0.12 / 0.36 / 0.74), and even the true
+//! corners of such tags are up to 0.6..1.5 px from it.
 
 use glam::DVec2;
 use skinbrdf_targets::{detect, CornerModel, Detection, DetectorConfig, GrayF32};
@@ -114,17 +121,14 @@ const MEDIAN_VS_TXT_PX: f64 = 0.42;
 /// edge about a pixel too high there).
 const MAX_VS_TXT_PX: f64 = 1.35;
 
-/// [`CornerModel::BinaryBoundary`] against the `.txt` it imitates, median (measured 0.120 px):
-/// the same estimator on our threshold (relative contrast floor, 8-connected boundary points,
-/// nearest-side assignment near the corners instead of the C library's own segmentation).
-const MEDIAN_BOUNDARY_VS_TXT_PX: f64 = 0.15;
-
-/// Same, worst corner (measured 0.664 px): a pixel more or less in the binary boundary of a
-/// 17 px tag's corner.
-const MAX_BOUNDARY_VS_TXT_PX: f64 = 0.75;
-
-/// The issue's bound, reported (not asserted, see the module docs).
+/// The issue's bound: every corner of the reference library's estimator (ours reimplementing
+/// it) within 0.5 px of the `.txt` it wrote.
 const ISSUE_BOUND_PX: f64 = 0.5;
+
+/// "Median well below" the bound, for the reference estimator (measured 0.001 px: the same
+/// integer threshold and line fits on the same pixels; a tenth of the bound leaves room for a
+/// different JPEG decoder).
+const MEDIAN_BOUNDARY_VS_TXT_PX: f64 = 0.05;
 
 /// Mean outward offset of each side (the side whose outward normal is closest to up, left,
 /// down, right in the image) of `d` from the reference `r`.
@@ -258,12 +262,12 @@ fn the_reference_estimator_reproduces_the_txt_corners() {
         ..DetectorConfig::default()
     };
     let mut e = run(&cfg);
-    let (m_txt, _, max_txt) = summary("binary boundary vs .txt (unrefined)", &mut e.txt);
+    let (m_txt, _, max_txt) = summary("reference estimator vs .txt (unrefined)", &mut e.txt);
     summary(
-        "binary boundary vs C library with refine_edges",
+        "reference estimator vs C library with refine_edges",
         &mut e.refined,
     );
-    print_sides("binary boundary", &e.sides);
+    print_sides("reference estimator", &e.sides);
     assert!(m_txt < MEDIAN_BOUNDARY_VS_TXT_PX, "median vs .txt {m_txt}");
-    assert!(max_txt < MAX_BOUNDARY_VS_TXT_PX, "max vs .txt {max_txt}");
+    assert!(max_txt < ISSUE_BOUND_PX, "max vs .txt {max_txt}");
 }

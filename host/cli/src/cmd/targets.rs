@@ -11,14 +11,18 @@
 //! headdress: head frame, flash: flash frame), as the scene's `session.toml` lists them: build
 //! the rig to that file and a real session uses the same layout as the synthetic one.
 //!
-//! `skinbrdf targets --detect IMAGE...` instead prints the tags found in images (JSON lines).
+//! `skinbrdf targets --detect IMAGE... [--corners edge|reference]` instead prints the tags found
+//! in images (JSON lines), corners in the project's convention (integer = pixel centre; the
+//! AprilTag C library's coordinates are these + 0.5). `--corners reference` reports the C
+//! library's own unrefined quad corners (its `refine_edges = 0` output, reproduced to a few
+//! hundredths of a pixel) instead of our edge-refined ones, to compare with that library.
 
 use anyhow::Context;
 use glam::DVec3;
 use serde::Serialize;
 use skinbrdf_session::{write_atomic, Target};
 use skinbrdf_targets::sheet::{Sheet, SheetKind};
-use skinbrdf_targets::{detect::detect_with_stats, DetectorConfig, GrayF32};
+use skinbrdf_targets::{detect::detect_with_stats, CornerModel, DetectorConfig, GrayF32};
 use std::path::PathBuf;
 
 /// Flags of `skinbrdf targets`.
@@ -37,6 +41,18 @@ pub struct Args {
     /// Detect tags in these images instead (prints one JSON line per image).
     #[arg(long, num_args = 1..)]
     pub detect: Vec<PathBuf>,
+    /// Which corners `--detect` reports.
+    #[arg(long, value_enum, default_value_t = Corners::Edge, requires = "detect")]
+    pub corners: Corners,
+}
+
+/// Corner estimators of `--detect`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum Corners {
+    /// Edge refinement on the grey image (the accurate one).
+    Edge,
+    /// The AprilTag C library's unrefined quad, to compare with that library's output.
+    Reference,
 }
 
 /// Sheet kinds.
@@ -61,10 +77,17 @@ struct LayoutFile {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     if !args.detect.is_empty() {
+        let cfg = DetectorConfig {
+            corner_model: match args.corners {
+                Corners::Edge => CornerModel::EdgeGradient,
+                Corners::Reference => CornerModel::BinaryBoundary,
+            },
+            ..DetectorConfig::default()
+        };
         for f in &args.detect {
             let img = GrayF32::load(f)?;
             let t = std::time::Instant::now();
-            let (dets, stats) = detect_with_stats(&img, &DetectorConfig::default());
+            let (dets, stats) = detect_with_stats(&img, &cfg);
             let line = serde_json::json!({
                 "file": f,
                 "ms": t.elapsed().as_secs_f64() * 1e3,
