@@ -90,6 +90,14 @@ pub struct DetectorConfig {
     /// Which corner estimate is reported.
     #[serde(default)]
     pub corner_model: CornerModel,
+    /// Refine the sides of small tags (cells up to [`crate::profile::MAX_CELL_PX`]) by fitting
+    /// their edge profiles ([`crate::profile`]); only with [`CornerModel::EdgeGradient`].
+    #[serde(default = "yes")]
+    pub profile_small_tags: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// The corner estimator.
@@ -119,6 +127,7 @@ impl DetectorConfig {
         min_margin: 0.1,
         max_side_deviation: 0.08,
         corner_model: CornerModel::EdgeGradient,
+        profile_small_tags: true,
     };
 }
 
@@ -209,6 +218,11 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
             stats.rejected_decode += 1;
             continue;
         };
+        if cfg.corner_model == CornerModel::EdgeGradient && cfg.profile_small_tags {
+            if let Some(c) = crate::profile::refine_small_tag(img, &refined.corners) {
+                refined.corners = c;
+            }
+        }
         if let Some(refs) = &reference {
             // Tags whose border the reference library's quad stage does not find are not
             // reported in its model, as that library would not report them.
