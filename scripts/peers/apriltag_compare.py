@@ -12,7 +12,8 @@ C library's corners are converted by subtracting 0.5 px.
 
 Scene options (docs/benchmarks-poses.md, "Which estimator is right"): --sides A B (black-square
 side range, px), --bg L (level beyond the tag's white ring), --white L (level of the white
-cells), --jpeg Q (JPEG quality); --binary-boundary runs ours with CornerModel::BinaryBoundary.
+cells), --jpeg Q (JPEG quality); --binary-boundary runs ours with CornerModel::BinaryBoundary,
+--profile with the small-tag edge-profile fit (DetectorConfig::profile_small_tags).
 Rows: the C library with and without refine_edges, and ours; the mean outward column is the
 mean radial offset of the corners from the truth (+ = too far out).
 
@@ -153,11 +154,14 @@ def main():
     ap.add_argument("--white", type=float, default=1.0, help="level of the tag's white cells (0..1)")
     ap.add_argument("--jpeg", type=int, default=0, help="save as JPEG of this quality (0: PNG)")
     ap.add_argument("--no-real", action="store_true", help="skip the real photos")
+    ap.add_argument("--profile", action="store_true", help="ours with the small-tag profile fit")
     ap.add_argument("--binary-boundary", action="store_true",
                     help="ours with CornerModel::BinaryBoundary (the reference's unrefined quad fit)")
     args = ap.parse_args()
     if args.binary_boundary:
         OURS_ARGS.append("--binary-boundary")
+    if args.profile:
+        OURS_ARGS.append("--profile")
     rng = np.random.default_rng(args.seed)
     cds = codes()
     det = pupil_apriltags.Detector(families="tag36h11", quad_decimate=1.0, refine_edges=1, decode_sharpening=0.25)

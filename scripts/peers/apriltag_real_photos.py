@@ -6,7 +6,7 @@ quad, refine_edges=0) and from the C library with edge refinement
 and the worst corners. Corners in the project's convention (C library corners - 0.5 px).
 
     cargo build --release -p skinbrdf-targets --example detect_json
-    python3 scripts/peers/apriltag_real_photos.py [--binary-boundary] [--worst 15]
+    python3 scripts/peers/apriltag_real_photos.py [--binary-boundary | --profile] [--worst 15]
 
 Needs numpy only (the refined reference comes from the fixture).
 """
@@ -37,11 +37,12 @@ def match(cands, c, side):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--binary-boundary", action="store_true", help="ours with CornerModel::BinaryBoundary")
+    ap.add_argument("--profile", action="store_true", help="ours with the small-tag profile fit")
     ap.add_argument("--worst", type=int, default=15)
     args = ap.parse_args()
     exe = os.path.join(os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target")), "release", "examples", "detect_json")
     stems = sorted(f[:-4] for f in os.listdir(D) if f.endswith(".jpg"))
-    flags = ["--binary-boundary"] if args.binary_boundary else []
+    flags = (["--binary-boundary"] if args.binary_boundary else []) + (["--profile"] if args.profile else [])
     out = subprocess.run([exe] + flags + [os.path.join(D, s + ".jpg") for s in stems],
                          capture_output=True, text=True, check=True).stdout.splitlines()
     fixture = json.load(open(FIXTURE))

@@ -1,9 +1,10 @@
 //! Detects tag36h11 tags in image files and prints one JSON line per image:
 //! `{"file": ..., "ms": ..., "detections": [...]}` (corners in the project's pixel convention).
 //!
-//! `cargo run --release -p skinbrdf-targets --example detect_json -- [--binary-boundary] IMAGE...`
+//! `cargo run --release -p skinbrdf-targets --example detect_json -- [--binary-boundary] [--profile] IMAGE...`
 //! (`--binary-boundary`: report the reference library's unrefined quad corners,
-//! [`CornerModel::BinaryBoundary`], instead of the edge-refined ones).
+//! [`CornerModel::BinaryBoundary`], instead of the edge-refined ones; `--profile`: fit small
+//! tags' edge profiles, `DetectorConfig::profile_small_tags`).
 
 use skinbrdf_targets::{detect::detect_with_stats, CornerModel, DetectorConfig, GrayF32};
 use std::path::Path;
@@ -14,6 +15,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for f in std::env::args().skip(1) {
         if f == "--binary-boundary" {
             cfg.corner_model = CornerModel::BinaryBoundary;
+            continue;
+        }
+        if f == "--profile" {
+            cfg.profile_small_tags = true;
             continue;
         }
         let img = GrayF32::load(Path::new(&f))?;

@@ -44,6 +44,10 @@ pub struct Args {
     /// Which corners `--detect` reports.
     #[arg(long, value_enum, default_value_t = Corners::Edge, requires = "detect")]
     pub corners: Corners,
+    /// With `--corners edge`: refine small tags (cells up to 4 px) by fitting their edge
+    /// profiles (skinbrdf_targets::profile; off by default, see there).
+    #[arg(long, requires = "detect")]
+    pub profile_small_tags: bool,
 }
 
 /// Corner estimators of `--detect`.
@@ -82,6 +86,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 Corners::Edge => CornerModel::EdgeGradient,
                 Corners::Reference => CornerModel::BinaryBoundary,
             },
+            profile_small_tags: args.profile_small_tags,
             ..DetectorConfig::default()
         };
         for f in &args.detect {
