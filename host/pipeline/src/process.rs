@@ -571,6 +571,21 @@ fn pose_stage_reports(
     status: &StageStatus,
 ) -> Vec<StageReport> {
     let errs = truth.map(|t| skinbrdf_poses::session::compare_truth(poses, t));
+    let corners = errs
+        .as_ref()
+        .map(|e| e.corner_summary())
+        .unwrap_or_default();
+    // The detector's own accuracy for a layout's targets: corners against their true positions.
+    let corner_metric = |r: &mut StageReport, layout: &str| {
+        if let Some(c) = corners.get(layout) {
+            r.metrics.push(Metric::new(
+                &format!("{layout}_corner_error_median"),
+                c.corner_error_median_px,
+                "px",
+                MetricKind::Error,
+            ));
+        }
+    };
     let mk = |stage: Stage, time: f64| -> StageReport {
         if !plan.runs(stage) {
             return skipped(plan, stage);
@@ -649,6 +664,7 @@ fn pose_stage_reports(
             )
             .with_bound(bounds::CAMERA_ORIENTATION_DEG),
         );
+        corner_metric(&mut r, "reference");
     }
     let failures: usize = poses.images.iter().map(|i| i.errors.len()).sum();
     if failures > 0 {
@@ -687,6 +703,7 @@ fn pose_stage_reports(
                 "deg",
                 MetricKind::Error,
             ));
+            corner_metric(&mut r, "headdress");
         }
         r.notes.push("timed together with camera poses".into());
     }

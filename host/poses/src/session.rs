@@ -141,6 +141,22 @@ pub struct ImagePoses {
     pub diagnostics: Vec<Diagnostic>,
     /// Failures of individual estimates (the image's other poses may still be valid).
     pub errors: Vec<String>,
+    /// The tags detected, with their corners (older `poses.json` files have none).
+    #[serde(default)]
+    pub detections: Vec<DetectedTag>,
+}
+
+/// One tag found in an image.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DetectedTag {
+    /// tag36h11 id.
+    pub id: u32,
+    /// The layout the id belongs to (`unknown` for an id no layout lists).
+    pub layout: String,
+    /// Corners in pixels, in the layout's corner order.
+    pub corners_px: [DVec2; 4],
+    /// Standard deviation of each corner along its worst direction, pixels.
+    pub corner_sigma_px: [f64; 4],
 }
 
 /// All poses of a session.
@@ -397,10 +413,17 @@ pub fn estimate_session_stages(
                 pose_ms: 0.0,
                 diagnostics: Vec::new(),
                 errors: det.error.iter().cloned().collect(),
+                detections: Vec::with_capacity(det.dets.len()),
             };
             for d in &det.dets {
                 let name = table.get(&d.id).map(|(l, _)| l.name()).unwrap_or("unknown");
                 *out.targets_found.entry(name.to_string()).or_insert(0) += 1;
+                out.detections.push(DetectedTag {
+                    id: d.id,
+                    layout: name.to_string(),
+                    corners_px: d.corners_px,
+                    corner_sigma_px: d.corner_sigma_px(),
+                });
             }
             // Camera.
             if let Some(p) = entry.world_from_camera {
@@ -693,6 +716,66 @@ pub struct TruthErrors {
     pub standard_orientation_error_deg: Option<f64>,
     /// Focal length error of the calibrated camera, pixels.
     pub focal_error_px: Option<f64>,
+    /// Per layout: the distance of every detected corner from its true image position, pixels
+    /// (targets the truth lists as fully visible; detections of ids it does not list in that
+    /// image are counted in `false_detections`).
+    pub corner_error_px: std::collections::BTreeMap<String, Vec<f64>>,
+    /// Detections of ids the truth does not list in their image.
+    pub false_detections: usize,
+    /// Fully visible targets the truth lists that were not detected, per layout.
+    pub missed_targets: std::collections::BTreeMap<String, usize>,
+}
+
+/// Detection accuracy of one layout against the truth.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CornerErrorSummary {
+    /// Corners compared.
+    pub corners: usize,
+    /// Median distance from the true corner, pixels.
+    pub corner_error_median_px: f64,
+    /// 90th percentile, pixels.
+    pub corner_error_p90_px: f64,
+    /// Largest, pixels.
+    pub corner_error_max_px: f64,
+    /// Fully visible targets of the layout not detected.
+    pub missed_targets: usize,
+}
+
+impl TruthErrors {
+    /// Per layout: the corner error statistics.
+    pub fn corner_summary(&self) -> std::collections::BTreeMap<String, CornerErrorSummary> {
+        let mut layouts: std::collections::BTreeSet<&String> =
+            self.corner_error_px.keys().collect();
+        layouts.extend(self.missed_targets.keys());
+        layouts
+            .into_iter()
+            .map(|l| {
+                let mut v: Vec<f64> = self
+                    .corner_error_px
+                    .get(l)
+                    .map(|v| v.iter().copied().filter(|x| x.is_finite()).collect())
+                    .unwrap_or_default();
+                v.sort_by(f64::total_cmp);
+                let at = |q: f64| {
+                    if v.is_empty() {
+                        f64::NAN
+                    } else {
+                        v[((v.len() - 1) as f64 * q).round() as usize]
+                    }
+                };
+                (
+                    l.clone(),
+                    CornerErrorSummary {
+                        corners: v.len(),
+                        corner_error_median_px: at(0.5),
+                        corner_error_p90_px: at(0.9),
+                        corner_error_max_px: at(1.0),
+                        missed_targets: self.missed_targets.get(l).copied().unwrap_or(0),
+                    },
+                )
+            })
+            .collect()
+    }
 }
 
 /// Median of the finite values (NaN when none).
@@ -725,6 +808,26 @@ pub fn compare_truth(est: &SessionPoses, truth: &Truth) -> TruthErrors {
         e.camera_orientation_error_deg.push(co);
         e.head_position_error_m.push(hp);
         e.head_orientation_error_deg.push(ho);
+        let Some(t) = t else { continue };
+        for d in &img.detections {
+            match t.targets.iter().find(|tt| tt.id == d.id) {
+                Some(tt) if tt.fully_visible => e
+                    .corner_error_px
+                    .entry(tt.layout.clone())
+                    .or_default()
+                    .extend((0..4).map(|k| d.corners_px[k].distance(tt.corners_px[k]))),
+                Some(_) => {}
+                None => e.false_detections += 1,
+            }
+        }
+        // Only images whose detections were recorded count misses (older poses.json files).
+        if !img.detections.is_empty() {
+            for tt in t.targets.iter().filter(|tt| tt.fully_visible) {
+                if !img.detections.iter().any(|d| d.id == tt.id) {
+                    *e.missed_targets.entry(tt.layout.clone()).or_default() += 1;
+                }
+            }
+        }
     }
     e.light_position_error_m = est
         .light_position_m

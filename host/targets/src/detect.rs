@@ -92,9 +92,8 @@ pub struct DetectorConfig {
     pub corner_model: CornerModel,
     /// Refine the sides of small tags (cells up to [`crate::profile::MAX_CELL_PX`]) by fitting
     /// their edge profiles ([`crate::profile`]); only with [`CornerModel::EdgeGradient`]. Off by
-    /// default: it lowers the corner error of isolated small tags by 10..60 %, but on the
-    /// synthetic sessions' foreshortened headdress tags it raised the head pose error (grazing
-    /// scene, half resolution: 0.48 -> 0.70 mm), see the module docs.
+    /// default: it lowers the corner error of small blurred tags on a dark or bright surround
+    /// by 30..60 % and is neutral on the synthetic sessions, see the module docs.
     #[serde(default)]
     pub profile_small_tags: bool,
 }

@@ -110,6 +110,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "light_position_error_m": e.light_position_error_m,
                 "standard_position_error_m": e.standard_position_error_m,
                 "focal_error_px": e.focal_error_px,
+                "detection": e.corner_summary(),
+                "false_detections": e.false_detections,
             })),
         });
         println!("{}", serde_json::to_string_pretty(&summary)?);
@@ -208,6 +210,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let Some(s) = e.standard_position_error_m {
             println!("vs truth: standard position error {:.3} mm", s * 1e3);
         }
+        for (layout, c) in e.corner_summary() {
+            println!(
+                "vs truth: {layout} corners: {} compared, error median {:.3} px, p90 {:.3}, max {:.3}; {} fully visible targets missed",
+                c.corners,
+                c.corner_error_median_px,
+                c.corner_error_p90_px,
+                c.corner_error_max_px,
+                c.missed_targets
+            );
+        }
+        println!(
+            "vs truth: {} detections of ids not in their image",
+            e.false_detections
+        );
     }
     println!(
         "poses written to {} in {:.0} ms",
