@@ -443,20 +443,17 @@ pub fn refine_small_tag(img: &GrayF32, q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
         let Some(Fit { p, sd, .. }) = best else {
             continue;
         };
-        let (e0, sigma) = (p[0], p[1].exp());
-        // The edge's move at the side's ends: within a pixel, and within half a cell (a larger
-        // move means the fit took a neighbouring edge for this one).
-        let end_shift = e0.abs();
-        let plausible = end_shift < MAX_SHIFT_PX.min(0.5 * cell)
+        let (e, sigma) = (p[0], p[1].exp());
+        // The edge's move: within a pixel, and within half a cell (a larger move means the fit
+        // took a neighbouring edge for this one).
+        let plausible = e.abs() < MAX_SHIFT_PX.min(0.5 * cell)
             && sd[0] < MAX_EDGE_SD_PX
             && (SIGMA_RANGE_PX.0..=SIGMA_RANGE_PX.1).contains(&sigma);
         if !plausible {
             continue;
         }
-        // The fitted edge line: through the points at u = -1/2 and u = 1/2.
-        let p0 = a + outward * e0;
-        let p1 = a + dir * len + outward * e0;
-        lines[k] = (p0, (p1 - p0).normalize());
+        // The side moves parallel to itself.
+        lines[k] = (a + outward * e, dir);
         any = true;
     }
     if !any {
