@@ -24,6 +24,10 @@ use crate::render::{Layout, Rendered, Renderer};
 use crate::scene::{CurveScene, Encoding, GeometryKind, Scene};
 use crate::shape::Shape;
 
+/// How far inside a target's outline the truth's visibility rays aim, metres: far below a
+/// pixel's footprint (0.3..1 mm), far above the ray tracer's single-precision resolution.
+const VISIBILITY_INSET_M: f64 = 1e-4;
+
 /// Errors of the generator.
 #[derive(Debug, thiserror::Error)]
 pub enum SynthError {
@@ -249,9 +253,14 @@ fn target_truths(
             let Some(corners_px) = corners_px.iter().copied().collect::<Option<Vec<_>>>() else {
                 continue;
             };
-            let unoccluded = corners_w.iter().all(|c| {
-                // Aim slightly inside the tag so the corner's own edge does not count.
-                let p = *c + (centre - *c) * 0.02;
+            // The border's outline: each corner and each side's midpoint, aimed a tenth of a
+            // millimetre inside so the outline's own edge does not count (aiming a fraction of
+            // the size inside, 0.4 mm on a 30 mm tag, let a neighbouring stand-off paper hide
+            // a pixel of a border unseen).
+            let sides = (0..4).map(|k| 0.5 * (corners_w[k] + corners_w[(k + 1) % 4]));
+            let outline: Vec<DVec3> = corners_w.iter().copied().chain(sides).collect();
+            let unoccluded = outline.iter().all(|c| {
+                let p = *c + (centre - *c).normalize_or_zero() * VISIBILITY_INSET_M;
                 let d = p - eye;
                 let dist = d.length();
                 renderer
