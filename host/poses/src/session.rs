@@ -720,6 +720,9 @@ pub struct TruthErrors {
     /// (targets the truth lists as fully visible; detections of ids it does not list in that
     /// image are counted in `false_detections`).
     pub corner_error_px: std::collections::BTreeMap<String, Vec<f64>>,
+    /// Per layout: each of those distances over the corner's stated standard deviation (worst
+    /// direction); for honest sigmas and Gaussian errors its median is about 1.18 (Rayleigh).
+    pub corner_error_over_sigma: std::collections::BTreeMap<String, Vec<f64>>,
     /// Detections of ids the truth does not list in their image.
     pub false_detections: usize,
     /// Fully visible targets the truth lists that were not detected, per layout.
@@ -739,6 +742,9 @@ pub struct CornerErrorSummary {
     pub corner_error_max_px: f64,
     /// Fully visible targets of the layout not detected.
     pub missed_targets: usize,
+    /// Median of the corner errors over their stated sigmas (about 1.18 when the sigmas are
+    /// honest, larger when they are optimistic).
+    pub error_over_sigma_median: f64,
 }
 
 impl TruthErrors {
@@ -771,6 +777,12 @@ impl TruthErrors {
                         corner_error_p90_px: at(0.9),
                         corner_error_max_px: at(1.0),
                         missed_targets: self.missed_targets.get(l).copied().unwrap_or(0),
+                        error_over_sigma_median: median(
+                            self.corner_error_over_sigma
+                                .get(l)
+                                .map(Vec::as_slice)
+                                .unwrap_or(&[]),
+                        ),
                     },
                 )
             })
@@ -811,11 +823,18 @@ pub fn compare_truth(est: &SessionPoses, truth: &Truth) -> TruthErrors {
         let Some(t) = t else { continue };
         for d in &img.detections {
             match t.targets.iter().find(|tt| tt.id == d.id) {
-                Some(tt) if tt.fully_visible => e
-                    .corner_error_px
-                    .entry(tt.layout.clone())
-                    .or_default()
-                    .extend((0..4).map(|k| d.corners_px[k].distance(tt.corners_px[k]))),
+                Some(tt) if tt.fully_visible => {
+                    let dist: [f64; 4] =
+                        std::array::from_fn(|k| d.corners_px[k].distance(tt.corners_px[k]));
+                    e.corner_error_px
+                        .entry(tt.layout.clone())
+                        .or_default()
+                        .extend(dist);
+                    e.corner_error_over_sigma
+                        .entry(tt.layout.clone())
+                        .or_default()
+                        .extend((0..4).map(|k| dist[k] / d.corner_sigma_px[k].max(1e-9)));
+                }
                 Some(_) => {}
                 None => e.false_detections += 1,
             }

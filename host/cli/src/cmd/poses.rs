@@ -212,11 +212,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         for (layout, c) in e.corner_summary() {
             println!(
-                "vs truth: {layout} corners: {} compared, error median {:.3} px, p90 {:.3}, max {:.3}; {} fully visible targets missed",
+                "vs truth: {layout} corners: {} compared, error median {:.3} px, p90 {:.3}, max {:.3}, error/sigma median {:.2} (1.18 if the sigmas are honest); {} fully visible targets missed",
                 c.corners,
                 c.corner_error_median_px,
                 c.corner_error_p90_px,
                 c.corner_error_max_px,
+                c.error_over_sigma_median,
                 c.missed_targets
             );
         }
