@@ -258,9 +258,8 @@ fn target_truths(
             // the size inside, 0.4 mm on a 30 mm tag, let a neighbouring stand-off paper hide
             // a pixel of a border unseen).
             let sides = (0..4).map(|k| 0.5 * (corners_w[k] + corners_w[(k + 1) % 4]));
-            let outline: Vec<DVec3> = corners_w.iter().copied().chain(sides).collect();
-            let unoccluded = outline.iter().all(|c| {
-                let p = *c + (centre - *c).normalize_or_zero() * VISIBILITY_INSET_M;
+            let unoccluded = corners_w.iter().copied().chain(sides).all(|c| {
+                let p = c + (centre - c).normalize_or_zero() * VISIBILITY_INSET_M;
                 let d = p - eye;
                 let dist = d.length();
                 renderer

@@ -132,7 +132,7 @@ struct Side {
 
 impl Side {
     /// Residuals of the profile model with the levels solved per position, and (if `jac` is
-    /// given) their Jacobian with respect to `(e₀, e₁, ln σ)` in Kaufman's variable
+    /// given) their Jacobian with respect to `(e, ln σ)` in Kaufman's variable
     /// projection form, `∂r/∂θ ≈ -(I - A A⁺) (∂A/∂θ) L`. `None` when a position's levels
     /// cannot be solved.
     fn evaluate(
@@ -275,10 +275,10 @@ fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; 
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
-/// A converged profile fit: `(e₀, e₁, ln σ)` and their standard deviations.
+/// A converged profile fit: `(e, ln σ)`, the edge offset's standard deviation and the cost.
 struct Fit {
     p: [f64; NP],
-    sd: [f64; NP],
+    edge_sd: f64,
     cost: f64,
 }
 
@@ -296,10 +296,10 @@ fn normal_equations(jac: &[[f64; NP]], r: &[f64]) -> ([[f64; NP]; NP], [f64; NP]
     (jtj, jtr)
 }
 
-/// Levenberg-Marquardt on the three nonlinear parameters; stops when a step changes the cost by
-/// less than [`COST_TOL`] relative or no damping lowers it. The standard deviations are
-/// `√diag((JᵀJ)⁻¹) · s` with `s²` the residual variance over the degrees of freedom left by the
-/// three parameters and the four levels per position.
+/// Levenberg-Marquardt on the two nonlinear parameters; stops when a step changes the cost by
+/// less than [`COST_TOL`] relative or no damping lowers it. The edge offset's standard
+/// deviation is `√((JᵀJ)⁻¹)₀₀ · s` with `s²` the residual variance over the degrees of freedom
+/// left by the two parameters and the four levels per position.
 fn fit(side: &Side, start: [f64; NP]) -> Option<Fit> {
     let mut p = start;
     let (mut r, mut jac) = (Vec::new(), Vec::new());
@@ -340,13 +340,10 @@ fn fit(side: &Side, start: [f64; NP]) -> Option<Fit> {
     let (jtj, _) = normal_equations(&jac, &r);
     let dof = r.len().saturating_sub(NP + 4 * side.rows.len()).max(1) as f64;
     let s2 = cost / dof;
-    let mut sd = [0.0; NP];
-    for (k, v) in sd.iter_mut().enumerate() {
-        let mut unit = [0.0; NP];
-        unit[k] = 1.0;
-        *v = (solve(jtj, unit)?[k] * s2).max(0.0).sqrt();
-    }
-    Some(Fit { p, sd, cost })
+    let mut unit = [0.0; NP];
+    unit[0] = 1.0;
+    let edge_sd = (solve(jtj, unit)?[0] * s2).max(0.0).sqrt();
+    Some(Fit { p, edge_sd, cost })
 }
 
 /// Relative cost decrease below which the fit has converged.
@@ -440,14 +437,14 @@ pub fn refine_small_tag(img: &GrayF32, q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
                 }
             }
         }
-        let Some(Fit { p, sd, .. }) = best else {
+        let Some(Fit { p, edge_sd, .. }) = best else {
             continue;
         };
         let (e, sigma) = (p[0], p[1].exp());
         // The edge's move: within a pixel, and within half a cell (a larger move means the fit
         // took a neighbouring edge for this one).
         let plausible = e.abs() < MAX_SHIFT_PX.min(0.5 * cell)
-            && sd[0] < MAX_EDGE_SD_PX
+            && edge_sd < MAX_EDGE_SD_PX
             && (SIGMA_RANGE_PX.0..=SIGMA_RANGE_PX.1).contains(&sigma);
         if !plausible {
             continue;

@@ -75,15 +75,16 @@ pub fn reference_quads(img: &GrayF32) -> Vec<[DVec2; 4]> {
     let mut uf = components(&thr, w, h);
     let clusters = boundary_clusters(&thr, w, h, &mut uf);
     let max_points = 3 * (2 * w + 2 * h);
-    let mut keys: Vec<&(u32, u32)> = clusters.keys().collect();
-    keys.sort();
-    keys.into_iter()
-        .filter_map(|k| {
-            let pts = &clusters[k];
+    // In a fixed order (the map's is arbitrary); each cluster is handed to its fit by value.
+    let mut clusters: Vec<((u32, u32), Vec<Pt>)> = clusters.into_iter().collect();
+    clusters.sort_unstable_by_key(|(k, _)| *k);
+    clusters
+        .into_iter()
+        .filter_map(|(_, pts)| {
             if pts.len() > max_points {
                 return None;
             }
-            let q = fit_quad(pts.clone(), &grey, w, h)?;
+            let q = fit_quad(pts, &grey, w, h)?;
             Some(q.map(|p| p - DVec2::splat(0.5)))
         })
         .collect()
