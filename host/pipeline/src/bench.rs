@@ -943,7 +943,7 @@ fn sweep_fit(
 mod tests {
     use super::*;
 
-    fn row(stage: &'static str, t: f64, e: f64) -> BenchRow {
+    fn row(stage: BenchStage, t: f64, e: f64) -> BenchRow {
         BenchRow {
             stage,
             setting: "s",
@@ -960,11 +960,11 @@ mod tests {
     #[test]
     fn pareto_front_keeps_only_undominated_rows_per_stage() {
         let mut rows = vec![
-            row("a", 1.0, 5.0),
-            row("a", 2.0, 3.0),
-            row("a", 3.0, 4.0),
-            row("b", 10.0, 10.0),
-            row("a", 0.5, f64::NAN),
+            row(BenchStage::Derender, 1.0, 5.0),
+            row(BenchStage::Derender, 2.0, 3.0),
+            row(BenchStage::Derender, 3.0, 4.0),
+            row(BenchStage::Fit, 10.0, 10.0),
+            row(BenchStage::Derender, 0.5, f64::NAN),
         ];
         mark_pareto(&mut rows);
         let front: Vec<bool> = rows.iter().map(|r| r.pareto).collect();
