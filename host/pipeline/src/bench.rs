@@ -18,10 +18,11 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::pose_inputs::{PoseChoice, SessionOptions};
 use glam::{DVec2, Vec3};
 use skinbrdf_brdf::{BrdfModel, ChannelModel, Geom, ModelSpec, ParamBound, StartHint};
 use skinbrdf_core::BrdfSample;
-use skinbrdf_derender::{DerenderConfig, PoseChoice, SessionOptions};
+use skinbrdf_derender::DerenderConfig;
 use skinbrdf_fit::loess::{choose_span_gcv, Bandwidth, Loess, LoessConfig};
 use skinbrdf_fit::plot::{write_figure, Figure, Panel, Series, SeriesKind};
 use skinbrdf_fit::report::SPAN_CANDIDATES;
@@ -54,6 +55,9 @@ pub enum BenchError {
     /// Derendering.
     #[error("derendering: {0}")]
     Derender(#[from] skinbrdf_derender::DerenderError),
+    /// Resolving the poses for derendering, or derendering, failed.
+    #[error("derendering: {0}")]
+    DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Ray casting.
     #[error("ray casting: {0}")]
     Mesh(#[from] skinbrdf_mesh::MeshError),
@@ -534,7 +538,7 @@ fn sweep_derender(
             skip_target_mask: false,
             estimated: Some(p.clone()),
         };
-        let run = skinbrdf_derender::derender_session(s, &opts, &c)?;
+        let run = crate::pose_inputs::derender_session(s, &opts, &c)?;
         let err = run
             .report
             .truth_error

@@ -10,6 +10,7 @@ pub mod bench;
 pub mod demo;
 pub mod ledger;
 pub mod plan;
+pub mod pose_inputs;
 pub mod process;
 pub mod report;
 

@@ -16,7 +16,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use skinbrdf_derender::{DerenderConfig, PoseChoice, SessionOptions, SessionRun};
+use crate::pose_inputs::{PoseChoice, SessionOptions};
+use skinbrdf_derender::{DerenderConfig, SessionRun};
 use skinbrdf_fit::report::{fit_and_report, FitReport, Input, ReportOptions};
 use skinbrdf_fit::FitConfig;
 use skinbrdf_poses::{PoseConfig, SessionPoses};
@@ -61,6 +62,9 @@ pub enum ProcessError {
     /// Derendering failed.
     #[error("derendering: {0}")]
     Derender(#[from] skinbrdf_derender::DerenderError),
+    /// Resolving the poses for derendering, or derendering, failed.
+    #[error("derendering: {0}")]
+    DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Smoothing or fitting failed.
     #[error("fitting: {0}")]
     Fit(#[from] skinbrdf_fit::report::ReportError),
@@ -322,7 +326,7 @@ pub fn process(
                 skip_target_mask: false,
                 estimated: estimated.clone(),
             };
-            let run = skinbrdf_derender::derender_session(&session, &opts, &dcfg)?;
+            let run = crate::pose_inputs::derender_session(&session, &opts, &dcfg)?;
             if facts.region_convex.is_none() {
                 facts.region_convex = Some(!run.report.region_can_self_shadow);
             }

@@ -3,10 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use skinbrdf_derender::{
-    derender_session, CEstimator, DerenderConfig, PoseChoice, SessionOptions, ShadowMode,
-};
+use skinbrdf_derender::{CEstimator, DerenderConfig, ShadowMode};
 use skinbrdf_mesh::NormalMethod;
+use skinbrdf_pipeline::pose_inputs::{derender_session, PoseChoice, SessionOptions};
 
 /// Flags of `skinbrdf derender`.
 #[derive(Debug, clap::Args)]
@@ -41,8 +40,9 @@ pub struct Args {
     /// BVH build preset: fastest, very_fast, fast, medium, high, very_high.
     #[arg(long, default_value = "medium")]
     pub bvh_quality: String,
-    /// Poses: auto (session.toml, else truth.json), session, truth, estimated (the pose
-    /// stage's output, --poses-file or SESSION/out/poses.json).
+    /// Poses: auto (session.toml, then the pose stage's output when given), session, truth
+    /// (session.toml, then truth.json), estimated (session.toml, then the pose stage's output,
+    /// --poses-file or SESSION/out/poses.json).
     #[arg(long, default_value = "auto")]
     pub poses: String,
     /// The pose stage's output (implies --poses estimated).
