@@ -56,7 +56,7 @@ pub enum BenchError {
     #[error("derendering: {0}")]
     Derender(#[from] skinbrdf_derender::DerenderError),
     /// Resolving the poses for derendering, or derendering, failed.
-    #[error("derendering: {0}")]
+    #[error(transparent)]
     DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Ray casting.
     #[error("ray casting: {0}")]

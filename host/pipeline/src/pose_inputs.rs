@@ -350,8 +350,14 @@ pub enum DerenderSessionError {
         error: FileError,
     },
     /// Derendering failed.
-    #[error(transparent)]
-    Derender(#[from] DerenderError),
+    #[error("derendering: {0}")]
+    Derender(DerenderError),
+}
+
+impl From<DerenderError> for DerenderSessionError {
+    fn from(e: DerenderError) -> Self {
+        Self::Derender(e)
+    }
 }
 
 /// Resolves the poses ([`resolve_poses`]; `truth.json` is read only for [`PoseChoice::Truth`])

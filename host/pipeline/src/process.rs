@@ -63,7 +63,7 @@ pub enum ProcessError {
     #[error("derendering: {0}")]
     Derender(#[from] skinbrdf_derender::DerenderError),
     /// Resolving the poses for derendering, or derendering, failed.
-    #[error("derendering: {0}")]
+    #[error(transparent)]
     DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Smoothing or fitting failed.
     #[error("fitting: {0}")]

@@ -80,6 +80,12 @@ fn a_stationary_sample_derenders_with_estimated_poses() {
     assert_eq!(r.pose_source, PoseSource::Estimated);
     assert!(r.counts.kept >= MIN_SAMPLES, "{:?}", r.counts);
     let e = r.truth_error.expect("truth.json scores the samples");
+    eprintln!(
+        "stationary sample: {} images, {} samples kept, median relative error {:.3} %",
+        r.images.len(),
+        r.counts.kept,
+        e.median_rel_error * 100.0
+    );
     assert!(
         e.median_rel_error <= SAMPLES_MEDIAN_REL_ERROR_MAX,
         "median relative error {:.2} %",

@@ -40,7 +40,7 @@ pub struct Args {
     /// BVH build preset: fastest, very_fast, fast, medium, high, very_high.
     #[arg(long, default_value = "medium")]
     pub bvh_quality: String,
-    /// Poses: auto (session.toml, then the pose stage's output when given), session, truth
+    /// Poses: auto (session.toml, then SESSION/out/poses.json if present), session, truth
     /// (session.toml, then truth.json), estimated (session.toml, then the pose stage's output,
     /// --poses-file or SESSION/out/poses.json).
     #[arg(long, default_value = "auto")]
@@ -165,11 +165,12 @@ fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let (cfg, mut opts) = config(&args)?;
-    if opts.poses == PoseChoice::Estimated {
-        let p = args
-            .poses_file
-            .clone()
-            .unwrap_or_else(|| args.session.join("out").join("poses.json"));
+    let p = args
+        .poses_file
+        .clone()
+        .unwrap_or_else(|| args.session.join("out").join("poses.json"));
+    // `auto` uses the pose stage's output when there is one.
+    if opts.poses == PoseChoice::Estimated || (opts.poses == PoseChoice::Auto && p.exists()) {
         let text = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
         opts.estimated = Some(
             serde_json::from_slice(&text).with_context(|| format!("parsing {}", p.display()))?,
