@@ -60,6 +60,9 @@ pub enum BenchError {
     /// Derendering.
     #[error("derendering: {0}")]
     Derender(#[from] skinbrdf_derender::DerenderError),
+    /// Resolving the poses for derendering, or derendering, failed.
+    #[error(transparent)]
+    DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Ray casting.
     #[error("ray casting: {0}")]
     Mesh(#[from] skinbrdf_mesh::MeshError),

@@ -11,6 +11,7 @@ pub mod demo;
 pub mod ledger;
 pub mod metrics;
 pub mod plan;
+pub mod pose_inputs;
 pub mod process;
 pub mod report;
 pub mod scenes;

@@ -122,6 +122,9 @@ pub struct DropCounts {
     pub saturated: u64,
     /// Below the noise floor.
     pub below_noise_floor: u64,
+    /// A channel is not a finite number (a broken value, not a dark one).
+    #[serde(default)]
+    pub non_finite: u64,
     /// No ray (outside the camera model's valid field).
     pub no_ray: u64,
 }
@@ -384,6 +387,7 @@ impl StageMetrics {
                     ("shadowed", d.shadowed),
                     ("saturated", d.saturated),
                     ("below_noise_floor", d.below_noise_floor),
+                    ("non_finite", d.non_finite),
                     ("no_ray", d.no_ray),
                 ] {
                     if n > 0 {

@@ -55,6 +55,9 @@ pub enum ProcessError {
     /// Derendering failed.
     #[error("derendering: {0}")]
     Derender(#[from] skinbrdf_derender::DerenderError),
+    /// The poses for derendering could not be resolved, or derendering failed.
+    #[error(transparent)]
+    DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Smoothing or fitting failed.
     #[error("fitting: {0}")]
     Fit(#[from] skinbrdf_fit::report::ReportError),

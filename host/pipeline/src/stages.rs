@@ -16,7 +16,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use skinbrdf_derender::{DerenderConfig, PoseChoice, SessionOptions, SessionRun};
+use skinbrdf_derender::{DerenderConfig, SessionRun};
+
+use crate::pose_inputs::{PoseChoice, SessionOptions};
 use skinbrdf_fit::report::{fit_and_report, FitReport, Input};
 use skinbrdf_poses::SessionPoses;
 use skinbrdf_samples::SampleHeader;
@@ -361,7 +363,7 @@ pub fn derender_stage(
         skip_target_mask: false,
         estimated: poses.cloned(),
     };
-    let mut run = skinbrdf_derender::derender_session(session, &session_opts, dcfg)?;
+    let mut run = crate::pose_inputs::derender_session(session, &session_opts, dcfg)?;
     let mut samples = std::mem::take(&mut run.report.samples);
     if opts.incidence_plane_only {
         samples.retain(near_incidence_plane);
@@ -508,6 +510,7 @@ pub fn derender_reports(plan: &Plan, run: &SessionRun, samples_kept: u64) -> [St
             shadowed: k.shadowed,
             saturated: k.saturated,
             below_noise_floor: k.below_noise_floor,
+            non_finite: k.non_finite,
             no_ray: k.no_ray,
         },
         c_green: d.c[1],

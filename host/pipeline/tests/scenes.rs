@@ -24,7 +24,7 @@ use std::path::Path;
 use skinbrdf_pipeline::plan::Action;
 use skinbrdf_pipeline::process::{process, Event, ProcessConfig};
 use skinbrdf_pipeline::report::{MetricKind, StageStatus};
-use skinbrdf_pipeline::{RunReport, Stage};
+use skinbrdf_pipeline::Stage;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
 /// Measurement images per test session (the scenes have 30).

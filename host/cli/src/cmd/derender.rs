@@ -3,10 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use skinbrdf_derender::{
-    derender_session, CEstimator, DerenderConfig, PoseChoice, SessionOptions, ShadowMode,
-};
+use skinbrdf_derender::{CEstimator, DerenderConfig, ShadowMode};
 use skinbrdf_mesh::NormalMethod;
+use skinbrdf_pipeline::pose_inputs::{derender_session, PoseChoice, SessionOptions};
 use skinbrdf_pipeline::process::{scene_facts, ProcessError};
 use skinbrdf_pipeline::{stages, Plan, PlanOptions};
 
