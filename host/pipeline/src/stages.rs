@@ -40,6 +40,8 @@ pub const POSES_FILE: &str = "poses.json";
 pub const SAMPLES_FILE: &str = "samples.skbs";
 /// The fit's parameter file, relative to the output directory.
 pub const PARAMS_FILE: &str = "fit/params.json";
+/// The fit's own report, relative to the output directory.
+pub const FIT_REPORT_FILE: &str = "fit/report.md";
 /// The head rendering (Lambertian against the fitted BRDF), relative to the output directory.
 pub const RENDER_FIGURE: &str = "render/head_comparison.png";
 
@@ -579,7 +581,7 @@ impl StageUnit for FitUnit {
         let fit_dir = ctx.out_dir.join("fit");
         let fr = fit_and_report(&input, &fit_dir, &ctx.cfg.fit)?;
         ctx.samples = Some(input.samples);
-        let outputs = fr
+        let mut outputs: Vec<String> = fr
             .files
             .iter()
             .filter_map(|f| {
@@ -589,6 +591,13 @@ impl StageUnit for FitUnit {
                     .map(|p| p.to_string_lossy().into_owned())
             })
             .collect();
+        // The parameters and the fit's own report are outputs too (the head rendering reads
+        // the parameters).
+        for f in [PARAMS_FILE, FIT_REPORT_FILE] {
+            if ctx.out_dir.join(f).is_file() && !outputs.iter().any(|o| o == f) {
+                outputs.push(f.to_string());
+            }
+        }
         let reports = fit_reports(&ctx.plan, &fr).to_vec();
         ctx.fit = Some(fr);
         Ok((reports, outputs))

@@ -78,19 +78,36 @@ fn resume_reuses_only_what_is_intact() {
     assert_eq!(strip(md(&again)), strip(md(&first)));
 
     // Samples replaced behind the ledger's back (a hand-run derender with another stride, or a
-    // run interrupted after writing them): derender and fit run again, and the report counts
-    // what the file holds.
+    // run interrupted after writing them): derender runs again and the report counts what the
+    // file holds. The rerun restores the very samples the fit was made from, so the fit (whose
+    // fingerprint covers the samples' digest) is rightly reused.
     let (h, s) = skinbrdf_samples::read_samples(out.join("samples.skbs")).expect("read");
     let half: Vec<_> = s.iter().step_by(2).copied().collect();
     skinbrdf_samples::write_samples(out.join("samples.skbs"), &h, &half).expect("write");
     let after = run(&session);
     assert_eq!(status(&after, Stage::CameraPoses), StageStatus::Reused);
     assert_eq!(status(&after, Stage::Derender), StageStatus::Ran);
-    assert_eq!(status(&after, Stage::Fit), StageStatus::Ran);
+    assert_eq!(status(&after, Stage::Fit), StageStatus::Reused);
     assert_eq!(
         after.report.derender().expect("derender").samples_kept,
         samples_in_file(&after)
     );
+    assert_eq!(
+        after.report.fit().expect("fit").samples_fitted,
+        samples_in_file(&after)
+    );
+
+    // The fit's input changed (another derender setting): the fit runs again.
+    let mut cfg = ProcessConfig::new();
+    cfg.derender.stride = 2;
+    let strided = process(&session, &cfg, &mut |_| {}).expect("process --stride 2");
+    assert_eq!(status(&strided, Stage::Derender), StageStatus::Ran);
+    assert_eq!(status(&strided, Stage::Fit), StageStatus::Ran);
+    assert_eq!(
+        strided.report.fit().expect("fit").samples_fitted,
+        samples_in_file(&strided)
+    );
+    run(&session);
     assert_eq!(samples_in_file(&after), kept);
 
     // A deleted fit product is written again; so is a figure; a garbage params.json is not

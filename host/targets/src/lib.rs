@@ -8,6 +8,7 @@
 //! * [`sheet`]: printable sheets (SVG, PDF) at true scale.
 
 pub mod detect;
+pub mod homography;
 pub mod image;
 pub mod profile;
 pub mod reference_quad;

@@ -368,7 +368,7 @@ pub fn refine_small_tag(img: &GrayF32, q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
     });
     // The tag's homography gives the border's and the ring's widths at each position, which
     // differ along a side seen in perspective.
-    let h = crate::detect::square_to_quad(q)?;
+    let h = crate::homography::square_to_quad(q)?;
     let h_inv = h.inverse();
     const SQUARE: [DVec2; 4] = [
         DVec2::new(-1.0, -1.0),
@@ -401,9 +401,9 @@ pub fn refine_small_tag(img: &GrayF32, q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
             if !img.contains(p, reach) {
                 continue;
             }
-            let sq = crate::detect::apply_h(&h_inv, p);
-            let inner = (p - crate::detect::apply_h(&h, sq - out_sq)).dot(outward);
-            let outer = (crate::detect::apply_h(&h, sq + out_sq) - p).dot(outward);
+            let sq = crate::homography::apply_h(&h_inv, p);
+            let inner = (p - crate::homography::apply_h(&h, sq - out_sq)).dot(outward);
+            let outer = (crate::homography::apply_h(&h, sq + out_sq) - p).dot(outward);
             if !(inner > 0.25 * cell
                 && inner < 4.0 * cell
                 && outer > 0.25 * cell
@@ -472,7 +472,8 @@ pub fn refine_small_tag(img: &GrayF32, q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::detect::{detect, square_to_quad, DetectorConfig};
+    use crate::detect::{detect, DetectorConfig};
+    use crate::homography::square_to_quad;
     use crate::render::paint_tag;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;

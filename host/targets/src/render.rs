@@ -1,7 +1,7 @@
 //! Painting tags into images (anti-aliased by supersampling), for tests, benchmarks and the
 //! synthetic generator.
 
-use crate::detect::apply_h;
+use crate::homography::apply_h;
 use crate::image::GrayF32;
 use crate::tag36h11;
 use glam::{DMat3, DVec2};
