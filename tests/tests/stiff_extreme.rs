@@ -1,6 +1,6 @@
-//! Stiff and extreme inputs through the real library stages (issue 8, "Stiff and extreme
-//! cases"): grazing angles, near-mirror lobes, values across six orders of magnitude, strongly
-//! distorted cameras, near-degenerate target layouts and scans with NaN vertices and holes.
+//! Stiff and extreme inputs through the real library stages: grazing angles, near-mirror lobes,
+//! values across six orders of magnitude, strongly distorted cameras, near-degenerate target
+//! layouts and scans with NaN vertices and holes.
 //!
 //! Every test asserts that results are finite, that errors stay within a named bound, and that
 //! failures are typed errors (never a NaN, a panic or a silently wrong answer). The table of cases

@@ -8,11 +8,9 @@
 //! `cargo test --release`): [`MEASUREMENT_IMAGES`] measurement images instead of 30 (plus the 6
 //! calibration images), and half the scene's pixels per axis (762 x 506 for the default 1524 x
 //! 1012; same field of view). One ray per pixel instead is not a valid reduction: a real sensor
-//! integrates over each pixel, and point-sampled (aliased) target edges move the detected corners (measured on this default
-//! session, 762 x 506, 12 images, 2026-12-01: camera position 0.95 mm and head 2.2 mm at 1 ray
-//! per pixel against 0.14 mm and 0.29 mm at the scene's 4; the samples' error barely changes,
-//! 1.19 % against 1.17 % median). `skinbrdf process` on the full scenes is recorded in
-//! `docs/benchmarks.md`.
+//! integrates over each pixel, and point-sampled (aliased) target edges move the detected
+//! corners (the measurement is in `docs/benchmarks-poses.md`). `skinbrdf process` on the full
+//! scenes is recorded in `docs/benchmarks.md`.
 //!
 //! In a debug build the tests are ignored (rendering takes minutes there).
 //!
@@ -43,7 +41,7 @@ struct Bounds {
     min_samples: f64,
 }
 
-/// The default scene's bounds (issues 5, 6, 7), with the samples' bound of issue 6.
+/// The default scene's stated bounds (camera, samples and model).
 const DEFAULT: Bounds = Bounds {
     camera_mm: 1.0,
     samples_pct: 3.0,
