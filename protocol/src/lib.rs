@@ -33,6 +33,20 @@ pub use messages::*;
 /// ([`DeviceError::VersionMismatch`]). Bump on any incompatible change of the wire format.
 pub const PROTOCOL_VERSION: u32 = 1;
 
+/// Shortest time the device keeps the camera's focus and shutter lines released between two
+/// presses. A camera needs its remote contacts open for some 10-50 ms to register a new press
+/// (bodies differ; 50 ms covers the slow ones), and a press that follows a release sooner is
+/// merged into the previous one: the camera sees one long press and takes one picture. The
+/// device enforces this whatever the plan says (a plan whose interval is shorter is shot
+/// with presses spaced by this time, and the device logs a warning when it loads such a plan);
+/// the host's plan check rejects such plans with the numbers to fix.
+pub const MIN_SHUTTER_OFF_US: u64 = 50_000;
+
+/// Longest host watchdog the device accepts ([`RequestBody::SetWatchdog`]): larger values,
+/// and `0` (which once meant "disabled"), are set to this. A session must always end by itself
+/// when its host is gone; ten minutes is far longer than any pause of a working host.
+pub const MAX_WATCHDOG_US: u64 = 600_000_000;
+
 /// Fixed sizes of the protocol.
 pub mod limits {
     /// Largest encoded frame in bytes, **including** the `0x00` delimiter. Every message of
