@@ -11,6 +11,9 @@
 //! * [`limits`]: the fixed sizes (frame length, string capacities, group count) that make every
 //!   message fit [`MAX_FRAME_LEN`] bytes, so `heapless` buffers hold any frame.
 //!
+//! * `pipe` (feature `std`): the in-process byte pipe that the host's memory transport and
+//!   the simulator's in-process link share.
+//!
 //! `docs/protocol.md` specifies the format byte by byte; `tests/golden.rs` pins it.
 #![no_std]
 
@@ -19,6 +22,8 @@ extern crate std;
 
 pub mod frame;
 pub mod messages;
+#[cfg(feature = "std")]
+pub mod pipe;
 
 pub use frame::{
     decode_frame_in_place, encode, encode_to_vec, DecoderStats, EncodeError, FrameDecoder,
