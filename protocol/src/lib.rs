@@ -11,6 +11,9 @@
 //! * [`limits`]: the fixed sizes (frame length, string capacities, group count) that make every
 //!   message fit [`MAX_FRAME_LEN`] bytes, so `heapless` buffers hold any frame.
 //!
+//! * `pipe` (feature `std`): the in-process byte pipe that the host's memory transport and
+//!   the simulator's in-process link share.
+//!
 //! `docs/protocol.md` specifies the format byte by byte; `tests/golden.rs` pins it.
 #![no_std]
 
@@ -19,6 +22,8 @@ extern crate std;
 
 pub mod frame;
 pub mod messages;
+#[cfg(feature = "std")]
+pub mod pipe;
 
 pub use frame::{
     decode_frame_in_place, encode, encode_to_vec, DecoderStats, EncodeError, FrameDecoder,
@@ -32,6 +37,20 @@ pub use messages::*;
 /// Protocol version; the device refuses a `Hello` with a different one
 /// ([`DeviceError::VersionMismatch`]). Bump on any incompatible change of the wire format.
 pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Shortest time the device keeps the camera's focus and shutter lines released between two
+/// presses. A camera needs its remote contacts open for some 10-50 ms to register a new press
+/// (bodies differ; 50 ms covers the slow ones), and a press that follows a release sooner is
+/// merged into the previous one: the camera sees one long press and takes one picture. The
+/// device enforces this whatever the plan says (a plan whose interval is shorter is shot
+/// with presses spaced by this time, and the device logs a warning when it loads such a plan);
+/// the host's plan check rejects such plans with the numbers to fix.
+pub const MIN_SHUTTER_OFF_US: u64 = 50_000;
+
+/// Longest host watchdog the device accepts ([`RequestBody::SetWatchdog`]): larger values,
+/// and `0` (which once meant "disabled"), are set to this. A session must always end by itself
+/// when its host is gone; ten minutes is far longer than any pause of a working host.
+pub const MAX_WATCHDOG_US: u64 = 600_000_000;
 
 /// Fixed sizes of the protocol.
 pub mod limits {

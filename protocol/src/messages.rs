@@ -168,7 +168,9 @@ pub enum RequestBody {
     /// Keep-alive; feeds the host watchdog. Answered by [`ResponseBody::Pong`].
     Ping,
     /// Set the host watchdog: a running session aborts after this long without any valid
-    /// request. 0 disables it.
+    /// request. `0` and values above [`crate::MAX_WATCHDOG_US`] set that maximum (a session
+    /// must never be left running with nobody able to stop it); the answer carries the
+    /// timeout in force.
     SetWatchdog {
         /// Host silence that aborts a session.
         timeout_us: u64,

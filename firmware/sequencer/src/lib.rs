@@ -35,7 +35,16 @@
 //! * Abort, host silence longer than the watchdog while running, and every fault release all
 //!   outputs; no path leaves the shutter, focus or flash-trigger line asserted once the session
 //!   is not running.
+//! * Between two presses the focus and shutter lines stay released for at least
+//!   [`MIN_SHUTTER_OFF_US`] of driver time (the release and the next press are never issued by
+//!   the same call), whatever the plan's intervals: otherwise the camera sees one long press.
+//! * A link that goes down during a run pauses the session: the shot in flight finishes, then
+//!   no new shot starts (all camera and flash lines released) until a host handshakes again;
+//!   the host watchdog, which is never disabled (at most [`MAX_WATCHDOG_US`]), ends a session
+//!   whose host does not come back.
 #![no_std]
+
+use core::fmt::Write as _;
 
 use heapless::Deque;
 use skinbrdf_protocol::{
@@ -47,6 +56,7 @@ use skinbrdf_protocol::{
 };
 
 pub use skinbrdf_protocol as protocol;
+pub use skinbrdf_protocol::{MAX_WATCHDOG_US, MIN_SHUTTER_OFF_US};
 
 /// Default host watchdog: long enough for a USB re-enumeration, short enough that a crashed
 /// host does not leave a session shooting for long.
@@ -275,6 +285,11 @@ pub struct Sequencer<const RING: usize = DEFAULT_RING> {
     last_light_us: Option<u64>,
     last_recycle_us: Option<u64>,
     last_shutter_us: Option<u64>,
+    /// Driver time at which focus or shutter was last released: the next press waits
+    /// [`MIN_SHUTTER_OFF_US`] from here.
+    camera_released_us: Option<u64>,
+    /// The link went down during a run: no new attempt starts until a host handshakes.
+    paused: bool,
     bad_frames: u32,
     dropped_messages: u32,
     /// The last response, for retries that reuse its `seq`.
@@ -285,7 +300,7 @@ impl<const RING: usize> Sequencer<RING> {
     /// A sequencer at device time `now_us`, all outputs released, link up, no plan.
     pub fn new(config: Config, now_us: u64) -> Self {
         Self {
-            watchdog_us: config.watchdog_us,
+            watchdog_us: bounded_watchdog(config.watchdog_us),
             config,
             now_us,
             wall_us: now_us,
@@ -307,6 +322,8 @@ impl<const RING: usize> Sequencer<RING> {
             last_light_us: None,
             last_recycle_us: None,
             last_shutter_us: None,
+            camera_released_us: None,
+            paused: false,
             bad_frames: 0,
             dropped_messages: 0,
             last_response: None,
@@ -359,6 +376,19 @@ impl<const RING: usize> Sequencer<RING> {
             }
             Input::LinkDown => {
                 self.advance_to(now_us);
+                // The host is gone: finish the shot in flight, start no other until it is back.
+                if let Some(mut run) = self.run {
+                    self.paused = true;
+                    // An attempt still waiting for its interval or the flash has done nothing
+                    // yet: drop it, the same shot starts afresh when the host is back.
+                    if run
+                        .current
+                        .is_some_and(|a| matches!(a.stage, Stage::WaitReady { .. }))
+                    {
+                        run.current = None;
+                        self.run = Some(run);
+                    }
+                }
                 self.link_up = false;
                 self.handshaken = false;
                 self.last_response = None;
@@ -388,9 +418,7 @@ impl<const RING: usize> Sequencer<RING> {
             }
         };
         if let Some(run) = &self.run {
-            if self.watchdog_us > 0 {
-                consider(Some(self.last_request_us.saturating_add(self.watchdog_us)));
-            }
+            consider(Some(self.last_request_us.saturating_add(self.watchdog_us)));
             if let Some(a) = &run.current {
                 match a.stage {
                     Stage::WaitReady {
@@ -499,6 +527,11 @@ impl<const RING: usize> Sequencer<RING> {
         self.link_up
     }
 
+    /// Whether the run is paused because the link went down (until a host handshakes).
+    pub fn paused(&self) -> bool {
+        self.paused
+    }
+
     // -----------------------------------------------------------------------------------------
     // Time
     // -----------------------------------------------------------------------------------------
@@ -521,7 +554,7 @@ impl<const RING: usize> Sequencer<RING> {
 
     fn fire_deadline(&mut self, d: u64) {
         let Some(run) = self.run else { return };
-        if self.watchdog_us > 0 && self.last_request_us.saturating_add(self.watchdog_us) <= d {
+        if self.last_request_us.saturating_add(self.watchdog_us) <= d {
             self.push_event(Event::Fault(Fault {
                 at_us: d,
                 kind: FaultKind::HostSilent,
@@ -617,7 +650,7 @@ impl<const RING: usize> Sequencer<RING> {
     /// Starts the run's next attempt (or waits for ring space).
     fn start_attempt(&mut self, t: u64) {
         let Some(mut run) = self.run else { return };
-        if self.ring.is_full() {
+        if self.ring.is_full() || self.paused {
             run.current = None;
             self.run = Some(run);
             return;
@@ -625,9 +658,17 @@ impl<const RING: usize> Sequencer<RING> {
         let Some(g) = self.group(run.group).cloned() else {
             return;
         };
+        // Every path here has released the camera lines; make sure, so the off time below
+        // is measured from a real release.
+        self.set_line(Line::Shutter, false);
+        self.set_line(Line::Focus, false);
+        let off_until_us = self
+            .camera_released_us
+            .map_or(0, |r| r.saturating_add(MIN_SHUTTER_OFF_US));
         let earliest_us = self
             .last_shutter_us
             .map_or(t, |s| s.saturating_add(g.min_interval_us))
+            .max(off_until_us)
             .max(t);
         let a = Attempt {
             group: run.group,
@@ -949,6 +990,15 @@ impl<const RING: usize> Sequencer<RING> {
             }
             self.handshaken = true;
             self.link_up = true;
+            if self.paused {
+                // The host is back; `on_request` starts the next attempt.
+                self.paused = false;
+                self.log(
+                    now,
+                    LogLevel::Warn,
+                    "link was lost: session paused, now resumed",
+                );
+            }
             return Ok(ResponseBody::Hello(DeviceInfo {
                 protocol_version: PROTOCOL_VERSION,
                 firmware_version: self.config.firmware_version.clone(),
@@ -966,8 +1016,10 @@ impl<const RING: usize> Sequencer<RING> {
             RequestBody::Ping => Ok(ResponseBody::Pong { device_us: now }),
             RequestBody::GetStatus => Ok(ResponseBody::Status(self.status())),
             RequestBody::SetWatchdog { timeout_us } => {
-                self.watchdog_us = timeout_us;
-                Ok(ResponseBody::WatchdogSet { timeout_us })
+                self.watchdog_us = bounded_watchdog(timeout_us);
+                Ok(ResponseBody::WatchdogSet {
+                    timeout_us: self.watchdog_us,
+                })
             }
             RequestBody::LoadPlan(plan) => self.load_plan(plan),
             RequestBody::Run {
@@ -1019,11 +1071,26 @@ impl<const RING: usize> Sequencer<RING> {
             });
         }
         let total_shots = validate_plan(&plan)?;
+        if let Some((group, off_us)) = short_off_time(&plan) {
+            let mut text = heapless::String::<LOG_LINE_LEN>::new();
+            let _ = write!(
+                text,
+                "group {group}: interval leaves {} ms between presses; spaced to {} ms",
+                off_us / 1000,
+                MIN_SHUTTER_OFF_US / 1000
+            );
+            self.push_event(Event::Log {
+                at_us: self.now_us,
+                level: LogLevel::Warn,
+                text,
+            });
+        }
         self.plan = Some(plan);
         self.state = SessionState::Ready;
         self.next_group = 0;
         self.next_index = 0;
         self.resend_from = None;
+        self.paused = false;
         Ok(ResponseBody::PlanLoaded { total_shots })
     }
 
@@ -1067,6 +1134,11 @@ impl<const RING: usize> Sequencer<RING> {
     // -----------------------------------------------------------------------------------------
 
     fn set_line(&mut self, line: Line, asserted: bool) {
+        if matches!(line, Line::Focus | Line::Shutter) && !asserted && self.outputs.level(line) {
+            // Driver time, not the deadline being caught up on: the line really drops when
+            // the driver applies this call's outputs.
+            self.camera_released_us = Some(self.wall_us);
+        }
         self.outputs.set(line, asserted);
     }
 
@@ -1077,7 +1149,8 @@ impl<const RING: usize> Sequencer<RING> {
     }
 
     fn release_all(&mut self) {
-        self.outputs = Outputs::SAFE;
+        self.release_camera_and_flash();
+        self.set_line(Line::StatusLed, false);
     }
 
     fn push_event(&mut self, event: Event) {
@@ -1100,6 +1173,39 @@ impl<const RING: usize> Sequencer<RING> {
             text: truncated::<LOG_LINE_LEN>(text),
         });
     }
+}
+
+/// `0` (no watchdog) and values above [`MAX_WATCHDOG_US`] become [`MAX_WATCHDOG_US`].
+fn bounded_watchdog(timeout_us: u64) -> u64 {
+    if timeout_us == 0 {
+        MAX_WATCHDOG_US
+    } else {
+        timeout_us.min(MAX_WATCHDOG_US)
+    }
+}
+
+/// The first group whose shots would press the shutter less than [`MIN_SHUTTER_OFF_US`] after
+/// the previous press was released (within the group, or after the previous group's last
+/// shot), with the off time the plan alone would give. The sequencer spaces such presses to
+/// the minimum; this is for telling the host so.
+///
+/// A press is released `shutter_pulse_us` after its shutter command and the next attempt may
+/// assert focus `min_interval_us` after that command, so the plan's off time is
+/// `min_interval_us - shutter_pulse_us` of the previous press.
+pub fn short_off_time(plan: &Plan) -> Option<(u32, u64)> {
+    let mut prev_pulse: Option<u64> = None;
+    for (i, g) in plan.groups.iter().enumerate() {
+        let group = u32::try_from(i).unwrap_or(u32::MAX);
+        let before = [prev_pulse, (g.count > 1).then_some(g.shutter_pulse_us)];
+        for pulse in before.into_iter().flatten() {
+            let off = g.min_interval_us.saturating_sub(pulse);
+            if off < MIN_SHUTTER_OFF_US {
+                return Some((group, off));
+            }
+        }
+        prev_pulse = Some(g.shutter_pulse_us);
+    }
+    None
 }
 
 /// Checks a plan; returns its total shot count.

@@ -8,7 +8,7 @@ mod world;
 
 use proptest::prelude::*;
 use skinbrdf_protocol::*;
-use skinbrdf_sequencer::{Input, Outputs};
+use skinbrdf_sequencer::{Input, Line, Outputs, MIN_SHUTTER_OFF_US};
 use world::{Hardware, World};
 
 #[allow(clippy::large_enum_variant)]
@@ -134,6 +134,32 @@ fn check_invariants(w: &World<8>) -> Result<(), TestCaseError> {
     Ok(())
 }
 
+/// The shutter (and focus) output is released for at least [`MIN_SHUTTER_OFF_US`] between any
+/// two presses, as the pins saw it: the log holds the level changes after each driver call,
+/// so a release and a press issued by the same call would leave no release in it at all.
+fn check_off_times<const R: usize>(w: &World<R>) -> Result<(), TestCaseError> {
+    for line in [Line::Shutter, Line::Focus] {
+        let mut released_at: Option<u64> = None;
+        let mut asserted = false;
+        for &(t, a) in w.pin_log.iter().filter(|(_, a)| a.line == line) {
+            if a.asserted {
+                prop_assert!(!asserted, "{line:?} asserted twice without a release");
+                if let Some(r) = released_at {
+                    prop_assert!(
+                        t - r >= MIN_SHUTTER_OFF_US,
+                        "{line:?} released at {r} and pressed again at {t}: off {} us",
+                        t - r
+                    );
+                }
+            } else {
+                released_at = Some(t);
+            }
+            asserted = a.asserted;
+        }
+    }
+    Ok(())
+}
+
 fn send(w: &mut World<8>, body: RequestBody) {
     let seq = w.next_seq;
     w.next_seq += 1;
@@ -172,7 +198,7 @@ fn run_ops(w: &mut World<8>, ops: &[Op]) -> Result<(), TestCaseError> {
         }
         check_invariants(w)?;
     }
-    Ok(())
+    check_off_times(w)
 }
 
 proptest! {
@@ -256,9 +282,64 @@ proptest! {
         }
         prop_assert_eq!(w.seq.status().next_index, recs.len() as u32);
         prop_assert_eq!(w.outputs(), Outputs::SAFE);
+        check_off_times(&w)?;
         if w.seq.state() == SessionState::Completed {
             let ok_or_skipped = recs.iter().filter(|r| r.attempt == 0).count() as u64;
             prop_assert!(ok_or_skipped >= 1);
         }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// Plans of any interval (most shorter than their pulses, across group boundaries too),
+    /// with or without pre-focus, against a camera and a flash fast enough that nothing else
+    /// holds the next shot back: every press still comes after a full off time, and every shot
+    /// is a clean exposure.
+    #[test]
+    fn the_shutter_is_released_for_the_minimum_off_time_between_presses(
+        plan in arb_plan(),
+        lag in 0u64..60_000,
+        recycle in 0u64..50_000,
+        handling_delay in 0u64..3_000,
+        no_pre_focus in any::<bool>(),
+    ) {
+        let mut plan = plan;
+        for g in plan.groups.iter_mut() {
+            if no_pre_focus {
+                g.pre_focus_us = 0;
+            }
+            // Room for the camera's lag and the flash: each shot can succeed.
+            g.xsync_timeout_us = g.xsync_timeout_us.max(lag + 1);
+            g.flash_window_us = g.flash_window_us.max(1_000);
+            g.flash_ready_timeout_us = g.flash_ready_timeout_us.max(1_000_000);
+        }
+        let hw = Hardware {
+            shutter_lag_us: lag,
+            recycle_us: recycle,
+            ..Hardware::default()
+        };
+        let mut w: World<8> = World::connected(0, hw);
+        w.handling_delay_us = handling_delay;
+        let groups = plan.groups.len() as u32;
+        let shots: u64 = plan.total_shots();
+        send(&mut w, RequestBody::LoadPlan(plan));
+        send(&mut w, RequestBody::Run { first_group: 0, last_group: groups - 1 });
+        for _ in 0..100 {
+            w.advance(1_000_000);
+            let n = w.records().len() as u32;
+            send(&mut w, RequestBody::AckRecords { next_index: n });
+            if w.seq.state() != SessionState::Running {
+                break;
+            }
+        }
+        prop_assert_eq!(w.seq.state(), SessionState::Completed);
+        check_off_times(&w)?;
+        let presses = w.assert_times(Line::Shutter).len() as u64;
+        let recs = w.records();
+        prop_assert_eq!(presses, recs.len() as u64, "one press per attempt");
+        prop_assert!(recs.iter().all(|r| r.outcome == ShotOutcome::Ok), "{:?}", recs);
+        prop_assert_eq!(recs.len() as u64, shots);
     }
 }

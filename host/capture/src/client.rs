@@ -94,6 +94,16 @@ pub enum ClientError {
         /// The last frame error seen.
         last_error: String,
     },
+    /// What came back is what was sent: a loopback plug, a terminal echoing its input, or a
+    /// pseudo-terminal nobody serves.
+    #[error(
+        "{port}: not our device: the port echoes what it is sent (a loopback, or a terminal \
+         in echo mode), no skinbrdf controller answers there"
+    )]
+    Echo {
+        /// The port.
+        port: String,
+    },
     /// The device speaks another protocol version.
     #[error(
         "{port}: protocol version mismatch: the device speaks version {device}, this host \
@@ -217,6 +227,12 @@ pub struct Client<T: Transport> {
     info: Option<DeviceInfo>,
     stats: LinkStats,
     last_frame_error: Option<FrameError>,
+    /// The last request frame written (with its delimiter), to recognise an echo.
+    last_sent: Vec<u8>,
+    /// Raw bytes of the frame being received (up to [`MAX_FRAME_LEN`]), for the same.
+    rx_frame: Vec<u8>,
+    /// Frames received that were byte for byte the last request sent.
+    echoes: u32,
     /// How long a request waits for its response, all copies included.
     pub request_timeout: Duration,
     /// Interval between copies of a request whose response is late (same `seq`).
@@ -245,6 +261,9 @@ impl<T: Transport> Client<T> {
             info: None,
             stats: LinkStats::default(),
             last_frame_error: None,
+            last_sent: Vec::new(),
+            rx_frame: Vec::new(),
+            echoes: 0,
             request_timeout: DEFAULT_REQUEST_TIMEOUT,
             resend_interval: RESEND_INTERVAL,
         }
@@ -280,6 +299,11 @@ impl<T: Transport> Client<T> {
 
     /// (Re-)runs the handshake on this link.
     pub fn handshake(&mut self) -> Result<DeviceInfo, ClientError> {
+        self.handshake_inner().map_err(|e| self.unless_echo(e))
+    }
+
+    fn handshake_inner(&mut self) -> Result<DeviceInfo, ClientError> {
+        self.echoes = 0;
         let bytes_before = self.stats.bytes;
         for _ in 0..HANDSHAKE_ATTEMPTS {
             // `request` re-sends within the attempt; `Hello` is not cached by the device but
@@ -360,6 +384,7 @@ impl<T: Transport> Client<T> {
         let mut frame = Vec::with_capacity(encoded.len() + 1);
         frame.push(0);
         frame.extend_from_slice(&encoded);
+        self.last_sent = encoded.to_vec();
         let first = Instant::now();
         let deadline = first + self.request_timeout;
         // A zero interval would spin: at least one copy per millisecond.
@@ -453,8 +478,35 @@ impl<T: Transport> Client<T> {
         let mut buf = [0u8; 512];
         let n = self.transport.read(&mut buf, timeout)?;
         self.stats.bytes += n as u64;
+        self.note_echo(&buf[..n]);
         self.pending.extend_from_slice(&buf[..n]);
         Ok(self.decode_pending())
+    }
+
+    /// Counts received frames that equal the last request sent (an echoing port).
+    fn note_echo(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            if self.rx_frame.len() < MAX_FRAME_LEN {
+                self.rx_frame.push(b);
+            }
+            if b == 0 {
+                if self.rx_frame.len() > 1 && self.rx_frame == self.last_sent {
+                    self.echoes += 1;
+                }
+                self.rx_frame.clear();
+            }
+        }
+    }
+
+    /// The handshake's failure, unless the port merely echoed: then that is the reason.
+    fn unless_echo(&self, e: ClientError) -> ClientError {
+        if self.echoes > 0 {
+            ClientError::Echo {
+                port: self.port.clone(),
+            }
+        } else {
+            e
+        }
     }
 
     fn decode_pending(&mut self) -> Option<DeviceMessage> {
@@ -485,6 +537,27 @@ impl<T: Transport> Client<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_echoing_port_is_reported_as_such() {
+        let (host, mut echo) = crate::transport::memory_pair();
+        let t = std::thread::spawn(move || {
+            let mut buf = [0u8; 256];
+            while let Ok(n) = echo.read(&mut buf, Duration::from_millis(20)) {
+                if n > 0 && echo.write_all(&buf[..n]).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut c = Client::new(host);
+        c.request_timeout = Duration::from_millis(300);
+        c.resend_interval = Duration::from_millis(50);
+        let err = c.handshake().expect_err("an echo is no device");
+        assert!(matches!(err, ClientError::Echo { .. }), "{err}");
+        assert!(err.to_string().contains("echoes what it is sent"), "{err}");
+        drop(c);
+        t.join().expect("echo thread");
+    }
     use crate::transport::memory_pair;
     use skinbrdf_protocol::{Response, Status};
 

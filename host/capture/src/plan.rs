@@ -11,6 +11,7 @@
 
 use std::path::{Path, PathBuf};
 
+use skinbrdf_protocol::MIN_SHUTTER_OFF_US;
 use skinbrdf_session::capture::{CapturePlan, ShotGroup};
 
 /// Longest duration accepted for any plan field: one hour. Every real interval or timeout is
@@ -175,6 +176,31 @@ pub fn validate_plan(plan: &CapturePlan, origin: &Path) -> Result<(), PlanError>
             )
         })?;
     }
+    // Across a group boundary the next group's interval counts from the previous group's last
+    // shutter command, whose pulse may be longer.
+    for (i, pair) in plan.groups.windows(2).enumerate() {
+        let (prev, next) = (&pair[0], &pair[1]);
+        let needed = prev.shutter_pulse_us.saturating_add(MIN_SHUTTER_OFF_US);
+        if next.min_interval_us < needed {
+            return Err(invalid(
+                format!(
+                    "{}.min_interval_us",
+                    group_location(i + 1, Some(&next.label))
+                ),
+                format!(
+                    "{} us after the last shot of {}, whose shutter pulse is {} us, leaves the \
+                     shutter released for {} us before the next press; a camera needs {} us \
+                     to see two presses (the controller would space them): set \
+                     min_interval_us >= {needed}",
+                    next.min_interval_us,
+                    group_location(i, Some(&prev.label)),
+                    prev.shutter_pulse_us,
+                    next.min_interval_us.saturating_sub(prev.shutter_pulse_us),
+                    MIN_SHUTTER_OFF_US,
+                ),
+            ));
+        }
+    }
     Ok(())
 }
 
@@ -233,6 +259,21 @@ fn validate_group(_index: usize, g: &ShotGroup) -> Result<(), (&'static str, Str
             ),
         ));
     }
+    let needed = g.shutter_pulse_us.saturating_add(MIN_SHUTTER_OFF_US);
+    if g.count > 1 && g.min_interval_us < needed {
+        return Err((
+            "min_interval_us",
+            format!(
+                "{} us leaves the shutter released for {} us between shots; a camera needs \
+                 {} us to see two presses (the controller would space them): set \
+                 min_interval_us >= shutter_pulse_us + {} = {needed}",
+                g.min_interval_us,
+                g.min_interval_us.saturating_sub(g.shutter_pulse_us),
+                MIN_SHUTTER_OFF_US,
+                MIN_SHUTTER_OFF_US,
+            ),
+        ));
+    }
     Ok(())
 }
 
@@ -264,7 +305,7 @@ flash_mode = "camera-hot-shoe"
 label = "reference standard"
 role = "reference-standard"
 count = 1
-min_interval_us = 0
+min_interval_us = 200_000
 pre_focus_us = 300_000
 shutter_pulse_us = 100_000
 xsync_timeout_us = 1_000_000
@@ -362,6 +403,57 @@ flash_mode = "controller-on-xsync"
             .to_string();
         assert!(
             msg.contains("min_interval_us") && msg.contains("400000"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn interval_without_off_time_is_rejected() {
+        let text = GOOD
+            .replace("min_interval_us = 4_000_000", "min_interval_us = 140_000")
+            .replace("pre_focus_us = 300_000", "pre_focus_us = 0");
+        let msg = parse_plan(&text, origin()).expect_err("no off").to_string();
+        assert!(
+            msg.contains("min_interval_us") && msg.contains("150000"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn interval_shorter_than_the_previous_groups_pulse_is_rejected() {
+        // The plan that merged two presses on the firmware image: a second group with no
+        // pre-focus whose 10 ms interval is shorter than the first group's 100 ms pulse.
+        let text = r#"
+max_retries = 0
+
+[[groups]]
+label = "a"
+role = "measurement"
+count = 1
+min_interval_us = 10_000
+pre_focus_us = 0
+shutter_pulse_us = 100_000
+xsync_timeout_us = 500_000
+flash_ready_timeout_us = 5_000_000
+flash_mode = "controller-on-xsync"
+
+[[groups]]
+label = "b"
+role = "measurement"
+count = 1
+min_interval_us = 10_000
+pre_focus_us = 0
+shutter_pulse_us = 100_000
+xsync_timeout_us = 500_000
+flash_ready_timeout_us = 5_000_000
+flash_mode = "controller-on-xsync"
+"#;
+        let msg = parse_plan(text, origin()).expect_err("merged").to_string();
+        assert!(
+            msg.contains("groups[1] (\"b\").min_interval_us")
+                && msg.contains("groups[0] (\"a\")")
+                && msg.contains("100000 us")
+                && msg.contains(">= 150000"),
             "{msg}"
         );
     }

@@ -143,13 +143,23 @@ pub struct CaptureOptions {
     /// Interval of `GetStatus` keep-alives (also clock reads) while waiting for events.
     pub keepalive: Duration,
     /// Host watchdog, **host** microseconds (wall time without a valid request after which the
-    /// device stops a running session; 0 disables it; `None`: leave the device's own, which is
-    /// in device time). Converted to device microseconds with the fitted clock rate.
+    /// device stops a running session; 0 asks for the device's longest,
+    /// [`skinbrdf_protocol::MAX_WATCHDOG_US`]: a session is never left without one; `None`:
+    /// leave the device's own, which is in device time). Converted to device microseconds
+    /// with the fitted clock rate.
     pub watchdog_us: Option<u64>,
     /// How long to keep trying to reconnect after the link fails.
     pub reconnect_window: Duration,
     /// Pause between reconnect attempts.
     pub reconnect_pause: Duration,
+    /// Reconnects in a row without a new exposure before the run gives up with
+    /// [`CaptureError::LinkUnusable`]: a line that drops every other frame re-handshakes for
+    /// ever otherwise, each reconnect succeeding and the next request failing again.
+    pub max_stalled_reconnects: u32,
+    /// Replace a `capture.json` of an interrupted session (`"complete": false`) in `out_dir`.
+    /// Without it the run refuses before touching the device ([`CaptureError::ExistingSession`]):
+    /// that file holds exposures that exist nowhere else.
+    pub overwrite: bool,
     /// Flash-trigger pulse width for `controller-on-xsync` groups.
     pub flash_trigger_pulse_us: u64,
     /// How long after X-sync the photodiode must see the flash.
@@ -157,6 +167,10 @@ pub struct CaptureOptions {
     /// Set from another thread (Ctrl-C) to abort cleanly.
     pub abort: Arc<AtomicBool>,
 }
+
+/// Default of [`CaptureOptions::max_stalled_reconnects`]: a noisy but usable line (the
+/// robustness tests' 20 % corruption each way) needs at most 3.
+pub const DEFAULT_MAX_STALLED_RECONNECTS: u32 = 5;
 
 impl Default for CaptureOptions {
     fn default() -> Self {
@@ -169,6 +183,8 @@ impl Default for CaptureOptions {
             watchdog_us: Some(DEFAULT_WATCHDOG_US),
             reconnect_window: Duration::from_secs(30),
             reconnect_pause: Duration::from_millis(100),
+            max_stalled_reconnects: DEFAULT_MAX_STALLED_RECONNECTS,
+            overwrite: false,
             flash_trigger_pulse_us: 1_000,
             flash_window_us: proto::ShotGroup::DEFAULT_FLASH_WINDOW_US,
             abort: Arc::new(AtomicBool::new(false)),
@@ -274,6 +290,54 @@ pub enum CaptureError {
     /// The operator aborted.
     #[error("aborted by the operator after {shots_kept} exposures (all kept)")]
     Aborted {
+        /// Exposures recorded.
+        shots_kept: usize,
+    },
+    /// The session directory holds an interrupted session that this run would overwrite.
+    #[error(
+        "{} holds an interrupted session ({exposures} exposures, \"complete\": false) that a new \
+         capture would overwrite; resuming it is not supported: move it away, choose another \
+         --out, or pass --overwrite to replace it",
+        path.display()
+    )]
+    ExistingSession {
+        /// The `capture.json`.
+        path: PathBuf,
+        /// Exposures it holds (0 if it cannot be read).
+        exposures: usize,
+    },
+    /// The controller restarted during the session (its state is `Idle` after a reconnect).
+    #[error(
+        "the controller restarted during the session (a watchdog reset after a hang, a panic, \
+         or power): it is idle now and its record ring, which lives in RAM, is gone. Kept: \
+         {shots_kept} exposures (indices below {first_lost}; {acked} acknowledged). Lost: any \
+         exposure from index {first_lost} on that the controller took before it restarted (at \
+         most the shot in flight, since every record is acknowledged as it arrives). Start a \
+         new capture for the shots that remain"
+    )]
+    DeviceRestarted {
+        /// Exposures on disk.
+        shots_kept: usize,
+        /// The first index the host does not have.
+        first_lost: u32,
+        /// Records the host had acknowledged.
+        acked: u32,
+    },
+    /// The link keeps failing right after each reconnect: the run gave up.
+    #[error(
+        "the link is unusable: {reconnects} reconnects in a row without a new exposure \
+         ({bad_frames} bad frames, {resends} re-sent requests, {timeouts} timeouts so far); \
+         {shots_kept} exposures kept; check the cable, the port and what else uses it"
+    )]
+    LinkUnusable {
+        /// Reconnects without progress.
+        reconnects: u32,
+        /// Frames that failed to decode.
+        bad_frames: u64,
+        /// Requests re-sent.
+        resends: u64,
+        /// Requests that timed out.
+        timeouts: u64,
         /// Exposures recorded.
         shots_kept: usize,
     },
@@ -408,6 +472,11 @@ struct Runner<'a, C: Connector, O: CaptureObserver> {
     closed_stats: LinkStats,
     /// Records below this index are acknowledged to the device.
     acked: u32,
+    /// Reconnects since the last new exposure, and the exposure count then.
+    stalled_reconnects: u32,
+    shots_at_last_reconnect: usize,
+    /// The device confirmed our plan (from then on it is never `Idle` unless it restarted).
+    plan_loaded: bool,
 }
 
 /// Runs `plan` on the device behind `connector`, writing `capture.json` after every exposure
@@ -420,6 +489,9 @@ pub fn run_capture<C: Connector, O: CaptureObserver>(
     observer: &mut O,
 ) -> Result<CaptureRecord, CaptureError> {
     let proto_plan = to_protocol_plan(plan, options)?;
+    if let Some(dir) = &options.out_dir {
+        refuse_interrupted_session(dir, options.overwrite)?;
+    }
     let writer = match &options.out_dir {
         Some(dir) => Some(CaptureWriter::create(dir)?),
         None => None,
@@ -466,6 +538,9 @@ pub fn run_capture<C: Connector, O: CaptureObserver>(
         started: Instant::now(),
         closed_stats: LinkStats::default(),
         acked: 0,
+        stalled_reconnects: 0,
+        shots_at_last_reconnect: 0,
+        plan_loaded: false,
     };
     let result = runner.run(&proto_plan);
     let summary = runner.finish_summary();
@@ -486,6 +561,25 @@ pub fn run_capture<C: Connector, O: CaptureObserver>(
     );
     runner.observer.finished(&summary);
     result
+}
+
+/// An interrupted session's `capture.json` in `dir` is refused unless `overwrite`; a complete
+/// one (a finished run being repeated, e.g. the demo) is replaced.
+fn refuse_interrupted_session(dir: &std::path::Path, overwrite: bool) -> Result<(), CaptureError> {
+    let path = dir.join(crate::store::CAPTURE_FILE_NAME);
+    if overwrite || !path.exists() {
+        return Ok(());
+    }
+    match crate::store::read_capture(&path) {
+        Ok(r) if r.complete => Ok(()),
+        Ok(r) => Err(CaptureError::ExistingSession {
+            path,
+            exposures: r.exposures.len(),
+        }),
+        // Unreadable (a crash mid-write leaves the old file, so this is someone else's file):
+        // not ours to destroy either.
+        Err(_) => Err(CaptureError::ExistingSession { path, exposures: 0 }),
+    }
 }
 
 /// Handshakes on `transport` with the request budget and re-send interval of `options`.
@@ -564,6 +658,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             Ok(())
         })?;
         tracing::info!(total_shots, "plan loaded");
+        self.plan_loaded = true;
         self.refit_and_write()?;
         self.observer.connected(&self.record);
         for (g, group) in self.record.plan.groups.clone().iter().enumerate() {
@@ -668,8 +763,12 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         }
         if let Some(host_us) = self.options.watchdog_us {
             let timeout_us = self.device_watchdog_us(host_us);
-            self.request(RequestBody::SetWatchdog { timeout_us })?;
-            self.summary.watchdog_device_us = timeout_us;
+            // The device bounds the timeout (0, "none", becomes its longest): keep what it set.
+            self.summary.watchdog_device_us =
+                match self.request(RequestBody::SetWatchdog { timeout_us })? {
+                    ResponseBody::WatchdogSet { timeout_us } => timeout_us,
+                    _ => timeout_us,
+                };
         }
         self.drain_queued()?;
         Ok(())
@@ -994,6 +1093,23 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
     /// `deadline`.
     fn reestablish(&mut self, error: ClientError, deadline: Instant) -> Result<(), CaptureError> {
         self.observer.link_lost(&error);
+        if self.shots() > self.shots_at_last_reconnect {
+            self.shots_at_last_reconnect = self.shots();
+            self.stalled_reconnects = 0;
+        }
+        if self.stalled_reconnects >= self.options.max_stalled_reconnects {
+            self.close_client();
+            let s = self.finish_summary();
+            self.refit_and_write()?;
+            return Err(CaptureError::LinkUnusable {
+                reconnects: self.stalled_reconnects,
+                bad_frames: s.bad_frames,
+                resends: s.resends,
+                timeouts: s.timeouts,
+                shots_kept: self.shots(),
+            });
+        }
+        self.stalled_reconnects += 1;
         // A silent link (timeouts) may come back on its own: handshake again on it first. A
         // dead link is closed before reopening (a serial port is opened exclusively).
         let mut keep = if matches!(
@@ -1062,6 +1178,17 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
     fn catch_up(&mut self) -> Result<(), CaptureError> {
         let before = self.next_index();
         let status = self.status()?;
+        // Once our plan is loaded the device never goes back to `Idle`: the controller restarted (watchdog reset
+        // after a hang, a panic, power) and its RAM ring, with every unacknowledged record,
+        // is gone.
+        if self.plan_loaded && status.state == SessionState::Idle {
+            self.refit_and_write()?;
+            return Err(CaptureError::DeviceRestarted {
+                shots_kept: self.shots(),
+                first_lost: self.next_index(),
+                acked: self.acked,
+            });
+        }
         self.drain_queued()?;
         self.ensure_records(status.next_index)?;
         if self.run_end.is_none() && status.state != SessionState::Running {

@@ -6,10 +6,11 @@
 //! closed link is [`TransportError::Disconnected`], so the client can tell a silent device from a
 //! lost one and reconnect.
 
-use std::collections::VecDeque;
 use std::io::{Read, Write};
-use std::sync::{Arc, Condvar, Mutex};
-use std::time::{Duration, Instant};
+use std::sync::Arc;
+use std::time::Duration;
+
+use skinbrdf_protocol::pipe::Pipe;
 
 /// Baud rate requested when opening a serial port. USB CDC-ACM ignores it; a UART bridge to the
 /// RP2040 runs at this rate.
@@ -228,27 +229,6 @@ impl Transport for SerialTransport {
     }
 }
 
-#[derive(Debug, Default)]
-struct PipeState {
-    bytes: VecDeque<u8>,
-    closed: bool,
-}
-
-#[derive(Debug, Default)]
-struct Pipe {
-    state: Mutex<PipeState>,
-    ready: Condvar,
-}
-
-impl Pipe {
-    fn close(&self) {
-        if let Ok(mut s) = self.state.lock() {
-            s.closed = true;
-        }
-        self.ready.notify_all();
-    }
-}
-
 /// One end of an in-memory duplex link. Dropping or [`close`](Self::close)-ing either end makes
 /// the other end's reads and writes fail with [`TransportError::Disconnected`] (after it has
 /// read what was already sent).
@@ -261,8 +241,8 @@ pub struct MemoryTransport {
 
 /// Creates two connected in-memory endpoints.
 pub fn memory_pair() -> (MemoryTransport, MemoryTransport) {
-    let a_to_b = Arc::new(Pipe::default());
-    let b_to_a = Arc::new(Pipe::default());
+    let a_to_b = Arc::new(Pipe::new());
+    let b_to_a = Arc::new(Pipe::new());
     (
         MemoryTransport {
             rx: b_to_a.clone(),
@@ -299,41 +279,11 @@ impl Drop for MemoryTransport {
 
 impl Transport for MemoryTransport {
     fn read(&mut self, buf: &mut [u8], timeout: Duration) -> Result<usize, TransportError> {
-        let deadline = Instant::now() + timeout;
-        let mut state = self.rx.state.lock().map_err(|_| self.disconnected())?;
-        loop {
-            if !state.bytes.is_empty() {
-                let n = buf.len().min(state.bytes.len());
-                for (dst, src) in buf.iter_mut().zip(state.bytes.drain(..n)) {
-                    *dst = src;
-                }
-                return Ok(n);
-            }
-            if state.closed {
-                return Err(self.disconnected());
-            }
-            let now = Instant::now();
-            if now >= deadline || buf.is_empty() {
-                return Ok(0);
-            }
-            state = self
-                .rx
-                .ready
-                .wait_timeout(state, deadline - now)
-                .map_err(|_| self.disconnected())?
-                .0;
-        }
+        self.rx.pop(buf, timeout).map_err(|_| self.disconnected())
     }
 
     fn write_all(&mut self, data: &[u8]) -> Result<(), TransportError> {
-        let mut state = self.tx.state.lock().map_err(|_| self.disconnected())?;
-        if state.closed {
-            return Err(self.disconnected());
-        }
-        state.bytes.extend(data);
-        drop(state);
-        self.tx.ready.notify_all();
-        Ok(())
+        self.tx.push(data).map_err(|_| self.disconnected())
     }
 
     fn name(&self) -> String {

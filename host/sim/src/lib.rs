@@ -1,6 +1,9 @@
-//! Firmware simulator: the firmware's own sequencer (`skinbrdf-sequencer`, not a
-//! re-implementation) driven by a simulated clock and models of the attached hardware, on a
-//! pseudo-terminal or an in-process link.
+//! **The firmware simulator**: a stand-in for the trigger controller board. It runs the
+//! firmware's own sequencer (`skinbrdf-sequencer`, the code the RP2040 image runs, not a
+//! re-implementation) with a simulated clock and models of the attached camera and flash,
+//! behind a pseudo-terminal or an in-process link, so host software (`skinbrdf capture`, the
+//! conformance suite) talks to it exactly as to a board. It lives under `host/` only because it
+//! runs on the host machine; it is device-side code.
 //!
 //! * [`SimDevice`]: deterministic, sans-IO. The sequencer plus a camera ([`CameraModel`]:
 //!   shutter lag uniform in 60-120 ms, X-sync), a flash ([`FlashModel`]: recycle 0.5-3 s by

@@ -4,9 +4,11 @@
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Condvar, Mutex};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
+
+use skinbrdf_protocol::pipe::{Pipe, PipeClosed};
 
 use crate::{SimConfig, SimDevice, SimError, SimStats};
 
@@ -99,74 +101,9 @@ impl DevicePort for PtyPort {
 // In-process pipe
 // ---------------------------------------------------------------------------------------------
 
-#[derive(Debug, Default)]
-struct PipeState {
-    buf: VecDeque<u8>,
-    closed: bool,
-}
-
-#[derive(Debug, Default)]
-struct Pipe {
-    state: Mutex<PipeState>,
-    ready: Condvar,
-}
-
-impl Pipe {
-    fn push(&self, data: &[u8]) -> io::Result<()> {
-        let mut s = self
-            .state
-            .lock()
-            .map_err(|_| io::Error::other("pipe poisoned"))?;
-        if s.closed {
-            return Err(io::Error::new(
-                io::ErrorKind::BrokenPipe,
-                "simulator link closed",
-            ));
-        }
-        s.buf.extend(data);
-        drop(s);
-        self.ready.notify_all();
-        Ok(())
-    }
-
-    fn pop(&self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
-        let deadline = Instant::now() + timeout;
-        let mut s = self
-            .state
-            .lock()
-            .map_err(|_| io::Error::other("pipe poisoned"))?;
-        loop {
-            if !s.buf.is_empty() {
-                let n = buf.len().min(s.buf.len());
-                for (dst, src) in buf.iter_mut().zip(s.buf.drain(..n)) {
-                    *dst = src;
-                }
-                return Ok(n);
-            }
-            if s.closed {
-                return Err(io::Error::new(
-                    io::ErrorKind::BrokenPipe,
-                    "simulator link closed",
-                ));
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return Ok(0);
-            }
-            let (guard, _) = self
-                .ready
-                .wait_timeout(s, deadline - now)
-                .map_err(|_| io::Error::other("pipe poisoned"))?;
-            s = guard;
-        }
-    }
-
-    fn close(&self) {
-        if let Ok(mut s) = self.state.lock() {
-            s.closed = true;
-        }
-        self.ready.notify_all();
-    }
+/// A closed in-process link, as the `io` error the run loop and [`HostLink`] report.
+fn closed(_: PipeClosed) -> io::Error {
+    io::Error::new(io::ErrorKind::BrokenPipe, "simulator link closed")
 }
 
 /// The device end of an in-process link.
@@ -188,8 +125,8 @@ pub struct HostLink {
 
 /// Creates a connected (device, host) in-process pair.
 pub fn memory_link() -> (MemoryDevicePort, HostLink) {
-    let to_host = Arc::new(Pipe::default());
-    let to_device = Arc::new(Pipe::default());
+    let to_host = Arc::new(Pipe::new());
+    let to_device = Arc::new(Pipe::new());
     (
         MemoryDevicePort {
             to_host: to_host.clone(),
@@ -207,12 +144,12 @@ impl HostLink {
     /// Reads available bytes, waiting at most `timeout` for the first; `Ok(0)` on timeout,
     /// `Err(BrokenPipe)` once the simulator stopped and everything was read.
     pub fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
-        self.to_host.pop(buf, timeout)
+        self.to_host.pop(buf, timeout).map_err(closed)
     }
 
     /// Sends bytes to the device.
     pub fn send(&mut self, data: &[u8]) -> io::Result<()> {
-        self.to_device.push(data)
+        self.to_device.push(data).map_err(closed)
     }
 
     /// Closes both directions.
@@ -230,7 +167,7 @@ impl Drop for HostLink {
 
 impl Read for HostLink {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        match self.to_host.pop(buf, self.read_timeout)? {
+        match self.to_host.pop(buf, self.read_timeout).map_err(closed)? {
             0 if !buf.is_empty() => Err(io::Error::new(io::ErrorKind::TimedOut, "no data")),
             n => Ok(n),
         }
@@ -239,7 +176,7 @@ impl Read for HostLink {
 
 impl Write for HostLink {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
-        self.to_device.push(buf)?;
+        self.to_device.push(buf).map_err(closed)?;
         Ok(buf.len())
     }
 
@@ -250,11 +187,11 @@ impl Write for HostLink {
 
 impl DevicePort for MemoryDevicePort {
     fn read(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
-        self.to_device.pop(buf, timeout)
+        self.to_device.pop(buf, timeout).map_err(closed)
     }
 
     fn write(&mut self, data: &[u8]) -> io::Result<usize> {
-        self.to_host.push(data)?;
+        self.to_host.push(data).map_err(closed)?;
         Ok(data.len())
     }
 }

@@ -419,3 +419,33 @@ fn config_errors_name_the_field() {
         .to_string()
         .contains("misfire"));
 }
+
+#[test]
+fn a_host_gone_for_good_pauses_the_session_then_its_watchdog_ends_it() {
+    let mut h = host(SimConfig::default());
+    h.request(RequestBody::SetWatchdog {
+        timeout_us: 10_000_000,
+    })
+    .expect("watchdog");
+    start(&mut h, method_plan(FlashMode::CameraHotShoe, 0));
+    // Until the second shot's shutter is down: a shot in flight when the host goes.
+    while !h.dev.outputs().shutter || h.records.is_empty() {
+        h.pump(1_000);
+    }
+    let taken = h.dev.sequencer().status().next_index;
+    // The host dies without unplugging: its port closes, the link goes down and stays down.
+    h.dev.drop_link(u64::MAX / 4);
+    h.dev.advance_to(h.dev.now_us() + 1_000_000);
+    // The shot in flight was finished and recorded; no other started; every line released.
+    assert_eq!(h.dev.sequencer().status().next_index, taken + 1);
+    assert!(h.dev.sequencer().paused());
+    assert_eq!(h.dev.sequencer().state(), SessionState::Running);
+    assert!(h.dev.outputs().camera_and_flash_released());
+    // Nobody comes back: the host watchdog ends the session, nothing more was shot.
+    h.dev.advance_to(h.dev.now_us() + 10_000_000);
+    assert_eq!(h.dev.sequencer().state(), SessionState::Aborted);
+    assert_eq!(h.dev.sequencer().status().next_index, taken + 1);
+    assert_eq!(h.dev.outputs(), skinbrdf_sequencer::Outputs::SAFE);
+    // The records (none acknowledged here) stay in the ring for a host that comes back later.
+    assert_eq!(h.dev.sequencer().unacked(), taken + 1);
+}

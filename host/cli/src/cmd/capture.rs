@@ -37,6 +37,10 @@ pub struct Args {
     /// How long to keep trying to reconnect after the link fails, seconds.
     #[arg(long, default_value_t = 30.0)]
     reconnect_s: f64,
+    /// Replace a `capture.json` already in `--out` (without it, the capture refuses to start:
+    /// that file may hold the only copy of an interrupted session's exposures).
+    #[arg(long)]
+    overwrite: bool,
 }
 
 /// True while the operator prompt waits on stdin (Ctrl-C then exits at once: nothing runs).
@@ -52,6 +56,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(args.reconnect_s >= 0.0 && args.reconnect_s.is_finite()) {
         anyhow::bail!("--reconnect-s must be a non-negative number of seconds");
     }
+    let existing = args.out.join("capture.json");
+    if existing.exists() && !args.overwrite {
+        let what = match skinbrdf_capture::read_capture(&existing) {
+            Ok(r) if r.complete => format!("a complete session ({} exposures)", r.exposures.len()),
+            Ok(r) => format!(
+                "an interrupted session ({} exposures, \"complete\": false)",
+                r.exposures.len()
+            ),
+            Err(_) => "a file that is not a readable capture record".to_string(),
+        };
+        anyhow::bail!(
+            "{} holds {what}; a new capture would overwrite it. Resuming is not supported: \
+             move it away, choose another --out, or pass --overwrite to replace it",
+            existing.display()
+        );
+    }
     let abort = Arc::new(AtomicBool::new(false));
     {
         let abort = abort.clone();
@@ -65,15 +85,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 );
                 std::process::exit(130);
             }
-            eprintln!("\nCtrl-C: aborting (the device releases every output) ...");
+            // Ctrl-C, SIGTERM and SIGHUP alike (ctrlc's `termination` feature): a killed or
+            // hung-up capture must still stop the controller.
+            eprintln!("\ninterrupted: aborting (the device releases every output) ...");
             abort.store(true, Ordering::SeqCst);
         })
-        .context("cannot install the Ctrl-C handler")?;
+        .context("cannot install the Ctrl-C / SIGTERM handler")?;
     }
     let options = CaptureOptions {
         out_dir: Some(args.out.clone()),
         watchdog_us: Some((args.watchdog_s * 1e6).round() as u64),
         reconnect_window: Duration::from_secs_f64(args.reconnect_s),
+        overwrite: args.overwrite,
         abort,
         ..CaptureOptions::default()
     };
