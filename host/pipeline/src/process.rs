@@ -895,23 +895,16 @@ fn derender_reports(plan: &Plan, run: &SessionRun) -> [StageReport; 3] {
 }
 
 fn fit_reports(plan: &Plan, fr: &FitReport) -> [StageReport; 3] {
-    let time_of = |name: &str| {
-        fr.timings_s
-            .iter()
-            .filter(|(n, _)| n == name)
-            .map(|(_, t)| *t)
-            .sum::<f64>()
-    };
-    let mut plane = StageReport::ran(Stage::SmoothIncidencePlane, time_of("smooth"));
+    let mut plane = StageReport::ran(Stage::SmoothIncidencePlane, fr.smooth.run_time_s);
     plane.metrics.push(Metric::new(
         "loess_span",
-        fr.smooth_span,
+        fr.smooth.span,
         "",
         MetricKind::Quality,
     ));
     plane.metrics.push(Metric::new(
         "loess_residual_sigma",
-        fr.smooth_sigma * 100.0,
+        fr.smooth.residual_sigma_log * 100.0,
         "% (log)",
         MetricKind::Quality,
     ));
@@ -922,7 +915,7 @@ fn fit_reports(plan: &Plan, fr: &FitReport) -> [StageReport; 3] {
     } else {
         skipped(plan, Stage::SmoothHemisphere)
     };
-    let mut fit = StageReport::ran(Stage::Fit, fr.fit.fit_time_s);
+    let mut fit = StageReport::ran(Stage::Fit, fr.timings.fit_s);
     fit.metrics.push(Metric::new(
         "samples_fitted",
         fr.n_samples as f64,
