@@ -2,7 +2,9 @@
 //! [`POLAR_THETA_I_DEG`] (the method's Fig. 6: the fitted model, and the smoothed samples where
 //! samples lie within [`POLAR_DATA_TOL_DEG`] of the panel's incident angle) and the samples near
 //! the incidence plane at [`SCATTER_THETA_I_DEG`] with the smoothed curve, its band and the
-//! model (Fig. 11). Drawing is [`crate::plot`]'s; this module chooses what is drawn.
+//! model (Fig. 11), the curves only over the samples' support
+//! ([`crate::plot::support_intervals`]). Drawing is [`crate::plot`]'s; this module chooses what
+//! is drawn.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -74,7 +76,8 @@ pub fn write_figures(
     ];
     let fig = plot::scatter_figure(
         &format!(
-            "samples within {PLANE_TOL_DEG} deg of theta_i = {ti} deg and the incidence plane"
+            "{} samples within {PLANE_TOL_DEG} deg of theta_i = {ti} deg and the incidence plane",
+            pts.len()
         ),
         &pts,
         &curves,
