@@ -29,9 +29,13 @@ window.addEventListener('load', () => {
   for (const el of document.body.querySelectorAll('*')) {
     const r = el.getBoundingClientRect();
     // Scrolling boxes (overflow: auto) may be wider inside; their own box must fit.
-    if (r.right > vw + 0.5 || r.left < -0.5) {
+    // An element whose content spills out of its box (overflow: visible) also counts.
+    const spills = el.scrollWidth > el.clientWidth + 1 && el.clientWidth > 0 &&
+      getComputedStyle(el).overflowX === 'visible' && r.left + el.scrollWidth > vw + 0.5;
+    if (r.right > vw + 0.5 || r.left < -0.5 || spills) {
       overflow.push({tag: el.tagName.toLowerCase(), text: (el.textContent || '').slice(0, 60),
-                     left: Math.round(r.left), right: Math.round(r.right)});
+                     left: Math.round(r.left),
+                     right: Math.round(Math.max(r.right, r.left + el.scrollWidth))});
     }
   }
   const out = document.createElement('pre');
