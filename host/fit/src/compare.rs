@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use crate::input::Input;
 use crate::loess::{Bandwidth, Loess, LoessConfig};
 use crate::plot;
-use crate::report::{write_text, ReportError};
+use crate::report::{create_out_dir, write_json, ReportError};
 use crate::smooth::{log_design, smooth, SmoothConfig, FIT_SIGMA_POINTS};
 
 /// Samples per session the pairwise difference test uses at most (the pooled pilot smooth is
@@ -77,10 +77,7 @@ pub fn compare(
     theta_i_deg: f64,
     out_dir: &Path,
 ) -> Result<CompareReport, ReportError> {
-    std::fs::create_dir_all(out_dir).map_err(|e| ReportError::Output {
-        path: out_dir.to_path_buf(),
-        problem: e.to_string(),
-    })?;
+    create_out_dir(out_dir)?;
     let mut curves = Vec::new();
     let mut smooths = Vec::new();
     for inp in inputs {
@@ -127,11 +124,7 @@ pub fn compare(
         files,
     };
     let json_path = out_dir.join("compare.json");
-    let json = serde_json::to_string_pretty(&report).map_err(|e| ReportError::Output {
-        path: json_path.clone(),
-        problem: e.to_string(),
-    })?;
-    write_text(&json_path, &json)?;
+    write_json(&json_path, &report)?;
     Ok(report)
 }
 

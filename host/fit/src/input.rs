@@ -46,6 +46,25 @@ fn find_skbs(dir: &Path) -> Option<PathBuf> {
     None
 }
 
+/// The true BRDF of a synthetic session: the `brdf` field of its `truth.json`.
+fn read_truth(path: &Path) -> Result<BrdfModel, ReportError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ReportError::TruthRead {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let json_err = |field, source| ReportError::TruthJson {
+        path: path.to_path_buf(),
+        field,
+        source,
+    };
+    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| json_err(None, Some(e)))?;
+    let brdf = v
+        .get("brdf")
+        .cloned()
+        .ok_or_else(|| json_err(Some("brdf"), None))?;
+    serde_json::from_value(brdf).map_err(|e| json_err(Some("brdf"), Some(e)))
+}
+
 /// Loads a sample file, Cornell file or session directory.
 pub fn load_input(path: &Path) -> Result<Input, ReportError> {
     let label = path.file_stem().map_or_else(
@@ -53,32 +72,13 @@ pub fn load_input(path: &Path) -> Result<Input, ReportError> {
         |s| s.to_string_lossy().into_owned(),
     );
     if path.is_dir() {
-        let skbs = find_skbs(path).ok_or_else(|| ReportError::Input {
-            path: path.to_path_buf(),
-            problem: "no samples found (expected out/samples.skbs from `skinbrdf derender`, or one .skbs file)".into(),
+        let skbs = find_skbs(path).ok_or_else(|| ReportError::NoSamples {
+            dir: path.to_path_buf(),
         })?;
         let (_, samples) = skinbrdf_samples::read_samples(&skbs)?;
         let truth_path = path.join("truth.json");
         let truth = if truth_path.is_file() {
-            let text = std::fs::read_to_string(&truth_path).map_err(|e| ReportError::Input {
-                path: truth_path.clone(),
-                problem: e.to_string(),
-            })?;
-            let v: serde_json::Value =
-                serde_json::from_str(&text).map_err(|e| ReportError::Input {
-                    path: truth_path.clone(),
-                    problem: e.to_string(),
-                })?;
-            let brdf = v.get("brdf").cloned().ok_or_else(|| ReportError::Input {
-                path: truth_path.clone(),
-                problem: "no `brdf` field".into(),
-            })?;
-            Some(
-                serde_json::from_value(brdf).map_err(|e| ReportError::Input {
-                    path: truth_path.clone(),
-                    problem: format!("brdf: {e}"),
-                })?,
-            )
+            Some(read_truth(&truth_path)?)
         } else {
             None
         };
@@ -91,9 +91,8 @@ pub fn load_input(path: &Path) -> Result<Input, ReportError> {
         });
     }
     if !path.is_file() {
-        return Err(ReportError::Input {
+        return Err(ReportError::NotFound {
             path: path.to_path_buf(),
-            problem: "no such file or directory".into(),
         });
     }
     if path
@@ -132,5 +131,35 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let e = load_input(dir.path()).expect_err("empty dir");
         assert!(e.to_string().contains("no samples found"));
+    }
+
+    #[test]
+    fn a_bad_truth_file_is_named_with_its_problem() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::create_dir(dir.path().join("out")).expect("out");
+        let (_, samples) = crate::synthetic::lafortune2_samples(20, 0.0, 1);
+        let header = skinbrdf_samples::SampleHeader::new("test", "truth errors");
+        skinbrdf_samples::write_samples(dir.path().join("out/samples.skbs"), &header, &samples)
+            .expect("samples");
+        let truth = dir.path().join("truth.json");
+        for (text, expected) in [
+            ("{", "not JSON"),
+            ("{}", "field `brdf` is missing or not a BRDF model"),
+            (
+                "{\"brdf\": 3}",
+                "field `brdf` is missing or not a BRDF model",
+            ),
+        ] {
+            std::fs::write(&truth, text).expect("truth");
+            let e = load_input(dir.path()).expect_err(text);
+            assert_eq!(e.to_string(), format!("{}: {expected}", truth.display()));
+        }
+        std::fs::write(
+            &truth,
+            "{\"brdf\": {\"model\": \"lambertian\", \"albedo\": [0.1, 0.2, 0.3]}}",
+        )
+        .expect("truth");
+        let ok = load_input(dir.path()).expect("valid truth");
+        assert!(ok.truth.is_some() && ok.samples.len() == 20);
     }
 }

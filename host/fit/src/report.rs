@@ -32,23 +32,48 @@ pub use crate::smooth::{SMOOTH_MAX_SAMPLES, SPAN_CANDIDATES};
 /// Errors of the fit and compare commands.
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
-    /// The input could not be found or read.
-    #[error("{path}: {problem}", path = path.display())]
-    Input {
+    /// The input path does not exist.
+    #[error("{path}: no such file or directory", path = path.display())]
+    NotFound {
         /// The input.
         path: PathBuf,
-        /// What is wrong.
-        problem: String,
     },
-    /// Reading samples, or writing the exported model, failed.
+    /// A session directory without samples.
+    #[error("{dir}: no samples found (expected out/samples.skbs from `skinbrdf derender`, or one .skbs file)", dir = dir.display())]
+    NoSamples {
+        /// The directory.
+        dir: PathBuf,
+    },
+    /// `truth.json` could not be read.
+    #[error("{path}: cannot read", path = path.display())]
+    TruthRead {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+    /// `truth.json` is not JSON, or its field is missing or not a BRDF model.
+    #[error("{path}: {}", match field { Some(f) => format!("field `{f}` is missing or not a BRDF model"), None => "not JSON".to_owned() }, path = path.display())]
+    TruthJson {
+        /// The file.
+        path: PathBuf,
+        /// The field (`None`: the file as a whole).
+        field: Option<&'static str>,
+        /// The cause (`None`: the field is missing).
+        #[source]
+        source: Option<serde_json::Error>,
+    },
+    /// Reading samples, or writing an output file, failed.
     #[error(transparent)]
     Samples(#[from] skinbrdf_samples::SamplesError),
     /// The fit failed.
-    #[error("fit of {input}: {source}", input = input.display())]
+    #[error("fit of {input}", input = input.display())]
     Fit {
         /// The input.
         input: PathBuf,
         /// The cause.
+        #[source]
         source: crate::fit::FitError,
     },
     /// The smoother failed.
@@ -57,13 +82,23 @@ pub enum ReportError {
     /// Drawing failed.
     #[error(transparent)]
     Plot(#[from] crate::plot::PlotError),
-    /// Writing an output failed.
-    #[error("{path}: {problem}", path = path.display())]
-    Output {
+    /// The output directory could not be created.
+    #[error("{path}: cannot create the output directory", path = path.display())]
+    CreateDir {
+        /// The directory.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A report could not be serialised.
+    #[error("{path}: cannot serialise the report", path = path.display())]
+    Serialize {
         /// The output.
         path: PathBuf,
-        /// What is wrong.
-        problem: String,
+        /// The cause.
+        #[source]
+        source: serde_json::Error,
     },
 }
 
@@ -167,19 +202,25 @@ pub struct ReportOptions {
 
 /// Writes `text` to `path` atomically.
 pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
-    skinbrdf_samples::write_atomic(path, |w| w.write_all(text.as_bytes())).map_err(|e| {
-        ReportError::Output {
-            path: path.to_path_buf(),
-            problem: e.to_string(),
-        }
-    })
+    Ok(skinbrdf_samples::write_atomic(path, |w| {
+        w.write_all(text.as_bytes())
+    })?)
+}
+
+/// Serialises `value` as pretty JSON to `path` atomically.
+pub(crate) fn write_json(path: &Path, value: &impl Serialize) -> Result<(), ReportError> {
+    let json = serde_json::to_string_pretty(value).map_err(|source| ReportError::Serialize {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    write_text(path, &json)
 }
 
 /// Creates `dir` (and its parents) if needed.
 pub fn create_out_dir(dir: &Path) -> Result<(), ReportError> {
-    std::fs::create_dir_all(dir).map_err(|e| ReportError::Output {
+    std::fs::create_dir_all(dir).map_err(|source| ReportError::CreateDir {
         path: dir.to_path_buf(),
-        problem: e.to_string(),
+        source,
     })
 }
 
@@ -195,11 +236,7 @@ pub struct ReportFiles {
 /// Writes `dir/params.json` and `dir/report.md`, each atomically; `dir` must exist.
 pub fn write_report(report: &FitReport, dir: &Path) -> Result<ReportFiles, ReportError> {
     let params_json = dir.join("params.json");
-    let json = serde_json::to_string_pretty(report).map_err(|e| ReportError::Output {
-        path: params_json.clone(),
-        problem: e.to_string(),
-    })?;
-    write_text(&params_json, &json)?;
+    write_json(&params_json, report)?;
     let report_md = dir.join("report.md");
     write_text(&report_md, &markdown(report))?;
     Ok(ReportFiles {
