@@ -150,6 +150,17 @@ const PANEL_MARGIN_PX: u32 = 10;
 /// Pixels a caption takes above the chart (font size plus plotters' padding).
 const CAPTION_AREA_PX: u32 = CAPTION_FONT_PX + 10;
 
+/// A tick label with as many decimals as a tenth of the axis span needs (`-80`, not `-80.0`;
+/// `0.13`, not `0.130000`).
+fn tick_label(v: f64, span: f64) -> String {
+    let decimals = if span > 0.0 && span.is_finite() {
+        (-(span / 10.0).log10().floor()).clamp(0.0, 9.0) as usize
+    } else {
+        3
+    };
+    format!("{v:.decimals$}")
+}
+
 fn draw_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     panel: &Panel,
@@ -163,8 +174,12 @@ fn draw_panel<DB: DrawingBackend>(
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(|e| e.to_string())?;
     if panel.axes {
+        let x_fmt = |v: &f64| tick_label(*v, x1 - x0);
+        let y_fmt = |v: &f64| tick_label(*v, y1 - y0);
         chart
             .configure_mesh()
+            .x_label_formatter(&x_fmt)
+            .y_label_formatter(&y_fmt)
             .label_style(("sans-serif", 13))
             .axis_desc_style(("sans-serif", 14))
             .x_desc(panel.x_label.as_str())
@@ -908,5 +923,13 @@ mod tests {
             / f64::from(h - 2 * PANEL_MARGIN_PX - CAPTION_AREA_PX);
         let data = 2.0 * POLAR_HALF_WIDTH / (POLAR_TOP - POLAR_BELOW_HORIZON);
         assert!((px / data - 1.0).abs() < ASPECT_TOL, "{px} vs {data}");
+    }
+
+    #[test]
+    fn tick_labels_carry_the_decimals_the_span_needs() {
+        assert_eq!(tick_label(-80.0, 180.0), "-80");
+        assert_eq!(tick_label(0.13, 0.1), "0.13");
+        assert_eq!(tick_label(0.135, 0.05), "0.135");
+        assert_eq!(tick_label(2.5, 5.0), "2.5");
     }
 }
