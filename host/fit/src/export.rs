@@ -9,13 +9,18 @@
 //!   Directions below the horizon get 0.
 //! * [`model_to_cornell`]: the model sampled on the Cornell grid of an existing file (or a
 //!   regular grid), as a 3-band RGB `.brdf` ([`skinbrdf_samples::CornellBrdf::from_rgb`]).
+//! * [`export`]: the report stage's export of a fit: `model.brdf`, and `model.binary` on request.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use glam::DVec3;
+use serde::{Deserialize, Serialize};
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_samples::{write_atomic, CornellBrdf, SamplesError};
+
+use crate::fit::Fitted;
 
 /// MERL table sizes.
 pub const MERL_THETA_H: usize = 90;
@@ -121,6 +126,63 @@ pub fn regular_cornell_grid() -> CornellBrdf {
         }
     }
     CornellBrdf::from_rgb(Vec::new(), rows)
+}
+
+/// What [`export`] writes.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ExportOptions<'a> {
+    /// The Cornell grid to sample the model on (the fitted file's own, for a Cornell input);
+    /// `None` = [`regular_cornell_grid`].
+    pub cornell_grid: Option<&'a CornellBrdf>,
+    /// Also write the MERL table `model.binary` (35 MB).
+    pub merl: bool,
+    /// What was fitted (goes into the `.brdf` header).
+    pub source_label: &'a str,
+}
+
+/// What [`export`] wrote.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Exported {
+    /// The files.
+    pub files: Vec<PathBuf>,
+    /// Wall time, seconds.
+    pub run_time_s: f64,
+}
+
+/// Writes the fitted model as `dir/model.brdf` (and `dir/model.binary` with
+/// [`ExportOptions::merl`]), each atomically; `dir` must exist.
+pub fn export(
+    fitted: &Fitted,
+    dir: &Path,
+    opts: &ExportOptions<'_>,
+) -> Result<Exported, SamplesError> {
+    let t = Instant::now();
+    let fit = &fitted.fit;
+    let regular;
+    let grid = match opts.cornell_grid {
+        Some(g) => g,
+        None => {
+            regular = regular_cornell_grid();
+            &regular
+        }
+    };
+    let cornell = model_to_cornell(
+        &fit.model,
+        grid,
+        &format!("skinbrdf {} fit of {}", fit.model_name, opts.source_label),
+    );
+    let brdf_path = dir.join("model.brdf");
+    cornell.write(&brdf_path)?;
+    let mut files = vec![brdf_path];
+    if opts.merl {
+        let merl_path = dir.join("model.binary");
+        write_merl(&merl_path, &fit.model)?;
+        files.push(merl_path);
+    }
+    Ok(Exported {
+        files,
+        run_time_s: t.elapsed().as_secs_f64(),
+    })
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@ use std::time::Instant;
 
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
-use skinbrdf_brdf::{BrdfModel, ChannelModel, Geom, StartHint};
+use skinbrdf_brdf::{BrdfModel, ChannelModel, Geom, ModelSpec, StartHint};
 use skinbrdf_core::BrdfSample;
 
 use crate::lm::{self, ChannelData, LmConfig, LmStatus, ResidualKind};
@@ -133,12 +133,25 @@ pub struct StartOutcome {
     pub status: Option<LmStatus>,
 }
 
+/// What one stage of a channel fit does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FitStageKind {
+    /// Residual targets, start hints and the multi-start subsample.
+    Prepare,
+    /// Every starting point solved on the subsample.
+    Multistart,
+    /// The best start solved again on a larger subsample, or on all samples.
+    Polish,
+    /// The fitted model's error against all samples.
+    ErrorMetrics,
+}
+
 /// One stage of a channel fit: what it ran on, what it reached, what it cost.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StageReport {
-    /// `prepare` (targets, start hints, subsample), `multistart`, `polish` or
-    /// `error_metrics`.
-    pub kind: String,
+    /// What the stage does.
+    pub kind: FitStageKind,
     /// Samples the stage ran on.
     pub samples: usize,
     /// Solver runs (starts) in the stage.
@@ -545,7 +558,7 @@ fn fit_channel_with_floor(
     };
     let starts = model.starting_points(&hint);
     let mut stages = vec![StageReport {
-        kind: "prepare".into(),
+        kind: FitStageKind::Prepare,
         samples: m,
         solves: 0,
         iterations: 0,
@@ -578,7 +591,7 @@ fn fit_channel_with_floor(
         starts: starts.len(),
     })?;
     stages.push(StageReport {
-        kind: "multistart".into(),
+        kind: FitStageKind::Multistart,
         samples: idx.len(),
         solves: starts.len(),
         iterations: iters,
@@ -626,7 +639,7 @@ fn fit_channel_with_floor(
         } = stage.ok_or(FitError::NoFiniteStart { channel, starts: 1 })?;
         best = outcome;
         stages.push(StageReport {
-            kind: "polish".into(),
+            kind: FitStageKind::Polish,
             samples: size,
             solves,
             iterations,
@@ -657,7 +670,7 @@ fn fit_channel_with_floor(
     let fitted = lm::eval_all(model, &fin.params, &data.geom);
     let error = error_metrics(|i| fitted[i], y, floor);
     stages.push(StageReport {
-        kind: "error_metrics".into(),
+        kind: FitStageKind::ErrorMetrics,
         samples: m,
         solves: 0,
         iterations: 0,
@@ -681,6 +694,29 @@ fn fit_channel_with_floor(
         },
         residual,
     ))
+}
+
+/// The fit stage's result: the fitted model with its per-channel metrics, and the stage's time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Fitted {
+    /// The fit.
+    pub fit: RgbFit,
+    /// Wall time of the stage (sample validation and the fit), seconds.
+    pub run_time_s: f64,
+}
+
+/// The fit stage: fits `model` to every RGB channel of `samples`.
+pub fn fit_model(
+    samples: &[BrdfSample],
+    cfg: &FitConfig,
+    model: ModelSpec,
+) -> Result<Fitted, FitError> {
+    let t = Instant::now();
+    let fit = fit_rgb(model.channel_model().as_ref(), samples, cfg)?;
+    Ok(Fitted {
+        fit,
+        run_time_s: t.elapsed().as_secs_f64(),
+    })
 }
 
 /// Fits a model to every RGB channel of `samples`.
@@ -741,7 +777,7 @@ pub fn fit_data(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use skinbrdf_brdf::{LafortuneFit, ModelSpec};
+    use skinbrdf_brdf::LafortuneFit;
     use skinbrdf_core::BrdfAngles;
     use skinbrdf_samples::{CornellBrdf, Illuminant};
     use std::path::{Path, PathBuf};
@@ -967,7 +1003,7 @@ mod tests {
             .stages
             .iter()
             .rev()
-            .find(|s| s.kind == "polish")
+            .find(|s| s.kind == FitStageKind::Polish)
             .expect("polish");
         assert_eq!(last.samples, 5_000, "{last:?} ({needed})");
         assert!(ch.status.converged());

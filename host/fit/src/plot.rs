@@ -2,6 +2,11 @@
 //! Fig. 6), raw samples with the smoothed curve and its band (Fig. 11), and overlays of several
 //! sessions (Figs. 8, 9) with a test of whether two sessions differ beyond their bands.
 //!
+//! Guarantees: a polar panel's drawing area holds the whole upper half-plane with its horizon,
+//! angle labels and ring values (nothing is clipped; circles are round); the scatter draws a
+//! curve only over the samples' support ([`support_intervals`]), never across a gap of more
+//! than [`SUPPORT_GAP_DEG`] without samples, and states the sample count.
+//!
 //! A figure is described as data ([`Figure`], [`Panel`], [`Series`]) and drawn twice, once per
 //! backend, by [`write_figure`]. Text uses plotters' `ttf` feature (fontconfig finds a system
 //! sans-serif font; DejaVu on Debian).
@@ -10,6 +15,7 @@ use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use serde::{Deserialize, Serialize};
 use skinbrdf_core::BrdfSample;
 
@@ -34,6 +40,8 @@ pub enum SeriesKind {
     Points(Vec<(f64, f64)>),
     /// A shaded band `(x, lower, upper)`.
     Band(Vec<(f64, f64, f64)>),
+    /// Text centred on `(x, y)`.
+    Text(Vec<(f64, f64, String)>),
 }
 
 /// One labelled series; `color` indexes a fixed palette (negative = light grey guides).
@@ -115,6 +123,7 @@ fn data_range(panel: &Panel) -> ((f64, f64), (f64, f64)) {
                 add(x, lo);
                 add(x, hi)
             }),
+            SeriesKind::Text(v) => v.iter().for_each(|(x, y, _)| add(*x, *y)),
         }
     }
     let fix = |r: (f64, f64)| {
@@ -132,21 +141,47 @@ fn data_range(panel: &Panel) -> ((f64, f64), (f64, f64)) {
     )
 }
 
+/// Above this many points a point series is drawn as small translucent dots.
+const DENSE_POINTS: usize = 500;
+/// Caption font size of a panel, pixels.
+const CAPTION_FONT_PX: u32 = 17;
+/// Margin around a panel's chart, pixels.
+const PANEL_MARGIN_PX: u32 = 10;
+/// Pixels a caption takes above the chart (font size plus plotters' padding).
+const CAPTION_AREA_PX: u32 = CAPTION_FONT_PX + 10;
+
+/// A tick label with as many decimals as a tenth of the axis span needs (`-80`, not `-80.0`;
+/// `0.13`, not `0.130000`).
+fn tick_label(v: f64, span: f64) -> String {
+    let decimals = if span > 0.0 && span.is_finite() {
+        (-(span / 10.0).log10().floor()).clamp(0.0, 9.0) as usize
+    } else {
+        3
+    };
+    format!("{v:.decimals$}")
+}
+
 fn draw_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     panel: &Panel,
 ) -> Result<(), String> {
     let ((x0, x1), (y0, y1)) = data_range(panel);
     let mut chart = ChartBuilder::on(area)
-        .caption(&panel.title, ("sans-serif", 18))
-        .margin(10)
+        .caption(&panel.title, ("sans-serif", CAPTION_FONT_PX))
+        .margin(PANEL_MARGIN_PX)
         .x_label_area_size(if panel.axes { 35 } else { 0 })
         .y_label_area_size(if panel.axes { 55 } else { 0 })
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(|e| e.to_string())?;
     if panel.axes {
+        let x_fmt = |v: &f64| tick_label(*v, x1 - x0);
+        let y_fmt = |v: &f64| tick_label(*v, y1 - y0);
         chart
             .configure_mesh()
+            .x_label_formatter(&x_fmt)
+            .y_label_formatter(&y_fmt)
+            .label_style(("sans-serif", 13))
+            .axis_desc_style(("sans-serif", 14))
             .x_desc(panel.x_label.as_str())
             .y_desc(panel.y_label.as_str())
             .draw()
@@ -173,7 +208,7 @@ fn draw_panel<DB: DrawingBackend>(
                 let ann = chart
                     .draw_series(LineSeries::new(
                         v.iter().copied(),
-                        col.stroke_width(if s.color < 0 || s.color >= 100 { 1 } else { 2 }),
+                        col.stroke_width(if s.color < 0 || s.color >= 100 { 1 } else { 3 }),
                     ))
                     .map_err(|e| e.to_string())?;
                 if !s.label.is_empty() {
@@ -183,11 +218,29 @@ fn draw_panel<DB: DrawingBackend>(
                     });
                 }
             }
+            SeriesKind::Text(v) => {
+                let style = TextStyle::from(("sans-serif", 13).into_font())
+                    .color(&RGBColor(90, 90, 90))
+                    .pos(Pos::new(HPos::Center, VPos::Center));
+                chart
+                    .draw_series(
+                        v.iter()
+                            .map(|(x, y, t)| Text::new(t.clone(), (*x, *y), style.clone())),
+                    )
+                    .map_err(|e| e.to_string())?;
+            }
             SeriesKind::Points(v) => {
+                // Thousands of samples: small, translucent dots, so the curves stay visible
+                // and the density shows.
+                let (radius, alpha) = if v.len() > DENSE_POINTS {
+                    (2, 0.25)
+                } else {
+                    (3, 0.8)
+                };
                 let ann = chart
                     .draw_series(
                         v.iter()
-                            .map(|&(x, y)| Circle::new((x, y), 3, col.mix(0.8).filled())),
+                            .map(|&(x, y)| Circle::new((x, y), radius, col.mix(alpha).filled())),
                     )
                     .map_err(|e| e.to_string())?;
                 if !s.label.is_empty() {
@@ -344,9 +397,38 @@ pub fn loess_curve(
     }
 }
 
+/// Extent of a polar panel in units of its largest plotted value `rmax`: the x range is
+/// `+-POLAR_HALF_WIDTH`, the y range `[POLAR_BELOW_HORIZON, POLAR_TOP]`: room for the ring values
+/// under the horizon, the angle labels outside the outer ring, and the legend in the upper right
+/// corner, above the 30 degree label and the clipped band edges (which end at `y <= 1.05 rmax`
+/// there).
+pub const POLAR_HALF_WIDTH: f64 = 1.32;
+/// See [`POLAR_HALF_WIDTH`].
+pub const POLAR_BELOW_HORIZON: f64 = -0.2;
+/// See [`POLAR_HALF_WIDTH`].
+pub const POLAR_TOP: f64 = 1.6;
+/// Band edges of a polar plot are clipped at this multiple of `rmax`.
+pub const POLAR_BAND_CLIP: f64 = 1.1;
+/// Radius of the angle labels, in units of `rmax`.
+const POLAR_LABEL_RADIUS: f64 = 1.19;
+/// Width of one polar panel, pixels (its height follows from the ranges: circles stay round).
+const POLAR_PANEL_WIDTH_PX: u32 = 440;
+
+/// A value with three significant digits.
+fn sig3(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor() as i32;
+    let decimals = (2 - mag).clamp(0, 9) as usize;
+    format!("{v:.decimals$}")
+}
+
 /// Polar plot of the incidence plane, one panel per incident angle (the method's Fig. 6):
-/// the value is the radius, the angle from the vertical is the signed exitant angle; the light
-/// direction is drawn as a grey ray.
+/// the value is the radius, the angle from the vertical is the signed exitant angle (negative on
+/// the light's side). Guides: rings at quarters of the largest value (labelled under the
+/// horizon), spokes every 30 degrees (labelled outside the outer ring), the horizon, and the
+/// light direction as a grey ray.
 pub fn polar_figure(curves_per_angle: &[(f64, Vec<PlaneCurve>)], scale_label: &str) -> Figure {
     let panels = curves_per_angle
         .iter()
@@ -356,38 +438,55 @@ pub fn polar_figure(curves_per_angle: &[(f64, Vec<PlaneCurve>)], scale_label: &s
                 .flat_map(|c| c.points.iter().map(|p| p.1))
                 .filter(|v| v.is_finite())
                 .fold(1e-12, f64::max);
+            let guide = |points: Vec<(f64, f64)>| Series {
+                label: String::new(),
+                color: -1,
+                kind: SeriesKind::Line(points),
+            };
+            let polar_xy = |deg: f64, r: f64| {
+                let a = deg.to_radians();
+                (r * a.sin(), r * a.cos())
+            };
             let mut series = Vec::new();
+            let mut labels = Vec::new();
             for k in 1..=4 {
                 let r = rmax * k as f64 / 4.0;
-                let circle: Vec<(f64, f64)> = (0..=90)
-                    .map(|a| {
-                        let t = (-90.0 + 2.0 * a as f64).to_radians();
-                        (r * t.sin(), r * t.cos())
-                    })
-                    .collect();
-                series.push(Series {
-                    label: String::new(),
-                    color: -1,
-                    kind: SeriesKind::Line(circle),
-                });
+                series.push(guide(
+                    (0..=90)
+                        .map(|a| polar_xy(-90.0 + 2.0 * a as f64, r))
+                        .collect(),
+                ));
+                labels.push((r, -0.08 * rmax, sig3(r)));
             }
-            let li = (-ti).to_radians();
+            series.push(guide(vec![(-rmax, 0.0), (rmax, 0.0)]));
+            for deg in [-60.0, -30.0, 0.0, 30.0, 60.0] {
+                series.push(guide(vec![(0.0, 0.0), polar_xy(deg, rmax)]));
+            }
+            for deg in [-90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0] {
+                let (x, y) = polar_xy(deg, POLAR_LABEL_RADIUS * rmax);
+                // The +-90 degree labels sit just above the horizon line.
+                let y = if f64::abs(deg) == 90.0 {
+                    0.06 * rmax
+                } else {
+                    y
+                };
+                labels.push((x, y, format!("{deg:.0}°")));
+            }
+            series.push(Series {
+                label: String::new(),
+                color: -1,
+                kind: SeriesKind::Text(labels),
+            });
             series.push(Series {
                 label: "light".into(),
                 color: -1,
-                kind: SeriesKind::Line(vec![
-                    (0.0, 0.0),
-                    (1.1 * rmax * li.sin(), 1.1 * rmax * li.cos()),
-                ]),
+                kind: SeriesKind::Line(vec![(0.0, 0.0), polar_xy(-ti, POLAR_BAND_CLIP * rmax)]),
             });
             for (k, c) in curves.iter().enumerate() {
-                let to_xy = |t: f64, r: f64| {
-                    let a = t.to_radians();
-                    (r.max(0.0) * a.sin(), r.max(0.0) * a.cos())
-                };
+                let to_xy = |t: f64, r: f64| polar_xy(t, r.max(0.0));
                 if c.points.iter().any(|p| p.2 != p.3) {
                     // The band's edges as thin lines (clipped to the plot), upper then lower.
-                    let clip = |r: f64| r.min(1.1 * rmax);
+                    let clip = |r: f64| r.min(POLAR_BAND_CLIP * rmax);
                     let upper: Vec<(f64, f64)> =
                         c.points.iter().map(|p| to_xy(p.0, clip(p.3))).collect();
                     let lower: Vec<(f64, f64)> =
@@ -407,56 +506,121 @@ pub fn polar_figure(curves_per_angle: &[(f64, Vec<PlaneCurve>)], scale_label: &s
                 });
             }
             Panel {
-                title: format!(
-                    "theta_i = {ti:.0} deg ({scale_label}, ring = {:.3})",
-                    rmax / 4.0
-                ),
+                title: format!("theta_i = {ti:.0} deg ({scale_label})"),
                 x_label: String::new(),
                 y_label: String::new(),
-                x_range: Some((-1.15 * rmax, 1.15 * rmax)),
-                y_range: Some((-0.05 * rmax, 1.15 * rmax)),
+                x_range: Some((-POLAR_HALF_WIDTH * rmax, POLAR_HALF_WIDTH * rmax)),
+                y_range: Some((POLAR_BELOW_HORIZON * rmax, POLAR_TOP * rmax)),
                 axes: false,
                 series,
             }
         })
         .collect();
+    // Equal scales on both axes: the chart's pixel aspect matches the ranges'.
+    let chart_w = f64::from(POLAR_PANEL_WIDTH_PX - 2 * PANEL_MARGIN_PX);
+    let chart_h = chart_w * (POLAR_TOP - POLAR_BELOW_HORIZON) / (2.0 * POLAR_HALF_WIDTH);
     Figure {
         panels,
-        panel_px: (520, 330),
+        panel_px: (
+            POLAR_PANEL_WIDTH_PX,
+            chart_h.round() as u32 + 2 * PANEL_MARGIN_PX + CAPTION_AREA_PX,
+        ),
     }
 }
 
-/// Raw samples near the incidence plane at `theta_i_deg` with smoothed curves and bands
-/// (the method's Fig. 11), Cartesian: signed exitant angle against value.
-pub fn scatter_figure(
-    title: &str,
-    samples: &[(f64, f64)],
-    curves: &[PlaneCurve],
-    y_label: &str,
-) -> Figure {
-    let mut series = vec![Series {
-        label: "samples".into(),
-        color: 5,
-        kind: SeriesKind::Points(samples.to_vec()),
-    }];
-    for (k, c) in curves.iter().enumerate() {
-        if c.points.iter().any(|p| p.2 != p.3) {
+/// Largest gap between neighbouring samples' angles, degrees, that a curve of the scatter
+/// figure is drawn across: the same tolerance the polar figure uses to decide whether an
+/// incident angle has data. A curve over a wider gap would show the smoother's or the model's
+/// extrapolation, not a measurement.
+pub const SUPPORT_GAP_DEG: f64 = 10.0;
+/// Fewest samples a stretch of support needs (fewer: a stray sample, not a curve's support).
+pub const SUPPORT_MIN_SAMPLES: usize = 3;
+
+/// The stretches of `xs` covered by samples: the sorted values split wherever neighbours are
+/// more than `max_gap` apart, each stretch `(first, last)`, stretches with fewer than
+/// `min_samples` values dropped. Non-finite values are ignored.
+pub fn support_intervals(xs: &[f64], max_gap: f64, min_samples: usize) -> Vec<(f64, f64)> {
+    let mut v: Vec<f64> = xs.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    let mut out = Vec::new();
+    let mut start = 0;
+    for i in 1..=v.len() {
+        if i == v.len() || v[i] - v[i - 1] > max_gap {
+            if i - start >= min_samples.max(1) {
+                out.push((v[start], v[i - 1]));
+            }
+            start = i;
+        }
+    }
+    out
+}
+
+/// The pieces of `curve` inside `support`, one per stretch that holds at least one of its points.
+pub fn clip_to_support(curve: &PlaneCurve, support: &[(f64, f64)]) -> Vec<PlaneCurve> {
+    support
+        .iter()
+        .map(|&(lo, hi)| PlaneCurve {
+            label: curve.label.clone(),
+            theta_i_deg: curve.theta_i_deg,
+            points: curve
+                .points
+                .iter()
+                .copied()
+                .filter(|p| p.0 >= lo && p.0 <= hi)
+                .collect(),
+        })
+        .filter(|c| !c.points.is_empty())
+        .collect()
+}
+
+/// The series of a curve drawn piece by piece (legend entries on the first piece only).
+fn curve_series(k: usize, label: &str, pieces: &[PlaneCurve]) -> Vec<Series> {
+    let mut series = Vec::new();
+    let banded = pieces.iter().any(|c| c.points.iter().any(|p| p.2 != p.3));
+    for (j, c) in pieces.iter().enumerate() {
+        let named = |s: String| if j == 0 { s } else { String::new() };
+        if banded {
             series.push(Series {
-                label: format!("{} 95% band", c.label),
+                label: named(format!("{label} 95% band")),
                 color: k as i32,
                 kind: SeriesKind::Band(c.points.iter().map(|p| (p.0, p.2, p.3)).collect()),
             });
         }
         series.push(Series {
-            label: c.label.clone(),
+            label: named(label.to_owned()),
             color: k as i32,
             kind: SeriesKind::Line(c.points.iter().map(|p| (p.0, p.1)).collect()),
         });
     }
+    series
+}
+
+fn plane_figure(
+    title: &str,
+    samples: &[(f64, f64)],
+    curves: &[PlaneCurve],
+    support: Option<&[(f64, f64)]>,
+    y_label: &str,
+) -> Figure {
+    let mut series = Vec::new();
+    if !samples.is_empty() {
+        series.push(Series {
+            label: format!("samples (n = {})", samples.len()),
+            color: 5,
+            kind: SeriesKind::Points(samples.to_vec()),
+        });
+    }
+    for (k, c) in curves.iter().enumerate() {
+        let pieces = match support {
+            Some(s) => clip_to_support(c, s),
+            None => vec![c.clone()],
+        };
+        series.extend(curve_series(k, &c.label, &pieces));
+    }
     Figure {
         panels: vec![Panel {
             title: title.into(),
-            x_label: "signed exitant angle (deg; < 0 light side)".into(),
+            x_label: "signed exitant angle theta_e (deg; < 0 on the light's side)".into(),
             y_label: y_label.into(),
             x_range: Some((-90.0, 90.0)),
             y_range: None,
@@ -465,6 +629,21 @@ pub fn scatter_figure(
         }],
         panel_px: (760, 480),
     }
+}
+
+/// Raw samples near the incidence plane at `theta_i_deg` with smoothed curves and bands
+/// (the method's Fig. 11), Cartesian: signed exitant angle against value. Curves are drawn only
+/// over the samples' support ([`support_intervals`] with [`SUPPORT_GAP_DEG`] and
+/// [`SUPPORT_MIN_SAMPLES`]); the legend states the sample count.
+pub fn scatter_figure(
+    title: &str,
+    samples: &[(f64, f64)],
+    curves: &[PlaneCurve],
+    y_label: &str,
+) -> Figure {
+    let xs: Vec<f64> = samples.iter().map(|p| p.0).collect();
+    let support = support_intervals(&xs, SUPPORT_GAP_DEG, SUPPORT_MIN_SAMPLES);
+    plane_figure(title, samples, curves, Some(&support), y_label)
 }
 
 /// Samples within `tol_deg` of `theta_i_deg` and of the incidence plane, as
@@ -575,7 +754,7 @@ fn erfc(x: f64) -> f64 {
 
 /// Overlay of several sessions' curves with bands (the method's Figs. 8, 9).
 pub fn overlay_figure(title: &str, curves: &[PlaneCurve], y_label: &str) -> Figure {
-    scatter_figure(title, &[], curves, y_label)
+    plane_figure(title, &[], curves, None, y_label)
 }
 
 #[cfg(test)]
@@ -630,5 +809,127 @@ mod tests {
             "rho",
         );
         write_figure(&dir.path().join("scatter"), &fig).expect("write");
+    }
+
+    /// Every `(x, y)` a series draws (text anchors included).
+    fn drawn_points(s: &Series) -> Vec<(f64, f64)> {
+        match &s.kind {
+            SeriesKind::Line(v) | SeriesKind::Points(v) => v.clone(),
+            SeriesKind::Band(v) => v
+                .iter()
+                .flat_map(|&(x, lo, hi)| [(x, lo), (x, hi)])
+                .collect(),
+            SeriesKind::Text(v) => v.iter().map(|&(x, y, _)| (x, y)).collect(),
+        }
+    }
+
+    #[test]
+    fn support_splits_at_gaps_wider_than_the_limit_and_drops_strays() {
+        let xs = [-45.0, -43.0, -41.0, -39.0, 5.0, 30.0, 31.0, 33.0, f64::NAN];
+        assert_eq!(
+            support_intervals(&xs, 10.0, 3),
+            vec![(-45.0, -39.0), (30.0, 33.0)]
+        );
+        // A gap of exactly the limit is bridged, one just over it is not.
+        assert_eq!(
+            support_intervals(&[0.0, 10.0, 20.0], 10.0, 3),
+            vec![(0.0, 20.0)]
+        );
+        assert!(support_intervals(&[0.0, 10.5, 21.0], 10.0, 3).is_empty());
+        assert!(support_intervals(&[], 10.0, 3).is_empty());
+    }
+
+    #[test]
+    fn scatter_curves_lie_within_the_samples_support() {
+        // The session of the issue: samples at theta_i = 30 only near -40 degrees, plus a
+        // second cluster near +20 degrees; the curves are defined from -89 to +89.
+        let mut pts: Vec<(f64, f64)> = (0..40).map(|k| (-46.0 + 0.3 * k as f64, 0.3)).collect();
+        pts.extend((0..10).map(|k| (18.0 + 0.4 * k as f64, 0.4)));
+        let support = support_intervals(
+            &pts.iter().map(|p| p.0).collect::<Vec<_>>(),
+            SUPPORT_GAP_DEG,
+            SUPPORT_MIN_SAMPLES,
+        );
+        assert_eq!(support.len(), 2, "{support:?}");
+        let curves = [curve("loess", 0.0, 0.01), curve("model", 0.0, 0.0)];
+        let fig = scatter_figure("s", &pts, &curves, "rho");
+        let panel = &fig.panels[0];
+        let mut drawn = 0;
+        for s in &panel.series {
+            if matches!(s.kind, SeriesKind::Points(_)) {
+                assert_eq!(s.label, "samples (n = 50)");
+                continue;
+            }
+            let xs: Vec<f64> = drawn_points(s).iter().map(|p| p.0).collect();
+            let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            // Each piece lies within one stretch of support: none crosses the gap.
+            assert!(
+                support.iter().any(|&(a, b)| lo >= a && hi <= b),
+                "{}: {lo}..{hi} outside {support:?}",
+                s.label
+            );
+            drawn += 1;
+        }
+        // Loess: band and line per stretch; model: line per stretch.
+        assert_eq!(drawn, 6);
+        // The overlay of sessions (no samples) draws the curves whole.
+        let overlay = overlay_figure("o", &curves, "rho");
+        let first = drawn_points(&overlay.panels[0].series[1]);
+        assert_eq!((first[0].0, first[first.len() - 1].0), (-89.0, 89.0));
+    }
+
+    #[test]
+    fn polar_panels_hold_the_horizon_labels_and_every_curve() {
+        // A curve with a wide band (clipped) and values at +-89 degrees, on the horizon.
+        let fig = polar_figure(
+            &[
+                (0.0, vec![curve("a", 0.0, 0.2)]),
+                (60.0, vec![curve("a", 0.0, 0.0), curve("b", 0.1, 0.01)]),
+            ],
+            "1/sr",
+        );
+        for panel in &fig.panels {
+            let ((x0, x1), (y0, y1)) = data_range(panel);
+            let rmax = x1 / POLAR_HALF_WIDTH;
+            // Room under the horizon for the ring values: a tenth of rmax at least.
+            assert!(y0 <= -0.1 * rmax, "{}: horizon at the edge", panel.title);
+            let mut texts = 0;
+            for s in &panel.series {
+                let margin = if matches!(s.kind, SeriesKind::Text(_)) {
+                    texts += 1;
+                    // Text is centred on its anchor: keep half a label's width clear.
+                    0.05 * rmax
+                } else {
+                    0.0
+                };
+                for (x, y) in drawn_points(s) {
+                    assert!(
+                        x >= x0 + margin
+                            && x <= x1 - margin
+                            && y >= y0 + margin
+                            && y <= y1 - margin,
+                        "{}: ({x}, {y}) outside the panel",
+                        panel.title
+                    );
+                }
+            }
+            assert_eq!(texts, 1, "ring and angle labels");
+        }
+        // Equal scales: the chart's pixel aspect matches the ranges' to 2% (round rings).
+        const ASPECT_TOL: f64 = 0.02;
+        let (w, h) = fig.panel_px;
+        let px = f64::from(w - 2 * PANEL_MARGIN_PX)
+            / f64::from(h - 2 * PANEL_MARGIN_PX - CAPTION_AREA_PX);
+        let data = 2.0 * POLAR_HALF_WIDTH / (POLAR_TOP - POLAR_BELOW_HORIZON);
+        assert!((px / data - 1.0).abs() < ASPECT_TOL, "{px} vs {data}");
+    }
+
+    #[test]
+    fn tick_labels_carry_the_decimals_the_span_needs() {
+        assert_eq!(tick_label(-80.0, 180.0), "-80");
+        assert_eq!(tick_label(0.13, 0.1), "0.13");
+        assert_eq!(tick_label(0.135, 0.05), "0.135");
+        assert_eq!(tick_label(2.5, 5.0), "2.5");
     }
 }

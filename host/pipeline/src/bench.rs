@@ -23,9 +23,9 @@ use skinbrdf_brdf::{BrdfModel, ChannelModel, Geom, ModelSpec, ParamBound, StartH
 use skinbrdf_core::stats::median;
 use skinbrdf_core::BrdfSample;
 use skinbrdf_derender::DerenderConfig;
-use skinbrdf_fit::loess::{choose_span_gcv, Bandwidth, Loess, LoessConfig};
+use skinbrdf_fit::loess::Loess;
 use skinbrdf_fit::plot::{write_figure, Figure, Panel, Series, SeriesKind};
-use skinbrdf_fit::report::SPAN_CANDIDATES;
+use skinbrdf_fit::smooth::{smooth, SmoothConfig, SpanChoice, SPAN_CANDIDATES};
 use skinbrdf_fit::{fit_rgb, FitConfig};
 use skinbrdf_mesh::{BuildQuality, MeshBvh, MeshRay, NormalMethod};
 use skinbrdf_poses::{PoseConfig, SessionPoses};
@@ -323,33 +323,6 @@ fn smoother_error_pct(l: &Loess, floor: f64, truth: &BrdfModel, held_out: &[Brdf
         })
         .collect();
     median(&errs) * 100.0
-}
-
-/// The smoother's inputs: `n` evenly strided samples as (theta_i, theta_e, phi_d) and
-/// `ln(channel mean + floor)`, with the floor (1% of the median, as `skinbrdf fit` uses).
-fn smoother_data(samples: &[BrdfSample], n: usize) -> (Vec<Vec<f64>>, Vec<f64>, f64) {
-    let k = n.min(samples.len()).max(1);
-    let idx: Vec<usize> = (0..k)
-        .map(|i| ((i as u128 * samples.len() as u128) / k as u128) as usize)
-        .collect();
-    let x = idx
-        .iter()
-        .map(|&i| {
-            let s = &samples[i];
-            vec![
-                f64::from(s.theta_i_rad),
-                f64::from(s.theta_e_rad),
-                f64::from(s.phi_d_rad),
-            ]
-        })
-        .collect();
-    let raw: Vec<f64> = idx
-        .iter()
-        .map(|&i| f64::from(samples[i].rho.iter().sum::<f32>()) / 3.0)
-        .collect();
-    let floor = (0.01 * median(&raw)).max(1e-9);
-    let y = raw.iter().map(|v| (v.max(0.0) + floor).ln()).collect();
-    (x, y, floor)
 }
 
 fn write_outputs(
@@ -775,10 +748,6 @@ fn sweep_smoothing(
         .step_by(step)
         .copied()
         .collect();
-    let base = LoessConfig {
-        max_sigma_points: 2000,
-        ..LoessConfig::default()
-    };
     let default_n = skinbrdf_fit::report::SMOOTH_MAX_SAMPLES;
     let mut run = |setting: &'static str,
                    value: String,
@@ -787,22 +756,15 @@ fn sweep_smoothing(
                    default: bool|
      -> Result<(), BenchError> {
         log(&format!("smoothing {setting} = {value}"));
-        let t = Instant::now();
-        let (x, y, floor) = smoother_data(samples, n);
-        let span = match span {
-            Some(s) => s,
-            None => choose_span_gcv(&x, &y, &SPAN_CANDIDATES, base)?.0,
-        };
-        let l = Loess::fit(
-            &x,
-            &y,
-            LoessConfig {
-                bandwidth: Bandwidth::Span(span),
-                max_sigma_points: 5000,
-                ..base
+        let sm = smooth(
+            samples,
+            &SmoothConfig {
+                max_samples: n,
+                span: span.map_or(SpanChoice::Gcv(SPAN_CANDIDATES.to_vec()), SpanChoice::Fixed),
+                ..SmoothConfig::default()
             },
         )?;
-        let time_s = t.elapsed().as_secs_f64();
+        let span = sm.metrics.span;
         rows.push(BenchRow {
             stage: BenchStage::Smoothing,
             setting,
@@ -812,9 +774,9 @@ fn sweep_smoothing(
                 value
             },
             error_name: "smoothed BRDF median rel. error at held-out samples",
-            error_pct: smoother_error_pct(&l, floor, &truth.brdf, &held_out),
-            time_s,
-            samples: x.len(),
+            error_pct: smoother_error_pct(&sm.loess, sm.metrics.floor_rho, &truth.brdf, &held_out),
+            time_s: sm.metrics.run_time_s,
+            samples: sm.metrics.samples_used,
             default,
             pareto: false,
         });

@@ -609,16 +609,10 @@ impl StageUnit for FitUnit {
 
 /// The reports of smoothing (plane, hemisphere) and the fit.
 pub fn fit_reports(plan: &Plan, fr: &FitReport) -> [StageReport; 3] {
-    let smooth_s: f64 = fr
-        .timings_s
-        .iter()
-        .filter(|(n, _)| n == "smooth")
-        .map(|(_, t)| *t)
-        .sum();
-    let plane = StageReport::ran(Stage::SmoothIncidencePlane, smooth_s).with_figures(
+    let plane = StageReport::ran(Stage::SmoothIncidencePlane, fr.smooth.run_time_s).with_figures(
         StageMetrics::Smooth(SmoothMetrics {
-            loess_span: fr.smooth_span,
-            loess_residual_sigma_pct: fr.smooth_sigma * 100.0,
+            loess_span: fr.smooth.span,
+            loess_residual_sigma_pct: fr.smooth.residual_sigma_log * 100.0,
         }),
     );
     let hemi = if plan.runs(Stage::SmoothHemisphere) {
@@ -628,7 +622,7 @@ pub fn fit_reports(plan: &Plan, fr: &FitReport) -> [StageReport; 3] {
     } else {
         skipped(plan, Stage::SmoothHemisphere)
     };
-    let mut fit = StageReport::ran(Stage::Fit, fr.fit.fit_time_s).with_figures(StageMetrics::Fit(
+    let mut fit = StageReport::ran(Stage::Fit, fr.timings.fit_s).with_figures(StageMetrics::Fit(
         FitMetrics {
             samples_fitted: fr.n_samples as u64,
             log_rmse_vs_samples_green: fr.fit.channels.get(1).map(|c| c.error.log_rmse),

@@ -109,7 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for w in &f.warnings {
         eprintln!("warning: {w}");
     }
-    for (k, v) in &report.timings_s {
+    for (k, v) in report.timings.rows() {
         println!("  {k}: {v:.3} s");
     }
     println!("wrote {} (params.json, report.md, figures)", out.display());
