@@ -30,7 +30,7 @@ pub use camera_rays::CameraRays;
 pub use coherent::TraceScratch;
 pub use load::{load_mesh, LengthUnit, LoadOptions, LoadedMesh};
 pub use normals::{estimate_noise, NoiseEstimate, NormalMethod, SurfaceNormals};
-pub use ply::{read_ply, write_ply_binary};
+pub use ply::{read_ply, write_ply_binary, write_ply_binary_in};
 pub use shadow::{shadow_ray, ShadowScratch};
 pub use validate::{inspect, repair, MeshReport, RepairPolicy};
 

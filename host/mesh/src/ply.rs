@@ -459,19 +459,29 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
 /// Writes the mesh as binary little-endian PLY, atomically (temporary file + rename).
 /// Vertex normals are written when the mesh has them.
 pub fn write_ply_binary(path: &Path, mesh: &TriMesh) -> Result<(), MeshError> {
+    write_ply_binary_in(path, mesh, "metres")
+}
+
+/// [`write_ply_binary`] for coordinates in another unit, named in the header's comment
+/// (`comment skinbrdf mesh, millimetres`).
+pub fn write_ply_binary_in(path: &Path, mesh: &TriMesh, units: &str) -> Result<(), MeshError> {
     let mut buf = Vec::with_capacity(64 + mesh.positions.len() * 24 + mesh.indices.len() * 13);
-    write_ply_binary_to(&mut buf, mesh);
+    write_ply_binary_units_to(&mut buf, mesh, units);
     write_atomic(path, &buf)
 }
 
-/// Encodes the mesh as binary little-endian PLY into `out`.
+/// Encodes the mesh (coordinates in metres) as binary little-endian PLY into `out`.
 pub fn write_ply_binary_to(out: &mut Vec<u8>, mesh: &TriMesh) {
+    write_ply_binary_units_to(out, mesh, "metres")
+}
+
+fn write_ply_binary_units_to(out: &mut Vec<u8>, mesh: &TriMesh, units: &str) {
     let normals = mesh
         .normals
         .as_ref()
         .filter(|n| n.len() == mesh.positions.len());
     let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment skinbrdf mesh, metres\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
+        "ply\nformat binary_little_endian 1.0\ncomment skinbrdf mesh, {units}\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
         mesh.positions.len()
     );
     if normals.is_some() {

@@ -21,7 +21,7 @@ use skinbrdf_fit::report::{fit_and_report, FitReport, Input, ReportOptions};
 use skinbrdf_fit::FitConfig;
 use skinbrdf_poses::{PoseConfig, SessionPoses};
 use skinbrdf_samples::SampleHeader;
-use skinbrdf_session::{GeometrySpec, ImageRole, Session, Truth};
+use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, Session, Truth};
 
 use crate::ledger::{write_atomic, FingerprintBuilder, Ledger};
 use crate::plan::{Geometry, Plan, PlanOptions, SceneFacts, Stage};
@@ -90,6 +90,8 @@ pub struct ProcessConfig {
     pub force: bool,
     /// Output directory (default `SESSION/out`).
     pub out_dir: Option<PathBuf>,
+    /// Leave unreadable or implausible images out (listed in the report) instead of failing.
+    pub skip_bad_images: bool,
 }
 
 impl ProcessConfig {
@@ -107,6 +109,7 @@ impl ProcessConfig {
             },
             force: false,
             out_dir: None,
+            skip_bad_images: false,
         }
     }
 }
@@ -167,6 +170,24 @@ pub fn scene_facts(session: &Session) -> SceneFacts {
     }
 }
 
+/// The images the input check left out and the defaults the session relies on: a count for the
+/// report's first table and one note per finding.
+fn input_findings(session: &Session) -> (Metric, Vec<String>) {
+    let metric = Metric::new(
+        "images_skipped",
+        session.skipped_images.len() as f64,
+        "",
+        MetricKind::Count,
+    );
+    let mut notes: Vec<String> = session
+        .skipped_images
+        .iter()
+        .map(|s| format!("skipped image `{}` ({:?}): {}", s.file, s.role, s.cause))
+        .collect();
+    notes.extend(session.linearization_source.note().map(str::to_string));
+    (metric, notes)
+}
+
 fn session_fingerprint(session: &Session) -> Result<FingerprintBuilder, ProcessError> {
     let mut fp = FingerprintBuilder::new().file(&session.dir.join("session.toml"))?;
     for img in &session.file.images {
@@ -182,10 +203,25 @@ pub fn process(
     on_event: &mut dyn FnMut(Event<'_>),
 ) -> Result<ProcessOutput, ProcessError> {
     let t0 = Instant::now();
-    let session = Session::load(dir).map_err(|e| ProcessError::Session {
+    let mut session = Session::load(dir).map_err(|e| ProcessError::Session {
         dir: dir.to_path_buf(),
         problems: e.to_string(),
     })?;
+    let policy = if cfg.skip_bad_images {
+        BadImagePolicy::Skip
+    } else {
+        BadImagePolicy::Fail
+    };
+    session
+        .check_images(policy)
+        .map_err(|e| ProcessError::Session {
+            dir: dir.to_path_buf(),
+            problems: format!(
+                "{e}\n(--skip-bad-images leaves unusable images out and lists them in the report)"
+            ),
+        })?;
+    // What the input check found, on the first line of the report's first table.
+    let (input_metric, input_notes) = input_findings(&session);
     let truth = match session.load_truth() {
         None => None,
         Some(r) => Some(r.map_err(|e| ProcessError::Truth(e.to_string()))?),
@@ -205,11 +241,16 @@ pub fn process(
     let plan = Plan::derive(&facts, &cfg.plan);
     on_event(Event::Plan(&plan));
     let mut reports: Vec<StageReport> = Vec::new();
-    let emit =
-        |r: StageReport, reports: &mut Vec<StageReport>, on_event: &mut dyn FnMut(Event<'_>)| {
-            on_event(Event::Finished(&r));
-            reports.push(r);
-        };
+    let emit = |mut r: StageReport,
+                reports: &mut Vec<StageReport>,
+                on_event: &mut dyn FnMut(Event<'_>)| {
+        if reports.is_empty() {
+            r.metrics.insert(0, input_metric.clone());
+            r.notes.extend(input_notes.iter().cloned());
+        }
+        on_event(Event::Finished(&r));
+        reports.push(r);
+    };
 
     // --- photogrammetry -------------------------------------------------------------------
     let pose_stages = [

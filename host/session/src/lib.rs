@@ -52,5 +52,6 @@ pub use load::{
     BadImagePolicy, LinearizationSource, SectionNeeds, Session, SkippedImage, TAG36H11_CODES,
     TARGET_SIZE_REL_TOL,
 };
+pub use parse::toml_unknown_keys;
 pub use truth::{ImageTruth, RenderTruth, SurfaceTruth, TargetTruth, Truth, TRUTH_FORMAT_VERSION};
 pub use write::{load_mask, write_atomic, write_json_atomic, write_mask_png, Mask};

@@ -98,6 +98,18 @@ fn unknown_keys(input: &toml::Value, round_trip: &toml::Value, path: &str, out: 
     }
 }
 
+/// Every key path of a TOML value that the value deserialised from it does not read (its
+/// serialisation lacks them): unknown keys, also inside tagged enums and types without
+/// `deny_unknown_fields`. Empty when `parsed` does not serialise. See the module docs.
+pub fn toml_unknown_keys<T: Serialize>(input: &toml::Value, parsed: &T) -> Vec<String> {
+    let Ok(round_trip) = toml::Value::try_from(parsed) else {
+        return Vec::new();
+    };
+    let mut unknown = Vec::new();
+    unknown_keys(input, &round_trip, "", &mut unknown);
+    unknown
+}
+
 /// Reports every key of `input` that `parsed` does not read (see the module docs).
 fn report_unknown<T: Serialize>(
     input: &toml::Value,
