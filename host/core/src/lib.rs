@@ -13,9 +13,11 @@
 
 pub mod angles;
 pub mod camera;
+pub mod fsio;
 pub mod mesh;
 pub mod pose;
 pub mod sample;
+pub mod stats;
 
 pub use angles::{BrdfAngles, ShadingFrame};
 pub use camera::{BrownConrady, CameraError, CameraModel};

@@ -11,8 +11,8 @@
 //! `uchar`-counted `int` triangles) atomically: a temporary file in the target directory,
 //! renamed over the destination only once complete.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::path::{Path, PathBuf};
+use std::io::{BufRead, BufReader};
+use std::path::Path;
 
 use glam::Vec3;
 use skinbrdf_core::TriMesh;
@@ -528,32 +528,10 @@ pub fn write_ply_ascii(path: &Path, mesh: &TriMesh) -> Result<(), MeshError> {
 
 /// Writes bytes to `path` through a temporary file in the same directory and a rename.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), MeshError> {
-    let io = |source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let dir: PathBuf = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let mut tmp = tempfile::NamedTempFile::new_in(&dir).map_err(io)?;
-    tmp.write_all(bytes).map_err(io)?;
-    tmp.as_file().sync_all().map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
-}
-
-/// Reads a whole file (helper for formats parsed from memory).
-#[allow(dead_code)]
-pub(crate) fn read_all(path: &Path) -> Result<Vec<u8>, MeshError> {
-    let mut v = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|mut f| f.read_to_end(&mut v))
-        .map_err(|source| MeshError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-    Ok(v)
+    skinbrdf_core::fsio::write_atomic(path, bytes).map_err(|e| MeshError::Io {
+        path: e.path,
+        source: e.source,
+    })
 }
 
 #[cfg(test)]

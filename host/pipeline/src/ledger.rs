@@ -176,19 +176,10 @@ impl Ledger {
 
 /// Writes a file atomically: a temp file in the same directory, then a rename.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), LedgerError> {
-    let io = |source| LedgerError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).map_err(io)?;
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{file_name}.{}.tmp", std::process::id()));
-    std::fs::write(&tmp, bytes).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    skinbrdf_core::fsio::write_atomic(path, bytes).map_err(|e| LedgerError::Io {
+        path: e.path,
+        source: e.source,
+    })
 }
 
 #[cfg(test)]

@@ -121,7 +121,7 @@ fn decode(b: &[u8]) -> BrdfSample {
 #[derive(Debug)]
 pub struct SampleWriter {
     path: PathBuf,
-    out: BufWriter<tempfile::NamedTempFile>,
+    out: BufWriter<skinbrdf_core::fsio::AtomicFile>,
     count: u64,
     count_offset: u64,
 }
@@ -134,11 +134,10 @@ impl SampleWriter {
             path: path.clone(),
             source,
         };
-        let dir = match path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        let tmp = tempfile::NamedTempFile::new_in(dir).map_err(io_err)?;
+        let tmp = skinbrdf_core::fsio::AtomicFile::create(&path).map_err(|e| SamplesError::Io {
+            path: e.path,
+            source: e.source,
+        })?;
         let mut out = BufWriter::with_capacity(1 << 20, tmp);
         let json = serde_json::to_vec(header).map_err(|e| SamplesError::BadHeader {
             path: path.clone(),
@@ -202,8 +201,10 @@ impl SampleWriter {
         tmp.seek(SeekFrom::Start(self.count_offset))
             .map_err(io_err)?;
         tmp.write_all(&self.count.to_le_bytes()).map_err(io_err)?;
-        tmp.as_file().sync_all().map_err(io_err)?;
-        tmp.persist(&path).map_err(|e| io_err(e.error))?;
+        tmp.commit().map_err(|e| SamplesError::Io {
+            path: e.path,
+            source: e.source,
+        })?;
         Ok(self.count)
     }
 }

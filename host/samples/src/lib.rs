@@ -35,19 +35,8 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> Result<(), SamplesError> {
-    let io_err = |source| SamplesError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let tmp = tempfile::NamedTempFile::new_in(&dir).map_err(io_err)?;
-    let mut buf = std::io::BufWriter::new(tmp);
-    write(&mut buf).map_err(io_err)?;
-    let tmp = buf.into_inner().map_err(|e| io_err(e.into_error()))?;
-    tmp.as_file().sync_all().map_err(io_err)?;
-    tmp.persist(path).map_err(|e| io_err(e.error))?;
-    Ok(())
+    skinbrdf_core::fsio::write_atomic_with(path, write).map_err(|e| SamplesError::Io {
+        path: e.path,
+        source: e.source,
+    })
 }
