@@ -470,8 +470,14 @@ pub fn process(
         total_time_s: 0.0,
     };
     report.total_time_s = t0.elapsed().as_secs_f64();
+    let input_section = if input_notes.is_empty() {
+        String::new()
+    } else {
+        let items: String = input_notes.iter().map(|n| format!("- {n}\n")).collect();
+        format!("## Input\n\n{items}\n")
+    };
     let md = format!(
-        "# skinbrdf process: {}\n\n{}\n## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the head rendering (Lambertian vs fitted): `render/head_comparison.png`; the same report with the figures inline: `report.html`.\n",
+        "# skinbrdf process: {}\n\n{}\n{input_section}## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the head rendering (Lambertian vs fitted): `render/head_comparison.png`; the same report with the figures inline: `report.html`.\n",
         dir.display(),
         "```text\n".to_string() + &report.plan.to_text() + "```\n",
         report.to_markdown()
@@ -811,6 +817,17 @@ fn derender_reports(plan: &Plan, run: &SessionRun) -> [StageReport; 3] {
         "",
         MetricKind::Count,
     ));
+    if let Some(m) = &run.mesh_report {
+        scan.metrics.push(Metric::new(
+            "scan_triangles_dropped",
+            m.dropped_triangles() as f64,
+            "",
+            MetricKind::Count,
+        ));
+        if m.summary() != "no problems" {
+            scan.notes.push(format!("scan repaired: {}", m.summary()));
+        }
+    }
     scan.metrics.push(Metric::new(
         "normal_fit_radius",
         d.normal_radius_m * 1e3,
