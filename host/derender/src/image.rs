@@ -106,6 +106,8 @@ pub struct FilterCounts {
     pub shadowed: u64,
     /// Saturated pixel.
     pub saturated: u64,
+    /// A channel NaN or -inf (a damaged or mis-decoded pixel, not a dark one).
+    pub non_finite: u64,
     /// A channel below the noise floor.
     pub below_noise_floor: u64,
     /// Pixels with no valid camera ray (outside the distortion model's invertible range).
@@ -126,13 +128,14 @@ impl FilterCounts {
         self.grazing += o.grazing;
         self.shadowed += o.shadowed;
         self.saturated += o.saturated;
+        self.non_finite += o.non_finite;
         self.below_noise_floor += o.below_noise_floor;
         self.no_ray += o.no_ray;
         self.kept += o.kept;
     }
 
     /// The drop reasons and counts, in filter order.
-    pub fn reasons(&self) -> [(&'static str, u64); 10] {
+    pub fn reasons(&self) -> [(&'static str, u64); 11] {
         [
             ("off_mask", self.off_mask),
             ("on_target", self.on_target),
@@ -143,6 +146,7 @@ impl FilterCounts {
             ("grazing", self.grazing),
             ("shadowed", self.shadowed),
             ("saturated", self.saturated),
+            ("non_finite", self.non_finite),
             ("below_noise_floor", self.below_noise_floor),
         ]
     }
@@ -546,9 +550,11 @@ pub fn derender_image_with_rays(
                     c.saturated += 1;
                     continue;
                 }
-                if v.iter()
-                    .any(|&ch| ch.is_nan() || (ch as f64) < cfg.noise_floor)
-                {
+                if !v.iter().all(|ch| ch.is_finite()) {
+                    c.non_finite += 1;
+                    continue;
+                }
+                if v.iter().any(|&ch| (ch as f64) < cfg.noise_floor) {
                     c.below_noise_floor += 1;
                     continue;
                 }
