@@ -83,6 +83,14 @@ fn an_exr_session_runs_end_to_end_and_damage_to_it_is_never_silent() {
     // Every pose stage found its targets in the float images (the light-position ones too).
     let report = std::fs::read_to_string(s.join("out/report.md")).expect("report.md");
     assert!(report.contains("flash triangulation | ran"), "{report}");
+    // One file mode for every output (no temp-file default leaking through).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = |p: &str| std::fs::metadata(s.join(p)).expect(p).permissions().mode() & 0o777;
+        assert_eq!(mode("scan.ply"), mode("session.toml"));
+        assert_eq!(mode("out/samples.skbs"), mode("out/report.md"));
+    }
     assert!(report.contains("| images_skipped | 0"), "{report}");
 
     // An unknown key in a core type's table is an error naming it.
@@ -112,9 +120,13 @@ fn an_exr_session_runs_end_to_end_and_damage_to_it_is_never_silent() {
     );
     assert!(t.contains("--skip-bad-images"), "{t}");
     // ... and with --skip-bad-images a listed skip: terminal summary, report, first table.
-    let o = process(&["--skip-bad-images"]);
+    // (With -v, whose log goes to a pipe here: plain text, no colour codes.)
+    let o = skinbrdf(&["-v", "process", s_str, "--no-figures", "--skip-bad-images"]);
     let t = text(&o);
     assert!(o.status.success(), "{t}");
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("stage started"), "{t}");
+    assert!(!stderr.contains('\x1b'), "colour codes in a piped log: {t}");
     assert!(t.contains("skipped image `images/m01.exr`"), "{t}");
     let report = std::fs::read_to_string(s.join("out/report.md")).expect("report.md");
     assert!(report.contains("| images_skipped | 1"), "{report}");
