@@ -240,6 +240,10 @@ fn saturation_floor_and_masks_are_counted() {
     let n = img.rgb.len();
     img.saturated = (0..n).map(|i| i % 7 == 0).collect();
     img.mask = Some((0..n).map(|i| i % 5 != 0).collect());
+    // Damaged pixels: NaN is counted as non-finite, not as dark.
+    for i in (0..n).filter(|i| i % 13 == 0) {
+        img.rgb[i][1] = f32::NAN;
+    }
     img.targets = Some(
         (0..n)
             .map(|i| if i % 11 == 0 { 0.0 } else { f32::INFINITY })
@@ -255,13 +259,17 @@ fn saturation_floor_and_masks_are_counted() {
     let r = derender_with_loader(&geom, &inputs, &cfg, |_| Ok(img.clone())).unwrap();
     let c = r.counts;
     assert!(
-        c.off_mask > 0 && c.on_target > 0 && c.saturated > 0 && c.below_noise_floor > 0,
+        c.off_mask > 0
+            && c.on_target > 0
+            && c.saturated > 0
+            && c.below_noise_floor > 0
+            && c.non_finite > 0,
         "{c:?}"
     );
     assert_eq!(c.dropped() + c.kept, c.considered);
     for smp in &r.samples {
         let i = smp.pixel[1] as usize * img.width as usize + smp.pixel[0] as usize;
-        assert!(i % 7 != 0 && i % 5 != 0 && i % 11 != 0);
+        assert!(i % 7 != 0 && i % 5 != 0 && i % 11 != 0 && i % 13 != 0);
     }
 }
 

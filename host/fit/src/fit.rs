@@ -60,6 +60,31 @@ pub enum FitError {
         /// The field.
         field: &'static str,
     },
+    /// A sample's angle is outside its domain (`theta` in `[0, pi/2]`, `phi_d` in `[-2 pi, 2 pi]`).
+    #[error("sample {index}: {field} = {value_rad} rad is outside [{min_rad}, {max_rad}]")]
+    AngleOutOfRange {
+        /// Sample index.
+        index: usize,
+        /// The angle (`theta_i_rad`, `theta_e_rad`, `phi_d_rad`).
+        field: &'static str,
+        /// Its value.
+        value_rad: f64,
+        /// Lowest value accepted.
+        min_rad: f64,
+        /// Highest value accepted.
+        max_rad: f64,
+    },
+    /// Fewer samples with a positive weight than the model has parameters (plus one); every
+    /// weight zero is the extreme case.
+    #[error("only {weighted} of {samples} samples have a positive weight; {needed} are needed to determine the parameters")]
+    TooFewWeighted {
+        /// Samples with a positive weight.
+        weighted: usize,
+        /// Samples in all.
+        samples: usize,
+        /// Samples needed.
+        needed: usize,
+    },
     /// No starting point gave a finite cost.
     #[error("channel {channel}: the cost is not finite at any of the {starts} starting points")]
     NoFiniteStart {
@@ -239,7 +264,8 @@ pub struct FitData {
 }
 
 impl FitData {
-    /// Converts samples, rejecting non-finite fields and negative weights.
+    /// Converts samples, rejecting non-finite fields, negative weights and angles outside their
+    /// domain (see [`check_angles`]).
     pub fn from_samples(samples: &[BrdfSample]) -> Result<Self, FitError> {
         let mut geom = Vec::with_capacity(samples.len());
         let mut y: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(samples.len()));
@@ -254,6 +280,7 @@ impl FitData {
                     field: "angle",
                 });
             }
+            check_angles(index, s)?;
             if !s.rho.iter().all(|v| v.is_finite()) {
                 return Err(FitError::BadSample {
                     index,
@@ -288,6 +315,35 @@ impl FitData {
     pub fn is_empty(&self) -> bool {
         self.geom.is_empty()
     }
+}
+
+/// Slack on the angle domains: the samples store angles as `f32`, and a direction on the
+/// horizon may round a little past `pi/2`.
+pub const ANGLE_DOMAIN_SLACK_RAD: f64 = 1e-4;
+
+/// Checks a sample's angles against their domains: `theta_i`, `theta_e` in `[0, pi/2]` (the
+/// hemisphere above the surface) and `phi_d` in `[-2 pi, 2 pi]` (any azimuth convention), each
+/// with [`ANGLE_DOMAIN_SLACK_RAD`]. An angle outside is a unit or column mix-up, not data.
+pub fn check_angles(index: usize, s: &BrdfSample) -> Result<(), FitError> {
+    use std::f64::consts::{FRAC_PI_2, TAU};
+    let e = ANGLE_DOMAIN_SLACK_RAD;
+    for (field, v, lo, hi) in [
+        ("theta_i_rad", s.theta_i_rad, 0.0, FRAC_PI_2),
+        ("theta_e_rad", s.theta_e_rad, 0.0, FRAC_PI_2),
+        ("phi_d_rad", s.phi_d_rad, -TAU, TAU),
+    ] {
+        let v = f64::from(v);
+        if !(lo - e..=hi + e).contains(&v) {
+            return Err(FitError::AngleOutOfRange {
+                index,
+                field,
+                value_rad: v,
+                min_rad: lo,
+                max_rad: hi,
+            });
+        }
+    }
+    Ok(())
 }
 
 fn quantile(v: &[f64], q: f64) -> f64 {
@@ -521,6 +577,14 @@ fn fit_channel_with_floor(
         return Err(FitError::TooFewSamples {
             needed: n + 1,
             found: m,
+        });
+    }
+    let weighted = data.sqrt_w.iter().filter(|&&w| w > 0.0).count();
+    if weighted < n + 1 {
+        return Err(FitError::TooFewWeighted {
+            weighted,
+            samples: m,
+            needed: n + 1,
         });
     }
     let y = &data.y[channel];
@@ -832,6 +896,41 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn unusable_data_is_an_error_not_a_fit() {
+        let truth = BrdfModel::Lambertian { albedo: [0.5; 3] };
+        let good = synthetic(&truth, (0.1, 1.2), (0.1, 1.2), 6);
+        let model = ModelSpec::Lambertian.channel_model();
+        let cfg = FitConfig::default();
+        assert!(fit_rgb(model.as_ref(), &good, &cfg).is_ok());
+
+        let mut zero = good.clone();
+        for s in &mut zero {
+            s.weight = 0.0;
+        }
+        let e = fit_rgb(model.as_ref(), &zero, &cfg).expect_err("all weights zero");
+        assert!(
+            matches!(e, FitError::TooFewWeighted { weighted: 0, .. }),
+            "{e}"
+        );
+
+        let mut bad = good.clone();
+        bad[5].theta_i_rad = 7.0;
+        let e = fit_rgb(model.as_ref(), &bad, &cfg).expect_err("theta = 7 rad");
+        assert!(
+            matches!(
+                e,
+                FitError::AngleOutOfRange {
+                    index: 5,
+                    field: "theta_i_rad",
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("7 rad"), "{e}");
     }
 
     /// The stated error bound of one Cornell material's 2-lobe Lafortune fit.

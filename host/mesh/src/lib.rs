@@ -30,7 +30,7 @@ pub use camera_rays::CameraRays;
 pub use coherent::TraceScratch;
 pub use load::{load_mesh, LengthUnit, LoadOptions, LoadedMesh};
 pub use normals::{estimate_noise, NoiseEstimate, NormalMethod, SurfaceNormals};
-pub use ply::{read_ply, write_ply_binary};
+pub use ply::{read_ply, write_ply_binary, write_ply_binary_in};
 pub use shadow::{shadow_ray, ShadowScratch};
 pub use validate::{inspect, repair, MeshReport, RepairPolicy};
 
@@ -58,6 +58,20 @@ pub enum MeshError {
     Defects {
         /// File or mesh name.
         source_name: String,
+        /// What was found.
+        report: Box<crate::validate::MeshReport>,
+    },
+    /// Repairing the mesh would drop more triangles than the policy accepts.
+    #[error("{source_name}: repairing the mesh drops {dropped} of its {triangles} triangles, more than the {:.1} % accepted ({})", max_fraction * 100.0, report.summary())]
+    TooManyDropped {
+        /// File or mesh name.
+        source_name: String,
+        /// Triangles the repair would drop.
+        dropped: usize,
+        /// Triangles in the input.
+        triangles: usize,
+        /// The policy's limit (fraction of the triangles).
+        max_fraction: f64,
         /// What was found.
         report: Box<crate::validate::MeshReport>,
     },

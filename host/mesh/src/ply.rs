@@ -108,6 +108,9 @@ struct Reader<'a, R> {
     /// Pending tokens of the current ASCII line.
     tokens: std::vec::IntoIter<String>,
     line: String,
+    /// ASCII: the next token starts an element, so it must start a new line (one element per
+    /// line: a face with an index short must not borrow the next face's values).
+    element_start: bool,
 }
 
 impl<R: BufRead> Reader<'_, R> {
@@ -118,7 +121,25 @@ impl<R: BufRead> Reader<'_, R> {
         }
     }
 
+    /// Marks the start of an element (ASCII: it must begin on a new line).
+    fn begin_element(&mut self) {
+        self.element_start = true;
+    }
+
     fn next_token(&mut self, what: &dyn Fn() -> String) -> Result<String, MeshError> {
+        if std::mem::take(&mut self.element_start) {
+            if let Some(extra) = self.tokens.next() {
+                return Err(self.err(format!(
+                    "{}: the line before holds more values than its element (`{extra}` left over)",
+                    what()
+                )));
+            }
+        } else if self.tokens.len() == 0 && !self.line.is_empty() {
+            return Err(self.err(format!(
+                "{}: the line ends before the element's values do (a value short?)",
+                what()
+            )));
+        }
         loop {
             if let Some(t) = self.tokens.next() {
                 return Ok(t);
@@ -309,6 +330,7 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
         format,
         tokens: Vec::new().into_iter(),
         line: String::new(),
+        element_start: false,
     };
     let mut mesh = TriMesh::default();
     let mut info = PlyInfo {
@@ -339,6 +361,7 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
                 mesh.positions.reserve(el.count);
                 let mut vals = vec![0.0f64; el.properties.len()];
                 for i in 0..el.count {
+                    rd.begin_element();
                     for (k, p) in el.properties.iter().enumerate() {
                         let what = || format!("vertex {i}");
                         match p {
@@ -374,6 +397,7 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
                 mesh.indices.reserve(el.count);
                 let mut corners: Vec<u32> = Vec::with_capacity(8);
                 for i in 0..el.count {
+                    rd.begin_element();
                     for (k, p) in el.properties.iter().enumerate() {
                         let what = || format!("face {i}");
                         match p {
@@ -414,6 +438,7 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
             }
             _ => {
                 for i in 0..el.count {
+                    rd.begin_element();
                     for p in &el.properties {
                         let what = || format!("element `{}` {i}", el.name);
                         match p {
@@ -459,19 +484,29 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
 /// Writes the mesh as binary little-endian PLY, atomically (temporary file + rename).
 /// Vertex normals are written when the mesh has them.
 pub fn write_ply_binary(path: &Path, mesh: &TriMesh) -> Result<(), MeshError> {
+    write_ply_binary_in(path, mesh, "metres")
+}
+
+/// [`write_ply_binary`] for coordinates in another unit, named in the header's comment
+/// (`comment skinbrdf mesh, millimetres`).
+pub fn write_ply_binary_in(path: &Path, mesh: &TriMesh, units: &str) -> Result<(), MeshError> {
     let mut buf = Vec::with_capacity(64 + mesh.positions.len() * 24 + mesh.indices.len() * 13);
-    write_ply_binary_to(&mut buf, mesh);
+    write_ply_binary_units_to(&mut buf, mesh, units);
     write_atomic(path, &buf)
 }
 
-/// Encodes the mesh as binary little-endian PLY into `out`.
+/// Encodes the mesh (coordinates in metres) as binary little-endian PLY into `out`.
 pub fn write_ply_binary_to(out: &mut Vec<u8>, mesh: &TriMesh) {
+    write_ply_binary_units_to(out, mesh, "metres")
+}
+
+fn write_ply_binary_units_to(out: &mut Vec<u8>, mesh: &TriMesh, units: &str) {
     let normals = mesh
         .normals
         .as_ref()
         .filter(|n| n.len() == mesh.positions.len());
     let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment skinbrdf mesh, metres\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
+        "ply\nformat binary_little_endian 1.0\ncomment skinbrdf mesh, {units}\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
         mesh.positions.len()
     );
     if normals.is_some() {
@@ -602,7 +637,9 @@ mod tests {
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nelement face 0\nproperty list uchar int vertex_indices\n", "without `end_header`"),
             ("ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 zz 0\n", "vertex 1: `zz` is not a number"),
             ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 9\n", "triangle 0 refers to vertex 9 but there are 3 vertices"),
-            ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1\n", "face 1: unexpected end of file"),
+            ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1\n", "face 1: the line ends before the element's values do"),
+            ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 3\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1\n3 0 1 2\n", "face 1: the line ends before the element's values do"),
+            ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 2\n3 0 1 2\n", "face 1: the line before holds more values"),
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n0 0\n", "lacks one of the properties x, y, z"),
             ("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n", "no `face` element"),
             ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n", "face 0: vertex index -1"),

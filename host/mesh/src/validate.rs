@@ -132,20 +132,38 @@ impl MeshReport {
 }
 
 /// What to do about each problem.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RepairPolicy {
     /// Fix problems (true) or fail with [`MeshError::Defects`] on the first kind found (false).
     pub repair: bool,
     /// Weld bit-identical vertices before looking at adjacency.
     pub weld: bool,
+    /// Largest fraction of the triangles a repair may lose ([`MeshReport::lost_triangles`]);
+    /// more is [`MeshError::TooManyDropped`] (a scan that damaged is not the surface it claims
+    /// to be).
+    pub max_dropped_fraction: f64,
 }
 
+/// The default limit on the triangles a repair may drop: 1 % (a few holes of NaN vertices
+/// drop well under that; a tenth of the vertices NaN drops about 30 %).
+pub const MAX_DROPPED_FRACTION: f64 = 0.01;
+
 impl RepairPolicy {
-    /// Repair everything that has a safe fix (the default).
+    /// Repair everything that has a safe fix, dropping at most [`MAX_DROPPED_FRACTION`] of the
+    /// triangles (the default).
     pub const fn repair() -> Self {
         Self {
             repair: true,
             weld: true,
+            max_dropped_fraction: MAX_DROPPED_FRACTION,
+        }
+    }
+    /// Repair, accepting that up to `fraction` of the triangles are dropped.
+    pub const fn accepting(fraction: f64) -> Self {
+        Self {
+            repair: true,
+            weld: true,
+            max_dropped_fraction: fraction,
         }
     }
     /// Refuse any defect.
@@ -153,7 +171,21 @@ impl RepairPolicy {
         Self {
             repair: false,
             weld: true,
+            max_dropped_fraction: 0.0,
         }
+    }
+}
+
+impl MeshReport {
+    /// Triangles the repair dropped (degenerate and duplicate ones included).
+    pub fn dropped_triangles(&self) -> usize {
+        self.triangles_in.saturating_sub(self.triangles_out)
+    }
+
+    /// Dropped triangles that took surface with them: on a non-finite vertex or with an index
+    /// out of range (a degenerate triangle has no area, a duplicate's copy stays).
+    pub fn lost_triangles(&self) -> usize {
+        self.triangles_on_non_finite.count + self.index_out_of_range.count
     }
 }
 
@@ -197,6 +229,16 @@ pub fn repair(
     if out.indices.is_empty() {
         return Err(MeshError::Invalid {
             problems: vec![skinbrdf_core::MeshError::Empty],
+        });
+    }
+    let dropped = report.lost_triangles();
+    if dropped as f64 > policy.max_dropped_fraction * report.triangles_in as f64 {
+        return Err(MeshError::TooManyDropped {
+            source_name: source.to_string(),
+            dropped,
+            triangles: report.triangles_in,
+            max_fraction: policy.max_dropped_fraction,
+            report: Box::new(report),
         });
     }
     Ok((out, report))
@@ -408,7 +450,22 @@ mod tests {
     fn nan_vertex_drops_its_triangles() {
         let mut m = grid();
         m.positions[4] = Vec3::new(f32::NAN, 0.0, 0.0);
-        let (out, r) = repair(&m, RepairPolicy::repair(), "grid").unwrap();
+        // Dropping 6 of 8 triangles is beyond the default limit: an error naming the count ...
+        let e = repair(&m, RepairPolicy::repair(), "scan.ply").unwrap_err();
+        assert!(
+            matches!(
+                e,
+                MeshError::TooManyDropped {
+                    dropped: 6,
+                    triangles: 8,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("scan.ply"), "{e}");
+        // ... unless the caller accepts it.
+        let (out, r) = repair(&m, RepairPolicy::accepting(1.0), "grid").unwrap();
         assert_eq!(r.non_finite_vertices.count, 1);
         assert_eq!(r.non_finite_vertices.examples, vec![4]);
         // Vertex 4 is the centre: every triangle of the grid uses it but two? count them.
@@ -477,7 +534,8 @@ mod tests {
             }
         }
         m.indices.push([0, 1, 77]);
-        let (out, r) = repair(&m, RepairPolicy::repair(), "grid").unwrap();
+        // One triangle of nine lost is beyond the default 1 %: accepted here.
+        let (out, r) = repair(&m, RepairPolicy::accepting(0.2), "grid").unwrap();
         assert_eq!(r.welded_vertices.examples, vec![9]);
         assert_eq!(r.index_out_of_range.examples, vec![8]);
         assert_eq!(out.positions.len(), 9);

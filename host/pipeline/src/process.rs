@@ -22,11 +22,11 @@ use skinbrdf_derender::DerenderConfig;
 use skinbrdf_fit::report::{FitReport, ReportOptions};
 use skinbrdf_fit::FitConfig;
 use skinbrdf_poses::PoseConfig;
-use skinbrdf_session::{GeometrySpec, ImageRole, Session};
+use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, Session};
 
 use crate::ledger::{write_atomic, Ledger, RunLock};
 use crate::plan::{Geometry, Plan, PlanOptions, SceneFacts, Stage};
-use crate::report::{RunReport, StageReport};
+use crate::report::{Metric, MetricKind, RunReport, StageReport};
 use crate::stages::{Ctx, DerenderUnit, FitUnit, PoseUnit, RenderUnit, StageUnit};
 
 pub use crate::metrics::bounds;
@@ -48,6 +48,14 @@ pub enum ProcessError {
     Truth {
         /// Why it did not load (names the file).
         source: skinbrdf_session::FileError,
+    },
+    /// An image is unreadable or implausible.
+    #[error("{dir}: {source}\n(--skip-bad-images leaves unusable images out and lists them in the report)")]
+    Images {
+        /// Session directory.
+        dir: PathBuf,
+        /// Each image and its cause.
+        source: skinbrdf_session::SessionErrors,
     },
     /// Photogrammetry failed.
     #[error("photogrammetry: {0}")]
@@ -111,6 +119,8 @@ pub struct ProcessConfig {
     pub force: bool,
     /// Output directory (default `SESSION/out`).
     pub out_dir: Option<PathBuf>,
+    /// Leave unreadable or implausible images out (listed in the report) instead of failing.
+    pub skip_bad_images: bool,
 }
 
 impl ProcessConfig {
@@ -128,6 +138,7 @@ impl ProcessConfig {
             },
             force: false,
             out_dir: None,
+            skip_bad_images: false,
         }
     }
 }
@@ -195,10 +206,23 @@ pub fn process(
     on_event: &mut dyn FnMut(Event<'_>),
 ) -> Result<ProcessOutput, ProcessError> {
     let t0 = Instant::now();
-    let session = Session::load(dir).map_err(|source| ProcessError::Session {
+    let mut session = Session::load(dir).map_err(|source| ProcessError::Session {
         dir: dir.to_path_buf(),
         source,
     })?;
+    let policy = if cfg.skip_bad_images {
+        BadImagePolicy::Skip
+    } else {
+        BadImagePolicy::Fail
+    };
+    session
+        .check_images(policy)
+        .map_err(|source| ProcessError::Images {
+            dir: dir.to_path_buf(),
+            source,
+        })?;
+    // What the input check found: on the first line of the report's first table.
+    let (input_metric, input_notes) = input_findings(&session);
     let truth = match session.load_truth() {
         None => None,
         Some(r) => Some(r.map_err(|source| ProcessError::Truth { source })?),
@@ -233,7 +257,11 @@ pub fn process(
     let units: [&dyn StageUnit; 4] = [&PoseUnit, &DerenderUnit, &FitUnit, &RenderUnit];
     let mut reports: Vec<StageReport> = Vec::new();
     for unit in units {
-        for r in run_unit(unit, &mut ctx, &mut ledger, cfg.force, on_event)? {
+        for mut r in run_unit(unit, &mut ctx, &mut ledger, cfg.force, on_event)? {
+            if reports.is_empty() {
+                r.metrics.insert(0, input_metric.clone());
+                r.notes.extend(input_notes.iter().cloned());
+            }
             on_event(Event::Finished(&r));
             reports.push(r);
         }
@@ -256,12 +284,30 @@ pub fn process(
         total_time_s: 0.0,
     };
     report.total_time_s = t0.elapsed().as_secs_f64();
-    write_reports(dir, &out_dir, &report)?;
+    write_reports(dir, &out_dir, &report, &input_notes)?;
     Ok(ProcessOutput {
         report,
         out_dir,
         fit: ctx.fit,
     })
+}
+
+/// The images the input check left out and the defaults the session relies on: a count for the
+/// report's first table and one note per finding.
+fn input_findings(session: &Session) -> (Metric, Vec<String>) {
+    let metric = Metric::new(
+        "images_skipped",
+        session.skipped_images.len() as f64,
+        "",
+        MetricKind::Count,
+    );
+    let mut notes: Vec<String> = session
+        .skipped_images
+        .iter()
+        .map(|s| format!("skipped image `{}` ({:?}): {}", s.file, s.role, s.cause))
+        .collect();
+    notes.extend(session.linearization_source.note().map(str::to_string));
+    (metric, notes)
 }
 
 /// Runs one unit under the ledger's contract (see the module docs); returns its stages'
@@ -306,9 +352,20 @@ fn run_unit(
 }
 
 /// Writes `report.md`, `report.html` and `report.json` into the output directory.
-fn write_reports(dir: &Path, out_dir: &Path, report: &RunReport) -> Result<(), ProcessError> {
+fn write_reports(
+    dir: &Path,
+    out_dir: &Path,
+    report: &RunReport,
+    input_notes: &[String],
+) -> Result<(), ProcessError> {
+    let input_section = if input_notes.is_empty() {
+        String::new()
+    } else {
+        let items: String = input_notes.iter().map(|n| format!("- {n}\n")).collect();
+        format!("## Input\n\n{items}\n")
+    };
     let md = format!(
-        "# skinbrdf process: {}\n\n{}\n## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the head rendering (Lambertian vs fitted): `render/head_comparison.png`; the same report with the figures inline: `report.html`.\n",
+        "# skinbrdf process: {}\n\n{}\n{input_section}## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the head rendering (Lambertian vs fitted): `render/head_comparison.png`; the same report with the figures inline: `report.html`.\n",
         dir.display(),
         "```text\n".to_string() + &report.plan.to_text() + "```\n",
         report.to_markdown()

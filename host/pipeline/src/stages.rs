@@ -169,6 +169,7 @@ impl StageUnit for PoseUnit {
     fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
         Ok(session_fingerprint(ctx.session)?
             .value("poses", &ctx.cfg.poses)
+            .value("skip_bad_images", &ctx.cfg.skip_bad_images)
             .finish())
     }
     fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
@@ -402,6 +403,7 @@ impl StageUnit for DerenderUnit {
         Ok(fp
             .value("derender", &ctx.cfg.derender)
             .value("plan", &ctx.cfg.plan)
+            .value("skip_bad_images", &ctx.cfg.skip_bad_images)
             .finish())
     }
     fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
@@ -444,10 +446,10 @@ pub fn derender_reports(plan: &Plan, run: &SessionRun, samples_kept: u64) -> [St
         triangles_dropped: run
             .mesh_report
             .as_ref()
-            .map_or(0, |m| m.triangles_in.saturating_sub(m.triangles_out)),
+            .map_or(0, |m| m.dropped_triangles()),
         region_can_self_shadow: Some(d.region_can_self_shadow),
     });
-    let scan = if plan.runs(Stage::ScanPreparation) {
+    let mut scan = if plan.runs(Stage::ScanPreparation) {
         StageReport::ran(
             Stage::ScanPreparation,
             t.mesh_load_s + t.bvh_s + t.normals_s + t.convexity_s,
@@ -462,6 +464,11 @@ pub fn derender_reports(plan: &Plan, run: &SessionRun, samples_kept: u64) -> [St
         ));
         r
     };
+    if let Some(m) = &run.mesh_report {
+        if m.summary() != "no problems" {
+            scan.notes.push(format!("scan repaired: {}", m.summary()));
+        }
+    }
     let shadow = if !plan.runs(Stage::ShadowRays) {
         let mut r = skipped(plan, Stage::ShadowRays);
         if d.region_can_self_shadow {

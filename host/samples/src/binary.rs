@@ -17,8 +17,8 @@
 //! `image_index` (`u16`, `u16::MAX` = not from an image), `pixel_x, pixel_y` (2 x `u16`).
 //! Angles follow [`skinbrdf_core::angles`].
 //!
-//! A reader rejects a wrong magic, an unknown version, a record size other than 46 and a file
-//! shorter than its count, each with an error naming the file. The writer streams records through
+//! A reader rejects a wrong magic, an unknown version, a record size other than 46, a file
+//! shorter than its count and one with data past its count, each with an error naming the file. The writer streams records through
 //! a temporary file in the target directory, patches the count at the end and renames the file
 //! into place, so a reader never sees a partial file.
 
@@ -316,6 +316,15 @@ impl SampleReader {
                 found,
             });
         }
+        let extra_bytes = body - count * RECORD_SIZE as u64;
+        if extra_bytes > 0 {
+            return Err(SamplesError::TrailingData {
+                path,
+                count,
+                extra_bytes,
+                extra_records: extra_bytes / RECORD_SIZE as u64,
+            });
+        }
         Ok(Self {
             path,
             input,
@@ -462,6 +471,27 @@ mod tests {
             ),
             "{e}"
         );
+
+        // Records past the header's count (a count never patched, or an append).
+        let mut bytes = std::fs::read(&good).expect("read");
+        let n = bytes.len();
+        bytes.extend_from_within(n - 2 * RECORD_SIZE..n);
+        bytes.push(0);
+        std::fs::write(&path, &bytes).expect("write");
+        let e = SampleReader::open(&path).expect_err("trailing data");
+        assert!(
+            matches!(
+                e,
+                SamplesError::TrailingData {
+                    count: 2,
+                    extra_records: 2,
+                    extra_bytes: 93,
+                    ..
+                }
+            ),
+            "{e}"
+        );
+        assert!(e.to_string().contains("bad.skbs"), "{e}");
 
         let mut bytes = std::fs::read(&good).expect("read");
         bytes[8] = 9;

@@ -49,6 +49,19 @@ pub enum SamplesError {
         /// Complete records present.
         found: u64,
     },
+    /// The file holds more than its header announces (the count was not patched after an
+    /// interrupted write, or records were appended).
+    #[error("{path}: {extra_bytes} bytes ({extra_records} whole records) follow the {count} records the header announces", path = path.display())]
+    TrailingData {
+        /// The file.
+        path: PathBuf,
+        /// Records announced.
+        count: u64,
+        /// Bytes after the announced records.
+        extra_bytes: u64,
+        /// Whole records in them.
+        extra_records: u64,
+    },
     /// A text file has a malformed line.
     #[error("{path}:{line}: {problem}", path = path.display())]
     Parse {

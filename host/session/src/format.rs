@@ -40,9 +40,13 @@ pub struct SessionFile {
     pub linearization: Linearization,
     /// The images.
     pub images: Vec<ImageEntry>,
-    /// Reference and headdress target layouts.
+    /// Reference and headdress target layouts (absent: none; needed unless every pose they
+    /// would give is known, see [`crate::SectionNeeds`]).
+    #[serde(default, skip_serializing_if = "TargetLayouts::is_empty")]
     pub targets: TargetLayouts,
-    /// The flash: its emitting disc and its targets.
+    /// The flash: its emitting disc and its targets (absent: [`FlashSpec::default`]; needed
+    /// unless the light position is known).
+    #[serde(default, skip_serializing_if = "FlashSpec::is_unstated")]
     pub flash: FlashSpec,
     /// The reflectance standard (needed unless `known.calibration_c` is given).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -199,6 +203,24 @@ pub struct TargetLayouts {
     pub headdress: Vec<Target>,
 }
 
+impl Default for TargetLayouts {
+    /// No targets (a session whose poses are all known).
+    fn default() -> Self {
+        Self {
+            family: default_family(),
+            reference: Vec::new(),
+            headdress: Vec::new(),
+        }
+    }
+}
+
+impl TargetLayouts {
+    /// True when neither layout has a target.
+    pub fn is_empty(&self) -> bool {
+        self.reference.is_empty() && self.headdress.is_empty() && self.family == TAG_FAMILY
+    }
+}
+
 fn default_family() -> String {
     TAG_FAMILY.to_string()
 }
@@ -219,6 +241,25 @@ pub struct FlashSpec {
     /// Targets around the flash, flash frame.
     #[serde(default)]
     pub targets: Vec<Target>,
+}
+
+impl Default for FlashSpec {
+    /// No `[flash]` section (the light position is known): no targets, the emitting point at
+    /// the flash frame's origin, diameter 0 (not stated; nothing downstream uses it).
+    fn default() -> Self {
+        Self {
+            diameter_m: 0.0,
+            light_centre_m: DVec3::ZERO,
+            targets: Vec::new(),
+        }
+    }
+}
+
+impl FlashSpec {
+    /// True for [`FlashSpec::default`], the value of an absent `[flash]` section.
+    pub fn is_unstated(&self) -> bool {
+        *self == Self::default()
+    }
 }
 
 /// The calibrated reflectance standard and its targets, in the standard's frame.

@@ -37,6 +37,7 @@ pub mod error;
 pub mod format;
 pub mod linear;
 pub mod load;
+mod parse;
 pub mod truth;
 pub mod write;
 
@@ -44,8 +45,13 @@ pub use capture::{CaptureRecord, ImageRole};
 pub use error::{FileError, SessionErrors, SessionProblem};
 pub use format::*;
 pub use linear::{
-    load_linear_image, LinearImage, Linearization, ResponseTable, StoredFormat, ToneCurve,
+    load_linear_image, read_header, ImageHeader, LinearImage, Linearization, ResponseTable,
+    StoredFormat, ToneCurve,
 };
-pub use load::{Session, TAG36H11_CODES, TARGET_SIZE_REL_TOL};
+pub use load::{
+    BadImagePolicy, LinearizationSource, SectionNeeds, Session, SkippedImage, TAG36H11_CODES,
+    TARGET_SIZE_REL_TOL,
+};
+pub use parse::toml_unknown_keys;
 pub use truth::{ImageTruth, RenderTruth, SurfaceTruth, TargetTruth, Truth, TRUTH_FORMAT_VERSION};
 pub use write::{load_mask, write_atomic, write_json_atomic, write_mask_png, Mask};

@@ -286,6 +286,70 @@ impl StoredFormat {
     }
 }
 
+impl StoredFormat {
+    /// "8-bit", "16-bit" or "32-bit float".
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Self::U8 => "8-bit",
+            Self::U16 => "16-bit",
+            Self::F32 => "32-bit float",
+        }
+    }
+
+    fn of(color: image::ColorType) -> Option<Self> {
+        match color.bytes_per_pixel() / color.channel_count().max(1) {
+            1 => Some(Self::U8),
+            2 => Some(Self::U16),
+            4 => Some(Self::F32),
+            _ => None,
+        }
+    }
+}
+
+/// What an image file's header says: its size and stored sample type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ImageHeader {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// The stored sample type.
+    pub format: StoredFormat,
+}
+
+/// Reads an image file's header only (no pixel data).
+pub fn read_header(path: &Path) -> Result<ImageHeader, FileError> {
+    use image::ImageDecoder;
+    let img_err = |source| FileError::Image {
+        path: path.to_path_buf(),
+        source,
+    };
+    let decoder = image::ImageReader::open(path)
+        .map_err(|source| FileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .with_guessed_format()
+        .map_err(|source| FileError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .into_decoder()
+        .map_err(img_err)?;
+    let (width, height) = decoder.dimensions();
+    let color = decoder.color_type();
+    let format = StoredFormat::of(color).ok_or_else(|| FileError::Invalid {
+        path: path.to_path_buf(),
+        field: "pixel format".into(),
+        problem: format!("unsupported channel type ({color:?})"),
+    })?;
+    Ok(ImageHeader {
+        width,
+        height,
+        format,
+    })
+}
+
 /// A linearized RGB image (row-major, top row first).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LinearImage {
@@ -321,32 +385,22 @@ pub fn load_linear_image(path: &Path, lin: &Linearization) -> Result<LinearImage
     })?;
     let (width, height) = (img.width(), img.height());
     let color = img.color();
-    let bytes_per_channel = color.bytes_per_pixel() / color.channel_count().max(1);
-    let (format, raw): (StoredFormat, Vec<[f32; 3]>) =
-        match (bytes_per_channel, color.has_color(), img) {
-            (1, _, img) => (
-                StoredFormat::U8,
-                img.to_rgb8().pixels().map(|p| p.0.map(f32::from)).collect(),
-            ),
-            (2, _, img) => (
-                StoredFormat::U16,
-                img.to_rgb16()
-                    .pixels()
-                    .map(|p| p.0.map(f32::from))
-                    .collect(),
-            ),
-            (4, _, img) => (
-                StoredFormat::F32,
-                img.to_rgb32f().pixels().map(|p| p.0).collect(),
-            ),
-            (b, _, _) => {
-                return Err(FileError::Invalid {
-                    path: path.to_path_buf(),
-                    field: "pixel format".into(),
-                    problem: format!("unsupported {b}-byte channels ({color:?})"),
-                })
-            }
-        };
+    let Some(format) = StoredFormat::of(color) else {
+        return Err(FileError::Invalid {
+            path: path.to_path_buf(),
+            field: "pixel format".into(),
+            problem: format!("unsupported channel type ({color:?})"),
+        });
+    };
+    let raw: Vec<[f32; 3]> = match format {
+        StoredFormat::U8 => img.to_rgb8().pixels().map(|p| p.0.map(f32::from)).collect(),
+        StoredFormat::U16 => img
+            .to_rgb16()
+            .pixels()
+            .map(|p| p.0.map(f32::from))
+            .collect(),
+        StoredFormat::F32 => img.to_rgb32f().pixels().map(|p| p.0).collect(),
+    };
     if let Some((field, problem)) = lin
         .problems()
         .into_iter()

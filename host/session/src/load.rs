@@ -10,7 +10,6 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use serde::de::DeserializeOwned;
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::Pose;
 
@@ -18,6 +17,7 @@ use crate::capture::{CaptureRecord, ImageRole, CAPTURE_FORMAT_VERSION};
 use crate::error::{FileError, SessionErrors};
 use crate::format::*;
 use crate::linear::{load_linear_image, LinearImage, Linearization};
+use crate::parse::{parse_session_toml, Stated};
 use crate::truth::Truth;
 
 /// Number of codes in the tag36h11 family.
@@ -36,6 +36,60 @@ pub struct Session {
     pub file: SessionFile,
     /// The parsed `capture.json`, if the session references one.
     pub capture: Option<CaptureRecord>,
+    /// Where the session's default linearization came from.
+    pub linearization_source: LinearizationSource,
+    /// Images left out by [`Session::check_images`] with [`BadImagePolicy::Skip`] (their
+    /// entries are removed from `file.images`).
+    pub skipped_images: Vec<SkippedImage>,
+}
+
+/// Where the session's default linearization (`[linearization]`) came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinearizationSource {
+    /// `session.toml` states it.
+    Stated,
+    /// Not stated, and every image that would use it is a float (OpenEXR) file: those are read
+    /// as linear, black 0, white 1.0 (a default that the run's output and report state).
+    FloatDefault,
+    /// Not stated, and no image uses it (every image has its own `linearization`).
+    Unused,
+}
+
+impl LinearizationSource {
+    /// A sentence for the run's output when the linearization was not stated, else `None`.
+    pub fn note(self) -> Option<&'static str> {
+        match self {
+            Self::FloatDefault => Some(
+                "session.toml has no [linearization]: the OpenEXR images are read as linear \
+                 values with black 0 and white 1.0",
+            ),
+            Self::Stated | Self::Unused => None,
+        }
+    }
+}
+
+/// An image that cannot be used: unreadable, or its values implausible.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct SkippedImage {
+    /// Its index in `session.toml`'s `[[images]]`.
+    pub index: usize,
+    /// Its file, relative to the session directory.
+    pub file: String,
+    /// Its role.
+    pub role: ImageRole,
+    /// What is wrong with it.
+    pub cause: String,
+}
+
+/// What [`Session::check_images`] does with an image that cannot be used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BadImagePolicy {
+    /// It is an error naming the file and the cause.
+    #[default]
+    Fail,
+    /// It is left out of the session and listed in [`Session::skipped_images`].
+    Skip,
 }
 
 impl Session {
@@ -51,12 +105,25 @@ impl Session {
                 return Err(errs);
             }
         };
-        let file = parse_session_toml(&text, &toml_path, &mut errs);
-        let Some(file) = file else {
+        let parsed = parse_session_toml(&text, &toml_path, &mut errs);
+        let Some((file, stated)) = parsed else {
             return Err(errs);
         };
-        let capture = validate(&dir, &file, &mut errs);
-        errs.into_result(Session { dir, file, capture })
+        let capture = validate(&dir, &file, stated, &mut errs);
+        let linearization_source = if stated.linearization {
+            LinearizationSource::Stated
+        } else if file.images.iter().any(|i| i.linearization.is_none()) {
+            LinearizationSource::FloatDefault
+        } else {
+            LinearizationSource::Unused
+        };
+        errs.into_result(Session {
+            dir,
+            file,
+            capture,
+            linearization_source,
+            skipped_images: Vec::new(),
+        })
     }
 
     /// Parses and validates a `session.toml` text (no file checks; for tools and tests).
@@ -64,7 +131,7 @@ impl Session {
         let mut errs = SessionErrors::default();
         let f = parse_session_toml(text, file_name, &mut errs);
         match f {
-            Some(f) if errs.is_empty() => Ok(f),
+            Some((f, _)) if errs.is_empty() => Ok(f),
             _ => Err(errs),
         }
     }
@@ -111,6 +178,67 @@ impl Session {
         load_linear_image(&self.path(&entry.file), self.linearization(index))
     }
 
+    /// Decodes every image and checks that its values are usable: readable to the end, every
+    /// stored value finite, some value above the black level. With [`BadImagePolicy::Fail`] an
+    /// unusable image is an error naming the file and the cause; with
+    /// [`BadImagePolicy::Skip`] it is removed from `file.images` and listed in
+    /// [`Session::skipped_images`] (then the session must still have what its stages need: a
+    /// measurement image, and a reference-standard image unless C is known).
+    pub fn check_images(&mut self, policy: BadImagePolicy) -> Result<(), SessionErrors> {
+        let mut errs = SessionErrors::default();
+        let bad: Vec<SkippedImage> = self
+            .file
+            .images
+            .iter()
+            .enumerate()
+            .filter_map(|(index, im)| {
+                image_problem(&self.path(&im.file), self.linearization(index)).map(|cause| {
+                    SkippedImage {
+                        index,
+                        file: im.file.clone(),
+                        role: im.role,
+                        cause,
+                    }
+                })
+            })
+            .collect();
+        if bad.is_empty() {
+            return Ok(());
+        }
+        if policy == BadImagePolicy::Fail {
+            for b in &bad {
+                errs.push(self.path(&b.file), "", b.cause.clone());
+            }
+            return Err(errs);
+        }
+        let drop: std::collections::HashSet<usize> = bad.iter().map(|b| b.index).collect();
+        let kept = std::mem::take(&mut self.file.images)
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| !drop.contains(i))
+            .map(|(_, im)| im)
+            .collect();
+        self.file.images = kept;
+        self.skipped_images = bad;
+        let file = self.dir.join(SESSION_FILE);
+        let count = |role| self.file.images.iter().filter(|i| i.role == role).count();
+        if count(ImageRole::Measurement) == 0 {
+            errs.push(
+                &file,
+                "images",
+                "no usable measurement image is left after skipping the bad ones",
+            );
+        }
+        if self.file.known.calibration_c.is_none() && count(ImageRole::ReferenceStandard) == 0 {
+            errs.push(
+                &file,
+                "images",
+                "no usable reference-standard image is left after skipping the bad ones, and known.calibration_c is not given",
+            );
+        }
+        errs.into_result(())
+    }
+
     /// The scan file and the factor to metres, when the geometry is a scan.
     pub fn scan(&self) -> Option<(PathBuf, f64)> {
         match &self.file.geometry {
@@ -129,257 +257,6 @@ impl Session {
         let p = self.truth_path();
         p.exists().then(|| Truth::load(&p))
     }
-}
-
-fn de_error_text(e: &toml::de::Error) -> String {
-    e.message().trim().to_string()
-}
-
-fn item<T: DeserializeOwned>(
-    v: toml::Value,
-    file: &Path,
-    field: &str,
-    errs: &mut SessionErrors,
-) -> Option<T> {
-    match v.try_into::<T>() {
-        Ok(t) => Some(t),
-        Err(e) => {
-            errs.push(file, field, de_error_text(&e));
-            None
-        }
-    }
-}
-
-/// Takes an array-of-items out of a table and deserialises each item on its own.
-fn take_list<T: DeserializeOwned>(
-    table: &mut toml::Table,
-    key: &str,
-    prefix: &str,
-    file: &Path,
-    errs: &mut SessionErrors,
-) -> (Vec<T>, bool) {
-    let field = format!("{prefix}{key}");
-    match table.remove(key) {
-        None => (Vec::new(), true),
-        Some(toml::Value::Array(items)) => {
-            let mut ok = true;
-            let mut out = Vec::with_capacity(items.len());
-            for (i, v) in items.into_iter().enumerate() {
-                match item(v, file, &format!("{field}[{i}]"), errs) {
-                    Some(t) => out.push(t),
-                    None => ok = false,
-                }
-            }
-            (out, ok)
-        }
-        Some(other) => {
-            errs.push(
-                file,
-                field,
-                format!("must be an array of tables, found a {}", other.type_str()),
-            );
-            (Vec::new(), false)
-        }
-    }
-}
-
-fn take_table(
-    root: &mut toml::Table,
-    key: &str,
-    file: &Path,
-    errs: &mut SessionErrors,
-) -> Option<toml::Table> {
-    match root.remove(key) {
-        None => None,
-        Some(toml::Value::Table(t)) => Some(t),
-        Some(other) => {
-            errs.push(
-                file,
-                key,
-                format!("must be a table, found a {}", other.type_str()),
-            );
-            None
-        }
-    }
-}
-
-fn parse_session_toml(text: &str, file: &Path, errs: &mut SessionErrors) -> Option<SessionFile> {
-    let mut root: toml::Table = match text.parse() {
-        Ok(t) => t,
-        Err(e) => {
-            let e: toml::de::Error = e;
-            let at = e
-                .span()
-                .map(|s| {
-                    let line = text[..s.start.min(text.len())].matches('\n').count() + 1;
-                    format!(" (line {line})")
-                })
-                .unwrap_or_default();
-            errs.push(
-                file,
-                "",
-                format!("not valid TOML{at}: {}", de_error_text(&e)),
-            );
-            return None;
-        }
-    };
-    let n_before = errs.len();
-    let need = |root: &mut toml::Table, key: &str, errs: &mut SessionErrors| {
-        let v = root.remove(key);
-        if v.is_none() {
-            errs.push(file, key, "missing (required)");
-        }
-        v
-    };
-    let format_version = need(&mut root, "format_version", errs)
-        .and_then(|v| item::<u32>(v, file, "format_version", errs));
-    if let Some(v) = format_version {
-        if v != SESSION_FORMAT_VERSION {
-            errs.push(
-                file,
-                "format_version",
-                format!("version {v} is not supported (this build reads {SESSION_FORMAT_VERSION})"),
-            );
-        }
-    }
-    let description = root
-        .remove("description")
-        .and_then(|v| item::<String>(v, file, "description", errs))
-        .unwrap_or_default();
-    let capture = root
-        .remove("capture")
-        .and_then(|v| item::<String>(v, file, "capture", errs));
-    let camera =
-        need(&mut root, "camera", errs).and_then(|v| item::<CameraSpec>(v, file, "camera", errs));
-    let linearization = match root.remove("linearization") {
-        Some(v) => item::<Linearization>(v, file, "linearization", errs),
-        None => Some(Linearization::LINEAR),
-    };
-    let images = {
-        let mut holder = toml::Table::new();
-        match root.remove("images") {
-            Some(v) => {
-                holder.insert("images".into(), v);
-            }
-            None => errs.push(
-                file,
-                "images",
-                "missing (required): at least one [[images]] entry",
-            ),
-        }
-        let (list, ok) = take_list::<ImageEntry>(&mut holder, "images", "", file, errs);
-        ok.then_some(list)
-    };
-    let targets = match take_table(&mut root, "targets", file, errs) {
-        Some(mut t) => {
-            let (reference, ok1) = take_list::<Target>(&mut t, "reference", "targets.", file, errs);
-            let (headdress, ok2) = take_list::<Target>(&mut t, "headdress", "targets.", file, errs);
-            let family = t
-                .remove("family")
-                .and_then(|v| item::<String>(v, file, "targets.family", errs))
-                .unwrap_or_else(|| TAG_FAMILY.to_string());
-            for k in t.keys() {
-                errs.push(
-                    file,
-                    format!("targets.{k}"),
-                    "unknown field (expected family, reference, headdress)",
-                );
-            }
-            (ok1 && ok2).then_some(TargetLayouts {
-                family,
-                reference,
-                headdress,
-            })
-        }
-        None => {
-            errs.push(
-                file,
-                "targets",
-                "missing (required): [targets] with reference/headdress layouts",
-            );
-            None
-        }
-    };
-    let flash = match take_table(&mut root, "flash", file, errs) {
-        Some(mut t) => {
-            let (targets, ok) = take_list::<Target>(&mut t, "targets", "flash.", file, errs);
-            item::<FlashSpecNoTargets>(toml::Value::Table(t), file, "flash", errs)
-                .filter(|_| ok)
-                .map(|f| FlashSpec {
-                    diameter_m: f.diameter_m,
-                    light_centre_m: f.light_centre_m,
-                    targets,
-                })
-        }
-        None => {
-            errs.push(
-                file,
-                "flash",
-                "missing (required): [flash] with diameter_m and targets",
-            );
-            None
-        }
-    };
-    let standard = match take_table(&mut root, "standard", file, errs) {
-        Some(mut t) => {
-            let (targets, ok) = take_list::<Target>(&mut t, "targets", "standard.", file, errs);
-            item::<StandardSpecNoTargets>(toml::Value::Table(t), file, "standard", errs)
-                .filter(|_| ok)
-                .map(|s| {
-                    Some(StandardSpec {
-                        brdf: s.brdf,
-                        size_m: s.size_m,
-                        targets,
-                    })
-                })
-        }
-        None => Some(None),
-    };
-    let geometry = need(&mut root, "geometry", errs)
-        .and_then(|v| item::<GeometrySpec>(v, file, "geometry", errs));
-    let roi = match root.remove("roi") {
-        Some(v) => item::<RegionOfInterest>(v, file, "roi", errs).map(Some),
-        None => Some(None),
-    };
-    let known = match root.remove("known") {
-        Some(v) => item::<KnownQuantities>(v, file, "known", errs),
-        None => Some(KnownQuantities::default()),
-    };
-    for k in root.keys() {
-        errs.push(file, k.as_str(), "unknown field");
-    }
-    if errs.len() > n_before {
-        return None;
-    }
-    Some(SessionFile {
-        format_version: format_version?,
-        description,
-        capture,
-        camera: camera?,
-        linearization: linearization?,
-        images: images?,
-        targets: targets?,
-        flash: flash?,
-        standard: standard?,
-        geometry: geometry?,
-        roi: roi?,
-        known: known?,
-    })
-}
-
-#[derive(serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct FlashSpecNoTargets {
-    diameter_m: f64,
-    #[serde(default)]
-    light_centre_m: DVec3,
-}
-
-#[derive(serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct StandardSpecNoTargets {
-    brdf: BrdfModel,
-    size_m: [f64; 2],
 }
 
 fn positive(v: f64) -> bool {
@@ -509,7 +386,12 @@ fn check_brdf(b: &BrdfModel, file: &Path, field: &str, errs: &mut SessionErrors)
 }
 
 /// Semantic and cross-file checks. Returns the capture record if it was loaded.
-fn validate(dir: &Path, s: &SessionFile, errs: &mut SessionErrors) -> Option<CaptureRecord> {
+fn validate(
+    dir: &Path,
+    s: &SessionFile,
+    stated: Stated,
+    errs: &mut SessionErrors,
+) -> Option<CaptureRecord> {
     let file = dir.join(SESSION_FILE);
     let file = file.as_path();
 
@@ -582,6 +464,8 @@ fn validate(dir: &Path, s: &SessionFile, errs: &mut SessionErrors) -> Option<Cap
         errs.push(file, "images", "the session has no images");
     }
     let mut seen: HashMap<&str, usize> = HashMap::new();
+    let mut seen_canonical: HashMap<PathBuf, usize> = HashMap::new();
+    let mut existing: Vec<usize> = Vec::new();
     for (i, im) in s.images.iter().enumerate() {
         let field = format!("images[{i}]");
         if let Some(prev) = seen.insert(im.file.as_str(), i) {
@@ -590,15 +474,44 @@ fn validate(dir: &Path, s: &SessionFile, errs: &mut SessionErrors) -> Option<Cap
                 format!("{field}.file"),
                 format!("`{}` is also images[{prev}]", im.file),
             );
-        }
-        if check_relative_file(dir, &im.file, file, &format!("{field}.file"), errs) {
-            match image::image_dimensions(dir.join(&im.file)) {
-                Ok((iw, ih)) if (iw, ih) != (w, h) => errs.push(
+        } else if check_relative_file(dir, &im.file, file, &format!("{field}.file"), errs) {
+            existing.push(i);
+            let path = dir.join(&im.file);
+            let same_file = std::fs::canonicalize(&path)
+                .ok()
+                .and_then(|c| seen_canonical.insert(c, i));
+            if let Some(prev) = same_file {
+                errs.push(
                     file,
                     format!("{field}.file"),
-                    format!("`{}` is {iw}x{ih} px but the camera is {w}x{h} px", im.file),
+                    format!(
+                        "`{}` is the same file as images[{prev}] (`{}`)",
+                        im.file, s.images[prev].file
+                    ),
+                );
+            }
+            match crate::linear::read_header(&path) {
+                Ok(hd) if (hd.width, hd.height) != (w, h) => errs.push(
+                    file,
+                    format!("{field}.file"),
+                    format!(
+                        "`{}` is {}x{} px but the camera is {w}x{h} px",
+                        im.file, hd.width, hd.height
+                    ),
                 ),
-                Ok(_) => {}
+                Ok(hd) => {
+                    let (lin, lin_field) = match &im.linearization {
+                        Some(l) => (l, format!("{field}.linearization")),
+                        None => (&s.linearization, "linearization".to_string()),
+                    };
+                    for (f, p) in lin.problems_for(hd.format) {
+                        errs.push(
+                            file,
+                            format!("{lin_field}.{f}"),
+                            format!("`{}` ({}): {p}", im.file, hd.format.describe()),
+                        );
+                    }
+                }
                 Err(e) => errs.push(
                     file,
                     format!("{field}.file"),
@@ -645,6 +558,7 @@ fn validate(dir: &Path, s: &SessionFile, errs: &mut SessionErrors) -> Option<Cap
             _ => {}
         }
     }
+    report_identical_contents(dir, s, &existing, file, errs);
     let count = |role| s.images.iter().filter(|i| i.role == role).count();
     if !s.images.is_empty() && count(ImageRole::Measurement) == 0 {
         errs.push(file, "images", "no image has role = \"measurement\"");
@@ -689,7 +603,7 @@ fn validate(dir: &Path, s: &SessionFile, errs: &mut SessionErrors) -> Option<Cap
     }
 
     // Flash and standard.
-    if !positive(s.flash.diameter_m) {
+    if stated.flash && !positive(s.flash.diameter_m) {
         errs.push(
             file,
             "flash.diameter_m",
@@ -804,55 +718,196 @@ fn validate(dir: &Path, s: &SessionFile, errs: &mut SessionErrors) -> Option<Cap
     }
 
     // What the stages need when nothing known lets them skip.
-    let no_cam: Vec<usize> = (0..s.images.len())
-        .filter(|&i| s.images[i].world_from_camera.is_none())
-        .collect();
-    if !no_cam.is_empty() && s.targets.reference.is_empty() {
-        errs.push(
-            file,
-            "targets.reference",
-            format!(
-                "empty, but {} image(s) have no known world_from_camera (first: images[{}])",
-                no_cam.len(),
-                no_cam[0]
-            ),
-        );
-    }
-    let no_head = s
-        .images
-        .iter()
-        .position(|i| i.role == ImageRole::Measurement && i.world_from_head.is_none());
-    if let (Some(i), false) = (no_head, k.stationary_sample) {
-        if s.targets.headdress.is_empty() {
-            errs.push(
-                file,
-                "targets.headdress",
-                format!("empty, but images[{i}] has no known world_from_head and the sample is not stationary"),
-            );
+    let needs = SectionNeeds::of(&s.images, k, Some(&s.camera));
+    if stated.targets {
+        if let (Some(why), true) = (&needs.reference_targets, s.targets.reference.is_empty()) {
+            errs.push(file, "targets.reference", format!("empty, but {why}"));
+        }
+        if let (Some(why), true) = (&needs.headdress_targets, s.targets.headdress.is_empty()) {
+            errs.push(file, "targets.headdress", format!("empty, but {why}"));
         }
     }
-    if k.light_position_m.is_none() && k.world_from_flash.is_none() && s.flash.targets.is_empty() {
-        errs.push(
-            file,
-            "flash.targets",
-            "empty, and neither known.light_position_m nor known.world_from_flash is given",
-        );
+    if let (Some(why), true, true) = (
+        &needs.flash_targets,
+        stated.flash,
+        s.flash.targets.is_empty(),
+    ) {
+        errs.push(file, "flash.targets", format!("empty, and {why}"));
     }
-    if k.calibration_c.is_none() {
+    if let Some(why) = &needs.standard {
         if s.standard.is_none() {
-            errs.push(
-                file,
-                "standard",
-                "missing, and known.calibration_c is not given",
-            );
+            errs.push(file, "standard", format!("missing, and {why}"));
         }
         if count(ImageRole::ReferenceStandard) == 0 {
             errs.push(
                 file,
                 "images",
-                "no reference-standard image, and known.calibration_c is not given",
+                format!("no reference-standard image, and {why}"),
             );
         }
     }
     capture
+}
+
+/// Reports images whose files have identical contents (the same photograph listed twice under
+/// different names: a copy, or a hard link the canonical path does not reveal). Only files of
+/// equal length are read and compared.
+fn report_identical_contents(
+    dir: &Path,
+    s: &SessionFile,
+    existing: &[usize],
+    file: &Path,
+    errs: &mut SessionErrors,
+) {
+    let mut by_len: HashMap<u64, Vec<usize>> = HashMap::new();
+    for &i in existing {
+        if let Ok(m) = std::fs::metadata(dir.join(&s.images[i].file)) {
+            by_len.entry(m.len()).or_default().push(i);
+        }
+    }
+    let mut groups: Vec<Vec<usize>> = by_len.into_values().filter(|g| g.len() > 1).collect();
+    groups.sort();
+    for group in groups {
+        let mut seen: Vec<(usize, Vec<u8>)> = Vec::new();
+        for i in group {
+            let Ok(bytes) = std::fs::read(dir.join(&s.images[i].file)) else {
+                continue;
+            };
+            if let Some((prev, _)) = seen.iter().find(|(_, b)| *b == bytes) {
+                errs.push(
+                    file,
+                    format!("images[{i}].file"),
+                    format!(
+                        "`{}` has the same contents as images[{prev}] (`{}`): the same photograph listed twice",
+                        s.images[i].file, s.images[*prev].file
+                    ),
+                );
+            } else {
+                seen.push((i, bytes));
+            }
+        }
+    }
+}
+
+/// Which optional parts of a session its planned stages need, from the quantities it already
+/// knows (the facts that plan `skinbrdf process`'s stages): `Some(reason)` = needed, `None` =
+/// every stage that would use it is skipped.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct SectionNeeds {
+    /// `[[targets.reference]]`: camera calibration (unknown intrinsics) or camera poses (an
+    /// image without `world_from_camera`).
+    pub reference_targets: Option<String>,
+    /// `[[targets.headdress]]`: head tracking (a measurement image without `world_from_head`,
+    /// and the sample not stationary).
+    pub headdress_targets: Option<String>,
+    /// `[flash]` and its targets: flash triangulation (no known light position).
+    pub flash_targets: Option<String>,
+    /// `[standard]` and a reference-standard image: radiometric calibration (no known C).
+    pub standard: Option<String>,
+    /// `[linearization]`: an integer (PNG/TIFF/JPEG) image without its own linearization.
+    pub linearization: Option<String>,
+}
+
+impl SectionNeeds {
+    /// The needs of a session with these images, known quantities and camera (`None`: not
+    /// known, e.g. because it did not parse).
+    pub fn of(images: &[ImageEntry], known: &KnownQuantities, camera: Option<&CameraSpec>) -> Self {
+        let no_cam: Vec<usize> = (0..images.len())
+            .filter(|&i| images[i].world_from_camera.is_none())
+            .collect();
+        let reference_targets = if let Some(&first) = no_cam.first() {
+            Some(format!(
+                "{} image(s) have no known world_from_camera (first: images[{first}])",
+                no_cam.len()
+            ))
+        } else if images.is_empty() {
+            Some("no image has a known world_from_camera".to_string())
+        } else if matches!(camera, Some(CameraSpec::ToBeCalibrated { .. })) {
+            Some("the camera is to be calibrated (from the reference targets)".to_string())
+        } else {
+            None
+        };
+        let no_head = images
+            .iter()
+            .position(|i| i.role == ImageRole::Measurement && i.world_from_head.is_none());
+        let headdress_targets = match (no_head, known.stationary_sample) {
+            (_, true) => None,
+            (Some(i), false) => Some(format!(
+                "images[{i}] has no known world_from_head and the sample is not stationary"
+            )),
+            (None, false) if images.is_empty() => {
+                Some("no image has a known world_from_head and the sample is not stationary".into())
+            }
+            (None, false) => None,
+        };
+        let flash_targets = (known.light_position_m.is_none() && known.world_from_flash.is_none())
+            .then(|| "neither known.light_position_m nor known.world_from_flash is given".into());
+        let standard = known
+            .calibration_c
+            .is_none()
+            .then(|| "known.calibration_c is not given".to_string());
+        let linearization = images
+            .iter()
+            .enumerate()
+            .find(|(_, im)| im.linearization.is_none() && !is_float_file(&im.file))
+            .map(|(i, im)| {
+                format!(
+                    "images[{i}] (`{}`) is an integer image without a linearization of its own",
+                    im.file
+                )
+            });
+        Self {
+            reference_targets,
+            headdress_targets,
+            flash_targets,
+            standard,
+            linearization,
+        }
+    }
+}
+
+/// True for an OpenEXR file (float values), by its extension.
+fn is_float_file(name: &str) -> bool {
+    Path::new(name)
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+}
+
+/// Why an image cannot be used (see [`Session::check_images`]), or `None` when it can.
+fn image_problem(path: &Path, lin: &Linearization) -> Option<String> {
+    let img = match load_linear_image(path, lin) {
+        Ok(img) => img,
+        Err(FileError::Image { source, .. }) => {
+            return Some(format!("cannot be decoded: {source}"))
+        }
+        Err(FileError::Io { source, .. }) => return Some(format!("cannot be read: {source}")),
+        Err(FileError::Invalid { field, problem, .. }) => {
+            return Some(format!("`{field}`: {problem}"))
+        }
+        Err(e) => return Some(e.to_string()),
+    };
+    let bad = img
+        .rgb
+        .iter()
+        .position(|p| !p.iter().all(|c| c.is_finite()));
+    if let Some(first) = bad {
+        let n = img
+            .rgb
+            .iter()
+            .filter(|p| !p.iter().all(|c| c.is_finite()))
+            .count();
+        let w = img.width as usize;
+        return Some(format!(
+            "{n} pixel(s) have non-finite values (inf or NaN; first at x = {}, y = {}): not a photograph's values",
+            first % w.max(1),
+            first / w.max(1)
+        ));
+    }
+    if img.rgb.iter().all(|p| p.iter().all(|&c| c <= 0.0)) {
+        return Some(format!(
+            "no stored value is above the black level ({}): the image is black or the linearization's levels do not fit it",
+            lin.black_level
+        ));
+    }
+    None
 }

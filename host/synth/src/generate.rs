@@ -37,6 +37,12 @@ pub enum SynthError {
     /// Building or writing a mesh failed.
     #[error("mesh: {0}")]
     Mesh(#[from] skinbrdf_mesh::MeshError),
+    /// The scene (with the options applied) has values outside their stated ranges.
+    #[error("the scene is not valid: {}", problems.join("; "))]
+    Scene {
+        /// Every problem, each naming its field and range.
+        problems: Vec<String>,
+    },
     /// An option is out of range.
     #[error("{field}: {problem}")]
     Invalid {
@@ -99,10 +105,15 @@ pub fn apply_options(scene: &Scene, opts: &SynthOptions) -> Result<Scene, SynthE
         s.camera.height_px = h;
     }
     if let Some(n) = opts.samples_per_pixel {
-        s.sensor.samples_per_pixel = n.max(1);
+        s.sensor.samples_per_pixel = n;
     }
     if opts.noise_free {
         s.geometry.scan_noise_m = 0.0;
+    }
+    // Every value against its range before any work (a flag can break a valid scene).
+    let problems = s.problems();
+    if !problems.is_empty() {
+        return Err(SynthError::Scene { problems });
     }
     Ok(s)
 }
@@ -110,7 +121,14 @@ pub fn apply_options(scene: &Scene, opts: &SynthOptions) -> Result<Scene, SynthE
 fn linearization(scene: &Scene) -> (Linearization, StoredFormat) {
     let se = &scene.sensor;
     match se.encoding {
-        Encoding::Exr => (Linearization::LINEAR, StoredFormat::F32),
+        // Float files hold V itself, clipped where the sensor saturates (V = 1).
+        Encoding::Exr => (
+            Linearization {
+                saturation_level: Some(1.0),
+                ..Linearization::LINEAR
+            },
+            StoredFormat::F32,
+        ),
         enc => {
             let (curve, gamma) = match se.curve {
                 CurveScene::Linear => (ToneCurve::Linear, None),
@@ -163,7 +181,7 @@ pub fn encode_image(r: &Rendered, scene: &Scene, noise_free: bool, seed: u64) ->
                         let raw = lin.encode(val.min(1.0), fmt).round();
                         raw.clamp(0.0, white.min(max)) as f32
                     }
-                    None => val as f32,
+                    None => val.min(1.0) as f32,
                 };
             }
         }
@@ -205,6 +223,16 @@ pub fn make_scan(shape: &Shape, scene: &Scene, rng: &mut ChaCha8Rng) -> TriMesh 
         *p = (q * scale).as_vec3();
     }
     mesh
+}
+
+fn unit_name(u: skinbrdf_session::LengthUnit) -> &'static str {
+    use skinbrdf_session::LengthUnit;
+    match u {
+        LengthUnit::M => "metres",
+        LengthUnit::Cm => "centimetres",
+        LengthUnit::Mm => "millimetres",
+        LengthUnit::In => "inches",
+    }
 }
 
 fn target_truths(
@@ -281,8 +309,23 @@ fn target_truths(
     out
 }
 
-/// Generates a session into `dir` (created if needed; existing files are overwritten).
+/// Generates a session into `dir` (created if needed; existing files are overwritten). The
+/// scene and options are validated before anything is written; a directory this call created
+/// is removed again if generation fails later.
 pub fn generate(
+    scene: &Scene,
+    opts: &SynthOptions,
+    dir: &Path,
+) -> Result<SynthSummary, SynthError> {
+    let created = !dir.exists();
+    let result = generate_into(scene, opts, dir);
+    if result.is_err() && created && dir.exists() {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+    result
+}
+
+fn generate_into(
     scene: &Scene,
     opts: &SynthOptions,
     dir: &Path,
@@ -310,7 +353,11 @@ pub fn generate(
     let (geometry, scan_vertices, scan_spacing) = match scene.geometry.kind {
         GeometryKind::Head => {
             let scan = make_scan(&rig.shape, &scene, &mut rng);
-            skinbrdf_mesh::write_ply_binary(&dir.join("scan.ply"), &scan)?;
+            skinbrdf_mesh::write_ply_binary_in(
+                &dir.join("scan.ply"),
+                &scan,
+                unit_name(scene.geometry.scan_units),
+            )?;
             (
                 GeometrySpec::Scan {
                     file: "scan.ply".into(),

@@ -26,7 +26,7 @@ use skinbrdf_core::{CameraModel, Pose};
 use skinbrdf_session::capture::{CaptureRecord, ShotOutcome};
 use skinbrdf_session::{ImageRole, Target};
 
-use crate::scene::Scene;
+use crate::scene::{Encoding, Scene};
 use crate::shape::Shape;
 
 /// First id of each target group (tag36h11 ids are unique across the session).
@@ -566,12 +566,17 @@ fn camera_for(
     }
 }
 
-fn file_name(role: ImageRole, k: usize) -> String {
+/// The image file of shot `k` of a role, with the extension of the scene's encoding.
+fn file_name(role: ImageRole, k: usize, scene: &Scene) -> String {
+    let ext = match scene.sensor.encoding {
+        Encoding::Png16 | Encoding::Png8 => "png",
+        Encoding::Exr => "exr",
+    };
     match role {
-        ImageRole::Measurement => format!("images/m{k:02}.png"),
-        ImageRole::LightPosition => format!("images/light{k}.png"),
-        ImageRole::ReferenceStandard => format!("images/standard{k}.png"),
-        ImageRole::StandardPosition => format!("images/standard_pos{k}.png"),
+        ImageRole::Measurement => format!("images/m{k:02}.{ext}"),
+        ImageRole::LightPosition => format!("images/light{k}.{ext}"),
+        ImageRole::ReferenceStandard => format!("images/standard{k}.{ext}"),
+        ImageRole::StandardPosition => format!("images/standard_pos{k}.{ext}"),
     }
 }
 
@@ -632,7 +637,7 @@ fn shots_from(
             let world_from_camera = camera_for(scene, rig, role, k, count(role), &mut rng);
             let t_s = t_us.saturating_sub(t0) as f64 * 1e-6;
             Shot {
-                file: file_name(role, k),
+                file: file_name(role, k, scene),
                 role,
                 exposure_us: t_us,
                 exposure_index: index,

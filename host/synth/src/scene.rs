@@ -34,6 +34,15 @@ pub const BUILTIN_SCENES: &[(&str, &str)] = &[
     ),
 ];
 
+/// Largest image side, pixels (a 100-megapixel frame is 12000 px wide).
+pub const MAX_SIDE_PX: f64 = 20000.0;
+/// Most rays per pixel (32 x 32 strata; the default is 2 x 2).
+pub const MAX_SAMPLES_PER_PIXEL: f64 = 1024.0;
+/// Most measurement images (the method takes about 30).
+pub const MAX_MEASUREMENT_IMAGES: f64 = 1000.0;
+/// Finest render or scan tessellation, metres (0.1 mm: finer than any pixel's footprint).
+pub const MIN_SPACING_M: f64 = 1e-4;
+
 /// Errors reading a scene.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
@@ -301,9 +310,24 @@ impl Scene {
             .parse()
             .map_err(|e: toml::de::Error| invalid(e.to_string()))?;
         merge(&mut base, over);
-        let scene: Scene = toml::Value::Table(base)
+        let merged = toml::Value::Table(base);
+        let scene: Scene = merged
+            .clone()
             .try_into()
             .map_err(|e: toml::de::Error| invalid(e.to_string()))?;
+        // `deny_unknown_fields` does not reach the BRDF tables and the distortion (other
+        // crates' types): the round trip finds what nothing read.
+        let unknown = skinbrdf_session::toml_unknown_keys(&merged, &scene);
+        if !unknown.is_empty() {
+            return Err(invalid(format!(
+                "unknown field(s): {}",
+                unknown
+                    .iter()
+                    .map(|k| format!("`{k}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
         let problems = scene.problems();
         if problems.is_empty() {
             Ok(scene)
@@ -334,22 +358,68 @@ impl Scene {
     /// Every invariant violation, as `field: problem` strings.
     pub fn problems(&self) -> Vec<String> {
         let mut out = Vec::new();
+        // Sizes and counts that set the work and the memory: each within a stated range.
+        let mut within = |field: &str, v: f64, lo: f64, hi: f64| {
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                out.push(format!("`{field}` must be in [{lo}, {hi}], got {v}"));
+            }
+        };
+        within(
+            "camera.width_px",
+            self.camera.width_px as f64,
+            16.0,
+            MAX_SIDE_PX,
+        );
+        within(
+            "camera.height_px",
+            self.camera.height_px as f64,
+            16.0,
+            MAX_SIDE_PX,
+        );
+        within("camera.hfov_deg", self.camera.hfov_deg, 0.1, 170.0);
+        within(
+            "sensor.samples_per_pixel",
+            self.sensor.samples_per_pixel as f64,
+            1.0,
+            MAX_SAMPLES_PER_PIXEL,
+        );
+        within(
+            "session.measurement_images",
+            self.session.measurement_images as f64,
+            1.0,
+            MAX_MEASUREMENT_IMAGES,
+        );
+        within(
+            "geometry.render_spacing_m",
+            self.geometry.render_spacing_m,
+            MIN_SPACING_M,
+            0.05,
+        );
+        within(
+            "geometry.scan_spacing_m",
+            self.geometry.scan_spacing_m,
+            MIN_SPACING_M,
+            0.05,
+        );
+        within(
+            "session.camera_radius_m",
+            self.session.camera_radius_m,
+            0.1,
+            100.0,
+        );
+        within(
+            "session.flash_distance_m",
+            self.session.flash_distance_m,
+            0.05,
+            100.0,
+        );
         let mut pos = |field: &str, v: f64| {
             if !(v.is_finite() && v > 0.0) {
                 out.push(format!("`{field}` must be positive and finite, got {v}"));
             }
         };
-        pos("camera.hfov_deg", self.camera.hfov_deg);
-        pos("camera.width_px", self.camera.width_px as f64);
-        pos("camera.height_px", self.camera.height_px as f64);
-        pos(
-            "sensor.samples_per_pixel",
-            self.sensor.samples_per_pixel as f64,
-        );
         pos("sensor.full_well_e", self.sensor.full_well_e);
         pos("sensor.gamma", self.sensor.gamma);
-        pos("geometry.render_spacing_m", self.geometry.render_spacing_m);
-        pos("geometry.scan_spacing_m", self.geometry.scan_spacing_m);
         pos(
             "geometry.superellipse_exponent",
             self.geometry.superellipse_exponent,
@@ -372,12 +442,6 @@ impl Scene {
         for (i, a) in self.geometry.semi_axes_m.iter().enumerate() {
             pos(&format!("geometry.semi_axes_m[{i}]"), *a);
         }
-        pos(
-            "session.measurement_images",
-            self.session.measurement_images as f64,
-        );
-        pos("session.camera_radius_m", self.session.camera_radius_m);
-        pos("session.flash_distance_m", self.session.flash_distance_m);
         pos("session.flash_diameter_m", self.session.flash_diameter_m);
         pos("session.shot_interval_s", self.session.shot_interval_s);
         pos("targets.reference_size_m", self.targets.reference_size_m);
@@ -498,6 +562,36 @@ mod tests {
             Scene::load("no-such-scene"),
             Err(SceneError::NotFound { .. })
         ));
+        // Keys nothing reads, also inside the BRDF and the distortion (other crates' types).
+        for (text, key) in [
+            (
+                "[skin]\nmodel = \"lambertian\"\nalbedo = [0.5, 0.4, 0.3]\nalbdo = 1\n",
+                "skin.albdo",
+            ),
+            ("[camera.distortion]\nk4 = 0.1\n", "camera.distortion.k4"),
+        ] {
+            let e = Scene::from_toml(text, "x").unwrap_err();
+            assert!(e.to_string().contains(key), "{key}: {e}");
+        }
+        // Sizes and counts beyond their stated ranges, before any work.
+        for (text, field) in [
+            (
+                "[session]\nmeasurement_images = 4294967295\n",
+                "session.measurement_images",
+            ),
+            (
+                "[sensor]\nsamples_per_pixel = 4294967295\n",
+                "sensor.samples_per_pixel",
+            ),
+            ("[camera]\nwidth_px = 100000\n", "camera.width_px"),
+            (
+                "[geometry]\nrender_spacing_m = 1e-7\n",
+                "geometry.render_spacing_m",
+            ),
+        ] {
+            let e = Scene::from_toml(text, "x").unwrap_err();
+            assert!(e.to_string().contains(field), "{field}: {e}");
+        }
         // A user scene replaces the BRDF as a whole.
         let s = Scene::from_toml(
             "[skin]\nmodel = \"lambertian\"\nalbedo = [0.5, 0.4, 0.3]\n",

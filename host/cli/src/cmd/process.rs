@@ -40,6 +40,10 @@ pub struct Args {
     /// Print the run's report as JSON on stdout (progress goes to stderr).
     #[arg(long)]
     pub json: bool,
+    /// Leave unreadable or implausible images out (each listed with its cause in the summary
+    /// and the report) instead of failing.
+    #[arg(long)]
+    pub skip_bad_images: bool,
 }
 
 /// Validates the flags into a pipeline configuration.
@@ -58,6 +62,7 @@ pub fn config(args: &Args) -> anyhow::Result<ProcessConfig> {
     cfg.fit.merl = args.merl;
     cfg.force = args.force;
     cfg.out_dir = args.out.clone();
+    cfg.skip_bad_images = args.skip_bad_images;
     Ok(cfg)
 }
 
