@@ -26,7 +26,7 @@ use skinbrdf_session::{GeometrySpec, Session, Target};
 
 use crate::geometry::{Geometry, Roi};
 use crate::poses::ResolvedPoses;
-use crate::session::{
+use crate::from_inputs::{
     derender_with_loader, CalibrationSource, DerenderInputs, DerenderReport, OwnedImage, PoseSource,
 };
 use crate::{truth_error, DerenderConfig, DerenderError};

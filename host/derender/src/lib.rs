@@ -32,7 +32,7 @@ pub mod from_session;
 pub mod geometry;
 pub mod image;
 pub mod poses;
-pub mod session;
+pub mod from_inputs;
 pub mod stats;
 
 pub use calibrate::{calibrate_c, CEstimator, Calibration, StandardImage};
@@ -43,7 +43,7 @@ pub use image::{
     Measurement, RegionPixels,
 };
 pub use poses::{ResolvedImage, ResolvedPoses, ResolvedStandard, Sourced};
-pub use session::{
+pub use from_inputs::{
     derender_with_loader, CalibrationInput, CalibrationSource, DerenderInputs, DerenderReport,
     ImagePoses, OwnedImage, PoseSource, StageTimes,
 };

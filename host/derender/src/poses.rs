@@ -15,7 +15,7 @@ use serde::Serialize;
 use skinbrdf_core::{CameraModel, Pose};
 use skinbrdf_session::{ImageRole, Session, Truth, SESSION_FILE};
 
-use crate::session::{CalibrationInput, DerenderInputs, ImagePoses, PoseSource};
+use crate::from_inputs::{CalibrationInput, DerenderInputs, ImagePoses, PoseSource};
 use crate::{DerenderError, MissingInput};
 
 /// A value with where it came from.

@@ -29,7 +29,7 @@ pub enum ScenesError {
         /// Its directory.
         dir: PathBuf,
         /// Why.
-        source: skinbrdf_synth::SynthError,
+        source: Box<skinbrdf_synth::SynthError>,
     },
     /// The rendered session did not load.
     #[error("{dir}: the session is not valid:\n{source}")]
@@ -120,7 +120,7 @@ pub fn pose_scenes(
                 ScenesError::Synth {
                     scene: name.clone(),
                     dir: dir.clone(),
-                    source,
+                    source: Box::new(source),
                 }
             })?;
         }

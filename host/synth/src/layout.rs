@@ -16,7 +16,7 @@
 //! circle (2 m) from near the flash (retro-reflection) to the far side (grazing), always aimed
 //! at the forehead; then the six extra images: three of the flash (light position, from 1.4 m),
 //! one of the standard under the flash (reference standard) and two more of the standard
-//! (standard position), from 2 m. [`usable_targets`] says which targets a shot can use; the
+//! (standard position), from 2 m. [`crate::visibility::usable_targets`] says which targets a shot can use; the
 //! tests check every shot of every built-in scene sees enough of them.
 
 use glam::DVec3;
@@ -115,15 +115,15 @@ pub const LIGHT_CAMERA_DISTANCE_M: f64 = 1.4;
 pub const STANDARD_CAMERA_DISTANCE_M: f64 = 2.0;
 
 /// Paper half-diagonal of a printed target of edge `size_m` (the paper is
-/// [`crate::render::PAPER_HALF_EXTENT`] tag half-edges wide).
+/// [`PAPER_HALF_EXTENT`] tag half-edges wide).
 pub fn paper_half_diagonal_m(size_m: f64) -> f64 {
-    0.5 * size_m * crate::render::PAPER_HALF_EXTENT * std::f64::consts::SQRT_2
+    0.5 * size_m * PAPER_HALF_EXTENT * std::f64::consts::SQRT_2
 }
 
 /// Centre-to-centre distance two printed targets of edge `size_m` need (paper edge to edge
 /// plus [`TARGET_GAP_M`]).
 pub fn target_pitch_m(size_m: f64) -> f64 {
-    size_m * crate::render::PAPER_HALF_EXTENT + TARGET_GAP_M
+    size_m * PAPER_HALF_EXTENT + TARGET_GAP_M
 }
 
 /// The azimuth (degrees) every reference and headdress target leans towards: lit by the flash
@@ -357,7 +357,7 @@ fn headdress_targets(
     let t = &scene.targets;
     let size = t.headdress_size_m;
     let pitch = target_pitch_m(size);
-    let paper_half = 0.5 * size * crate::render::PAPER_HALF_EXTENT;
+    let paper_half = 0.5 * size * PAPER_HALF_EXTENT;
     let roi_clear = scene.geometry.roi_radius_m + paper_half_diagonal_m(size) + 0.003;
     // (elevation, azimuth limit) per row, degrees; on a cylinder the elevation is that of a
     // height on its side.
@@ -654,177 +654,31 @@ fn shots_from(
         .collect()
 }
 
-/// Most oblique view of a target counted as usable by [`usable_targets`], degrees (the pose
-/// stage warns at 70).
-pub const USABLE_VIEW_MAX_DEG: f64 = 70.0;
+/// Half extent of a printed target's paper in tag units (the black border is at ±1, the tag's
+/// white ring ends at ±1.25; a quarter cell more of paper around it).
+pub const PAPER_HALF_EXTENT: f64 = 1.5;
 
-/// The targets of a shot a detector can use: facing the camera within
-/// [`USABLE_VIEW_MAX_DEG`], all four corners inside the image, not hidden by anything, and lit.
-/// Returns `(layout, id, centre in the world)`.
-pub fn usable_targets(
-    renderer: &crate::render::Renderer,
-    rig: &Rig,
-    shot: &Shot,
-) -> Vec<(crate::render::Layout, u32, DVec3)> {
-    use crate::render::Layout;
-    let cam = &rig.camera;
-    let camera_from_world = shot.world_from_camera.inverse();
-    let eye = shot.world_from_camera.translation_m;
-    let mut groups: Vec<(Layout, &Vec<Target>, Pose)> = vec![
-        (Layout::Reference, &rig.reference, Pose::IDENTITY),
-        (Layout::Headdress, &rig.headdress, shot.world_from_head),
-        (Layout::Flash, &rig.flash_targets, rig.world_from_flash),
-    ];
-    if shot.standard_present {
-        groups.push((
-            Layout::Standard,
-            &rig.standard_targets,
-            rig.world_from_standard,
-        ));
-    }
-    let cos_max = USABLE_VIEW_MAX_DEG.to_radians().cos();
-    let mut out = Vec::new();
-    for (layout, list, frame) in groups {
-        for t in list {
-            let centre = frame.transform_point(t.centre());
-            let out_n = frame.transform_vector(t.outward_normal());
-            if out_n.dot((eye - centre).normalize()) < cos_max {
-                continue;
-            }
-            let corners_w = t.corners_m.map(|c| frame.transform_point(c));
-            let inside = corners_w.iter().all(|c| {
-                cam.project(camera_from_world.transform_point(*c))
-                    .is_some_and(|p| cam.contains(p))
-            });
-            let unoccluded = corners_w.iter().all(|c| {
-                let p = *c + (centre - *c) * 0.02;
-                let d = p - eye;
-                let dist = d.length();
-                renderer
-                    .first_hit_m(shot, rig, eye, d / dist)
-                    .is_none_or(|t| t >= dist - 1e-3)
-            });
-            if inside && unoccluded && renderer.target_lit(shot, centre, out_n) {
-                out.push((layout, t.id, centre));
-            }
-        }
-    }
-    out
+/// Which frame a target lives in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layout {
+    /// Reference structure (world frame).
+    Reference,
+    /// Headdress (head frame).
+    Headdress,
+    /// Flash (flash frame).
+    Flash,
+    /// Standard (standard frame).
+    Standard,
 }
 
-#[cfg(test)]
-mod framing_tests {
-    use super::*;
-    use crate::render::{Layout, Renderer};
-    use crate::scene::BUILTIN_SCENES;
-
-    /// Minimum usable reference targets per image (well over the 1-2 PnP needs, for accuracy).
-    const MIN_REFERENCE: usize = 5;
-    /// Minimum usable headdress targets per measurement image.
-    const MIN_HEADDRESS: usize = 3;
-
-    fn spread_m(pts: &[DVec3]) -> f64 {
-        let c = pts.iter().copied().sum::<DVec3>() / pts.len().max(1) as f64;
-        pts.iter().map(|p| p.distance(c)).fold(0.0, f64::max)
-    }
-
-    #[test]
-    fn every_shot_of_every_scene_sees_enough_well_spread_targets() {
-        let mut report = String::new();
-        let mut failures = Vec::new();
-        for (name, _) in BUILTIN_SCENES {
-            let scene = Scene::load(name).expect("builtin scene");
-            let rig = build_rig(&scene);
-            let shots = plan_shots(&scene, &rig);
-            let renderer = Renderer::new(&scene, &rig).expect("renderer");
-            let mut min_ref = usize::MAX;
-            let mut min_head = usize::MAX;
-            for shot in &shots {
-                let vis = usable_targets(&renderer, &rig, shot);
-                let of = |l: Layout| -> Vec<DVec3> {
-                    vis.iter().filter(|v| v.0 == l).map(|v| v.2).collect()
-                };
-                let (r, h, f, s) = (
-                    of(Layout::Reference),
-                    of(Layout::Headdress),
-                    of(Layout::Flash),
-                    of(Layout::Standard),
-                );
-                min_ref = min_ref.min(r.len());
-                let mut bad = Vec::new();
-                if r.len() < MIN_REFERENCE || spread_m(&r) < 0.08 {
-                    bad.push(format!(
-                        "reference {} (spread {:.3} m)",
-                        r.len(),
-                        spread_m(&r)
-                    ));
-                }
-                match shot.role {
-                    ImageRole::Measurement => {
-                        min_head = min_head.min(h.len());
-                        if h.len() < MIN_HEADDRESS {
-                            bad.push(format!("headdress {}", h.len()));
-                        }
-                    }
-                    ImageRole::LightPosition if f.len() < 4 => {
-                        bad.push(format!("flash {}", f.len()))
-                    }
-                    ImageRole::StandardPosition | ImageRole::ReferenceStandard if s.len() < 4 => {
-                        bad.push(format!("standard {}", s.len()))
-                    }
-                    _ => {}
-                }
-                if !bad.is_empty() {
-                    failures.push(format!("{name} {}: {}", shot.file, bad.join(", ")));
-                }
-            }
-            report += &format!(
-                "{name}: {} reference, {} headdress targets; per image min reference {min_ref}, min headdress {min_head}\n",
-                rig.reference.len(),
-                rig.headdress.len()
-            );
-        }
-        eprintln!("{report}");
-        assert!(failures.is_empty(), "{}", failures.join("\n"));
-    }
-
-    #[test]
-    fn no_headdress_target_reaches_into_the_region_of_interest() {
-        for (name, _) in BUILTIN_SCENES {
-            let scene = Scene::load(name).expect("builtin scene");
-            let rig = build_rig(&scene);
-            for t in &rig.headdress {
-                for c in t.corners_m.iter().chain([t.centre()].iter()) {
-                    let d = c.distance(rig.roi_centre_head);
-                    assert!(
-                        d > scene.geometry.roi_radius_m,
-                        "{name}: headdress tag {} is {d:.4} m from the region's centre",
-                        t.id
-                    );
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn printed_targets_do_not_overlap() {
-        for (name, _) in BUILTIN_SCENES {
-            let scene = Scene::load(name).expect("builtin scene");
-            let rig = build_rig(&scene);
-            for list in [&rig.reference, &rig.headdress] {
-                for (i, a) in list.iter().enumerate() {
-                    for b in &list[i + 1..] {
-                        let need = 0.5 * (target_pitch_m(a.size_m) + target_pitch_m(b.size_m))
-                            - TARGET_GAP_M;
-                        assert!(
-                            a.centre().distance(b.centre()) >= need - 1e-9,
-                            "{name}: targets {} and {} overlap",
-                            a.id,
-                            b.id
-                        );
-                    }
-                }
-            }
+impl Layout {
+    /// Name used in `truth.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Reference => "reference",
+            Self::Headdress => "headdress",
+            Self::Flash => "flash",
+            Self::Standard => "standard",
         }
     }
 }

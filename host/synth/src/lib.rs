@@ -20,6 +20,7 @@ pub mod layout;
 pub mod render;
 pub mod scene;
 pub mod shape;
+pub mod visibility;
 
 pub use generate::{generate, SynthError, SynthOptions, SynthSummary};
 pub use scene::{Scene, SceneError, BUILTIN_SCENES};

@@ -52,34 +52,7 @@ const BLOCK_PX: u32 = 16;
 /// Pixel rows per band of coherent tracing (one task; 8 rows x 2 strata = one super-tile band
 /// of the grid tracer at 4 rays per pixel).
 const BAND_ROWS: u32 = 8;
-/// Half extent of a printed target's paper in tag units (the black border is at ±1, the tag's
-/// white ring ends at ±1.25; a quarter cell more of paper around it).
-pub const PAPER_HALF_EXTENT: f64 = 1.5;
-
-/// Which frame a target lives in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Layout {
-    /// Reference structure (world frame).
-    Reference,
-    /// Headdress (head frame).
-    Headdress,
-    /// Flash (flash frame).
-    Flash,
-    /// Standard (standard frame).
-    Standard,
-}
-
-impl Layout {
-    /// Name used in `truth.json`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Reference => "reference",
-            Self::Headdress => "headdress",
-            Self::Flash => "flash",
-            Self::Standard => "standard",
-        }
-    }
-}
+pub use crate::layout::{Layout, PAPER_HALF_EXTENT};
 
 /// A printed target ready for shading, in its BVH's frame.
 #[derive(Debug, Clone)]
