@@ -6,6 +6,9 @@
 //! 3. Checks that the two human-readable copies of the pin map, the `//!` wiring header of
 //!    `src/main.rs` and the pin table of `hardware/wiring.md`, agree with `pinmap.toml`; the build
 //!    fails naming the file, the signal and both GPIO numbers if they do not.
+//! 4. Checks the board's net list (`hardware/netlist.toml`): each pin-map signal's net holds
+//!    that signal's GPIO and no other, no pin is on two nets, every net has two pins or more,
+//!    and its parts are exactly the parts of `hardware/bom.md`'s table.
 
 use std::collections::BTreeMap;
 use std::env;
@@ -261,8 +264,97 @@ fn main() {
     check_copy(&map, &main_rs);
     check_copy(&map, &wiring);
 
-    for p in [&pinmap_path, &main_rs, &wiring] {
+    // 4. the net list
+    let netlist = manifest.join("../../hardware/netlist.toml");
+    let bom = manifest.join("../../hardware/bom.md");
+    check_netlist(&map, &netlist, &bom);
+
+    for p in [&pinmap_path, &main_rs, &wiring, &netlist, &bom] {
         println!("cargo:rerun-if-changed={}", p.display());
     }
     println!("cargo:rerun-if-changed=build.rs");
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NetList {
+    nets: BTreeMap<String, Vec<String>>,
+}
+
+/// Designators in the first column of `bom.md`'s table (`U1, U2` lists several).
+fn bom_refs(path: &Path) -> Vec<String> {
+    let text = fs::read_to_string(path)
+        .unwrap_or_else(|e| fail(format!("cannot read {}: {e}", path.display())));
+    let mut refs = Vec::new();
+    for line in text.lines() {
+        let Some(row) = line.trim().strip_prefix('|') else {
+            continue;
+        };
+        let first = row.split('|').next().unwrap_or("").trim();
+        if first.is_empty() || first == "ref" || first.starts_with("---") {
+            continue;
+        }
+        refs.extend(first.split(',').map(|r| r.trim().to_string()));
+    }
+    refs
+}
+
+fn check_netlist(map: &PinMap, netlist_path: &Path, bom_path: &Path) {
+    let name = netlist_path.display();
+    let text = fs::read_to_string(netlist_path)
+        .unwrap_or_else(|e| fail(format!("cannot read {name}: {e}")));
+    let list: NetList = toml::from_str(&text)
+        .unwrap_or_else(|e| fail(format!("{name} is not a valid net list: {e}")));
+    let mut seen: BTreeMap<&str, &str> = BTreeMap::new();
+    let mut parts: std::collections::BTreeSet<&str> = std::collections::BTreeSet::new();
+    for (net, pins) in &list.nets {
+        if pins.len() < 2 {
+            fail(format!(
+                "{name}: net {net} has fewer than two pins: {pins:?}"
+            ));
+        }
+        for pin in pins {
+            let Some((part, _)) = pin.split_once('.') else {
+                fail(format!("{name}: net {net}: {pin:?} is not REF.PIN"));
+            };
+            parts.insert(part);
+            if let Some(other) = seen.insert(pin, net) {
+                fail(format!(
+                    "{name}: pin {pin} is on two nets, {other} and {net}"
+                ));
+            }
+        }
+    }
+    for (signal, spec) in &map.pins {
+        let gpio = format!("A1.GP{}", spec.gpio);
+        let Some(pins) = list.nets.get(signal) else {
+            fail(format!(
+                "{name}: no net {signal} (pin-map signal on GP{})",
+                spec.gpio
+            ));
+        };
+        if !pins.contains(&gpio) {
+            fail(format!(
+                "{name}: net {signal} does not hold {gpio} (pinmap.toml: GP{})",
+                spec.gpio
+            ));
+        }
+        if let Some(other) = pins.iter().find(|p| p.starts_with("A1.GP") && **p != gpio) {
+            fail(format!("{name}: net {signal} also holds {other}"));
+        }
+    }
+    let bom = bom_refs(bom_path);
+    for r in &bom {
+        if !parts.contains(r.as_str()) {
+            fail(format!(
+                "{}: part {r} is on no net of {name}",
+                bom_path.display()
+            ));
+        }
+    }
+    for p in &parts {
+        if !bom.iter().any(|r| r == p) {
+            fail(format!("{name}: part {p} is not in {}", bom_path.display()));
+        }
+    }
 }

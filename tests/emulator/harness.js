@@ -132,6 +132,8 @@ async function main() {
     }
   };
 
+  board.onReset((cause) => emit({ event: 'watchdog_reset', cause, sim_ns: board.nanos }));
+
   // Commands on stdin (one JSON object per line).
   const commands = readline.createInterface({ input: process.stdin });
   commands.on('line', (line) => {
@@ -188,6 +190,16 @@ async function main() {
         // Unplug and replug: bus reset, re-enumeration (the firmware sees link down, then up).
         board.reconnectUsb();
         emit({ event: 'usb_reset', sim_ns: board.nanos });
+        break;
+      case 'dtr':
+        // {"cmd":"dtr","asserted":false}: the host closes (or reopens) the port.
+        board.setDtr(!!cmd.asserted);
+        emit({ event: 'dtr', asserted: !!cmd.asserted, sim_ns: board.nanos });
+        break;
+      case 'hang':
+        // The firmware hangs (a runaway loop, interrupts masked): only the watchdog gets out.
+        board.hang();
+        emit({ event: 'hang', sim_ns: board.nanos });
         break;
       case 'speed':
         opts.speed = Number(cmd.value);

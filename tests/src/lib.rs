@@ -88,6 +88,11 @@ pub trait Backend: Send {
     fn input_edges_us(&self, _signal: &str) -> Option<Vec<f64>> {
         None
     }
+    /// Sends a fault-injection command to the device's environment (the emulator harness's
+    /// JSON commands, e.g. `{"cmd":"hang"}`); false if the backend cannot.
+    fn inject(&self, _json: &str) -> bool {
+        false
+    }
 }
 
 /// Serialises cases on devices that exist once (the board) or are heavy (the emulator).
@@ -331,6 +336,9 @@ impl Backend for EmulatorBackend {
     }
     fn port(&self) -> String {
         self.path.clone()
+    }
+    fn inject(&self, json: &str) -> bool {
+        self.command(json).is_ok()
     }
     fn input_edges_us(&self, signal: &str) -> Option<Vec<f64>> {
         let edges = self.edges.lock().unwrap_or_else(|p| p.into_inner());

@@ -4,8 +4,8 @@
 //! next deadline, or a USB connect/disconnect, and turns each into an input of the sequencer
 //! (`skinbrdf-sequencer`, which makes every decision); after each input it drives the pins to
 //! the sequencer's output levels and queues its messages as frames for the host. It also feeds
-//! the hardware watchdog and drives the status LED (lit while a session runs, a short flash
-//! once a second otherwise).
+//! the hardware watchdog and drives the status LED (lit while a session runs, otherwise a
+//! flash of one housekeeping period, ~100 ms, once a second).
 
 use embassy_futures::select::{select4, Either4};
 use embassy_rp::peripherals::FLASH;
@@ -177,11 +177,7 @@ pub async fn run(mut hw: Hardware) -> ! {
                 if Instant::now() >= next_housekeeping {
                     hw.watchdog.feed(WATCHDOG_TIMEOUT);
                     heartbeat = heartbeat_phase(Instant::now());
-                    next_housekeeping += if heartbeat {
-                        HEARTBEAT_ON
-                    } else {
-                        HOUSEKEEPING_PERIOD
-                    };
+                    next_housekeeping += HOUSEKEEPING_PERIOD;
                     let now = Instant::now();
                     if next_housekeeping < now {
                         next_housekeeping = now + HOUSEKEEPING_PERIOD;
@@ -214,14 +210,12 @@ pub async fn run(mut hw: Hardware) -> ! {
 const RING: usize = skinbrdf_sequencer::DEFAULT_RING;
 /// Retry sending queued messages this soon when the USB pipe was full.
 const TX_RETRY: Duration = Duration::from_millis(2);
-/// Idle heartbeat: the LED flashes for this long once per housekeeping cycle.
-const HEARTBEAT_ON: Duration = Duration::from_millis(20);
 
 fn now_us() -> u64 {
     Instant::now().as_micros()
 }
 
-/// Heartbeat phase: a short flash at the start of every second.
+/// Heartbeat phase: lit during the first housekeeping period (~100 ms) of every second.
 fn heartbeat_phase(now: Instant) -> bool {
     now.as_millis() % 1000 < HOUSEKEEPING_PERIOD.as_millis()
 }

@@ -86,8 +86,9 @@ async fn main(spawner: Spawner) {
     static SERIAL: StaticCell<heapless::String<24>> = StaticCell::new();
     let serial: &'static str = SERIAL.init(identity.serial.clone()).as_str();
     let (device, class) = usb::build(Driver::new(p.USB, Irqs), serial);
-    let (tx, rx) = class.split();
+    let (tx, rx, control) = class.split_with_control();
     spawner.spawn(usb::usb_task(device).expect("usb task spawned once"));
+    spawner.spawn(usb::dtr_task(control).expect("dtr task spawned once"));
     spawner.spawn(usb::rx_task(rx).expect("rx task spawned once"));
     spawner.spawn(usb::tx_task(tx).expect("tx task spawned once"));
 

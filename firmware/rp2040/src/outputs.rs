@@ -7,7 +7,7 @@
 //! and a hang (the hardware watchdog resets the chip, which turns every GPIO back into a
 //! high-impedance input; the external pull-downs on the optocoupler drivers keep them off).
 
-use embassy_rp::gpio::{Level, Output, Pin};
+use embassy_rp::gpio::{Drive, Level, Output, Pin};
 use embassy_rp::pac;
 use embassy_rp::Peri;
 
@@ -56,9 +56,16 @@ impl Outputs {
         flash_trigger: Peri<'static, impl Pin>,
         status_led: Peri<'static, impl Pin>,
     ) -> Self {
+        let mut shutter = Output::new(shutter, released(pins::SHUTTER));
+        let mut focus = Output::new(focus, released(pins::FOCUS));
+        // The shutter and focus pins drive optocoupler LEDs directly (up to ~5 mA through
+        // 470 R, `hardware/circuits.md`): more than the pads' default 4 mA class, so the
+        // 8 mA class. The flash trigger drives only a MOSFET gate.
+        shutter.set_drive_strength(Drive::_8mA);
+        focus.set_drive_strength(Drive::_8mA);
         Self {
-            shutter: Output::new(shutter, released(pins::SHUTTER)),
-            focus: Output::new(focus, released(pins::FOCUS)),
+            shutter,
+            focus,
             flash_trigger: Output::new(flash_trigger, released(pins::FLASH_TRIGGER)),
             led: Output::new(status_led, released(pins::STATUS_LED)),
         }

@@ -8,8 +8,10 @@
 //! moment of the panic would stay held on the bench.
 //!
 //! The HardFault handler (reached by that `udf`, or by a real fault) releases the lines again and
-//! resets the chip through the watchdog; after reset every GPIO is a released input until the
-//! firmware drives them released again in `main`.
+//! resets the chip by forcing a watchdog reset (`WATCHDOG.CTRL.TRIGGER`, which resets the
+//! peripherals and the GPIOs as a watchdog timeout does; the core's `SYSRESETREQ` would reset
+//! only the processors). After reset every GPIO is a released input until the firmware drives
+//! them released again in `main`.
 
 use core::panic::PanicInfo;
 use core::sync::atomic::{AtomicBool, Ordering};
@@ -35,5 +37,14 @@ fn panic(info: &PanicInfo<'_>) -> ! {
 unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
     release_all_raw();
     // A clean restart is the safe state: the host sees the device re-enumerate and re-handshakes.
+    // What the watchdog resets: everything but the oscillators (as `Watchdog::start` sets it;
+    // repeated here because a fault may come before the controller started the watchdog).
+    embassy_rp::pac::PSM
+        .wdsel()
+        .write_value(embassy_rp::pac::psm::regs::Wdsel(0x0001_fffc));
+    embassy_rp::pac::WATCHDOG
+        .ctrl()
+        .write(|w| w.set_trigger(true));
+    // The reset takes a few cycles; should it not come, the core's own reset still does.
     cortex_m::peripheral::SCB::sys_reset()
 }

@@ -7,8 +7,9 @@
 //! * serial `SKB-` + the 16 hex digits of the flash chip's unique ID (`SKB-EMULATOR` when the
 //!   rp2040js harness runs the image, which cannot issue flash commands).
 //!
-//! Three tasks share the class: [`usb_task`] runs the device state machine (whose callbacks
-//! report the link state in [`LINK`]), [`rx_task`] copies received bytes into [`RX`] for the
+//! Four tasks share the class: [`usb_task`] runs the device state machine (whose callbacks
+//! report the link state in [`LINK`]), [`dtr_task`] reports the host opening and closing the
+//! port (DTR) in [`LINK`] too, [`rx_task`] copies received bytes into [`RX`] for the
 //! controller's frame decoder,
 //! [`tx_task`] drains the controller's outgoing byte pipe into 64-byte packets (with a
 //! zero-length packet after a full one, so the host's read returns at once).
@@ -18,7 +19,7 @@ use embassy_rp::usb::Driver;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
-use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
+use embassy_usb::class::cdc_acm::{CdcAcmClass, ControlChanged, Receiver, Sender, State};
 use embassy_usb::{Builder, Config, UsbDevice};
 use static_cell::StaticCell;
 
@@ -107,6 +108,23 @@ pub fn build(
 #[embassy_executor::task]
 pub async fn usb_task(mut device: UsbDevice<'static, UsbDriver>) -> ! {
     device.run().await
+}
+
+/// Reports the host's DTR line as link changes: a host program that closes the port (or dies,
+/// which closes it) drops DTR, and the sequencer pauses the session as for an unplugged cable;
+/// opening the port raises DTR again (link up: the host handshakes). Only changes are
+/// reported, so a host that never raises DTR still talks (configuration brings the link up).
+#[embassy_executor::task]
+pub async fn dtr_task(control: ControlChanged<'static>) -> ! {
+    let mut dtr = control.dtr();
+    loop {
+        control.control_changed().await;
+        let now = control.dtr();
+        if now != dtr {
+            dtr = now;
+            LINK.signal(now);
+        }
+    }
 }
 
 /// Copies received packets into [`RX`].

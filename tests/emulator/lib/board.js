@@ -16,11 +16,18 @@
 //    another one from thread mode, as on the chip.
 //  * When the core sleeps (WFI/WFE) the clock jumps to the next alarm (timer, USB, or a model
 //    event), or to the pacing target when none is pending.
+//  * A watchdog reset (the timer expiring after a hang, or the firmware forcing one) reboots the
+//    image as the chip does: a fresh chip (RAM, peripherals, GPIOs back to inputs, USB detached
+//    and enumerated again), the same flash image, the models' input levels re-applied. One
+//    difference: rp2040js's timer reads the simulated clock, so device time goes on counting
+//    across the reboot instead of restarting at 0 (the host handshakes again anyway).
 //
 // Device time = simulated time: the RP2040 timer reads `clock.nanos / 1000`, so an event
 // scheduled at simulated nanosecond T is seen by the firmware at (T + capture latency) / 1000 us.
 
-const { RP2040, USBCDC, ConsoleLogger, LogLevel } = require('rp2040js');
+const {
+  RP2040, USBCDC, ConsoleLogger, LogLevel, createSetupPacket, DataDirection, SetupType, SetupRecipient,
+} = require('rp2040js');
 const { loadIntoFlash, FLASH_BASE } = require('./elf');
 
 const CYCLE_NS = 8; // 125 MHz
@@ -36,7 +43,20 @@ class Board {
    * @param {object} opts { logLevel: 'error'|'warn'|'info'|'debug' }
    */
   constructor(elfPath, opts = {}) {
-    const mcu = new RP2040();
+    this.elfPath = elfPath;
+    this.opts = opts;
+    this.outputListeners = [];
+    this.serialListeners = [];
+    this.resetListeners = [];
+    this.inputLevels = new Map();
+    this.resets = 0;
+    this.instructions = 0;
+    this._boot(new RP2040());
+  }
+
+  /** Loads the image into a fresh chip `mcu` and starts it (power-up, or after a reset). */
+  _boot(mcu) {
+    const opts = this.opts;
     const levels = { error: LogLevel.Error, warn: LogLevel.Warn, info: LogLevel.Info, debug: LogLevel.Debug };
     const inner = new ConsoleLogger(levels[opts.logLevel || 'error'] ?? LogLevel.Error, true);
     // SEV is a no-op in rp2040js (it only logs 'SEV'); embassy's executor relies on it to wake
@@ -52,7 +72,7 @@ class Board {
     };
     this.mcu = mcu;
     this.clock = mcu.clock;
-    loadIntoFlash(elfPath, mcu.flash);
+    loadIntoFlash(this.elfPath, mcu.flash);
     mcu.peripherals[0x40058].scratchData[0] = EMULATOR_MAGIC;
     // Boot: vector table after boot2.
     mcu.core.VTOR = VECTOR_TABLE;
@@ -63,13 +83,49 @@ class Board {
     for (const pio of mcu.pio) pio.run = () => {};
 
     this._setupUsb();
-    this.outputListeners = [];
     for (const pin of mcu.gpio) {
       pin.addListener(() => {
+        if (this.mcu !== mcu) return;
         for (const l of this.outputListeners) l(pin.index, pin.outputEnable ? pin.outputValue : null);
       });
     }
-    this.instructions = 0;
+    for (const [gpio, high] of this.inputLevels) mcu.gpio[gpio].setInputValue(high);
+    const watchdog = mcu.peripherals[0x40058];
+    watchdog.onWatchdogTrigger = () => {
+      // Stop this chip's watchdog at once (its periodic alarm would fire again and again at
+      // count 0), and reset from the run loop: the trigger fires inside an alarm or a store.
+      watchdog.alarm.enable = false;
+      watchdog.timer.enable = false;
+      this.resetPending = watchdog.reason === 1 ? 'timeout' : 'forced';
+    };
+    this.resetPending = null;
+    this.hung = false;
+  }
+
+  /**
+   * The watchdog reset: every GPIO becomes an input at once (the outputs' external pull-downs
+   * then hold the drivers off), the chip restarts from the same flash image.
+   */
+  _watchdogReset() {
+    const cause = this.resetPending;
+    this.resetPending = null;
+    const old = this.mcu;
+    old.peripherals[0x40058].alarm.enable = false;
+    old.peripherals[0x40058].timer.enable = false;
+    this.resets += 1;
+    this.connected = false;
+    const { RP2040: Chip } = require('rp2040js');
+    this._boot(new Chip(this.clock));
+    // The new chip's pins start as inputs: report that to the models (released outputs).
+    for (let gpio = 0; gpio < this.mcu.gpio.length; gpio++) {
+      for (const l of this.outputListeners) l(gpio, null);
+    }
+    for (const l of this.resetListeners) l(cause);
+  }
+
+  /** Calls `listener(cause)` after a watchdog reset ('timeout' or 'forced') rebooted the image. */
+  onReset(listener) {
+    this.resetListeners.push(listener);
   }
 
   // ---------------------------------------------------------------- time
@@ -103,13 +159,18 @@ class Board {
     const clock = this.clock;
     let n = 0;
     while (clock.nanos < targetNanos) {
-      if (core.waiting) {
+      if (this.resetPending) {
+        this._watchdogReset();
+        this.instructions += n;
+        return this.runUntil(targetNanos, Math.max(1, maxInstructions - n));
+      }
+      if (core.waiting || this.hung) {
         const toAlarm = clock.nanosToNextAlarm;
         const toTarget = targetNanos - clock.nanos;
         const jump = toAlarm > 0 ? Math.min(toAlarm, toTarget) : toTarget;
         clock.tick(jump);
         // Let the PIO react to inputs changed by alarm callbacks (2-4 cycles).
-        for (let i = 0; i < 4 && core.waiting; i++) {
+        for (let i = 0; i < 4 && core.waiting && !this.hung; i++) {
           this._stepPio(1);
           clock.tick(CYCLE_NS);
         }
@@ -128,7 +189,30 @@ class Board {
 
   /** Drives an input pin from outside (true = high). */
   setInput(gpio, high) {
+    this.inputLevels.set(gpio, !!high);
     this.mcu.gpio[gpio].setInputValue(!!high);
+  }
+
+  /**
+   * Makes the firmware hang: the core stops making progress (as in a runaway loop with
+   * interrupts masked) and runs no more code, so nothing feeds the watchdog; its reset is the
+   * only way out. (The core is not stepped while hung: a spinning branch would only cost
+   * emulation time.)
+   */
+  hang() {
+    this.hung = true;
+  }
+
+  /**
+   * Enters the firmware's panic handler as a panic would (`rust_begin_unwind`, at `address`,
+   * from the ELF's symbols), with interrupts masked: it must release every output first.
+   */
+  enterPanicHandler(address, infoPtr) {
+    const { core } = this.mcu;
+    core.PM = true;
+    core.registers[0] = infoPtr;
+    core.PC = address & ~1;
+    core.waiting = false;
   }
 
   /** Level the firmware drives on `gpio`, or null if it is not an output. */
@@ -151,8 +235,9 @@ class Board {
     this.connected = false;
     this.hostToDevice = [];
     this.pendingOutRead = null; // { endpoint, size }
-    this.serialListeners = [];
     cdc.onDeviceConnected = () => {
+      // A host's serial driver raises DTR when a program opens the port.
+      this.setDtr(true);
       this.connected = true;
       if (this.onConnected) this.onConnected();
     };
@@ -216,6 +301,26 @@ class Board {
     this.pendingOutRead = null;
     this.hostToDevice = [];
     this.mcu.usbCtrl.resetDevice();
+  }
+
+  /**
+   * The host opens (true) or closes (false) the port: USB CDC SET_CONTROL_LINE_STATE with DTR
+   * and RTS set or cleared, as a host's serial driver sends it.
+   */
+  setDtr(asserted) {
+    // Addressed to the CDC communication interface (0), as hosts send it. (rp2040js's own
+    // cdcSetControlLineState addresses the device, which embassy-usb's CDC class ignores.)
+    this.mcu.usbCtrl.sendSetupPacket(
+      createSetupPacket({
+        dataDirection: DataDirection.HostToDevice,
+        type: SetupType.Class,
+        recipient: SetupRecipient.Interface,
+        bRequest: 0x22, // SET_CONTROL_LINE_STATE
+        wValue: asserted ? 0x3 : 0x0, // DTR | RTS
+        wIndex: 0,
+        wLength: 0,
+      }),
+    );
   }
 
   /** Calls `listener(Buffer)` with every packet the firmware sends to the host. */

@@ -47,4 +47,40 @@ function loadIntoFlash(path, flash) {
   }
 }
 
-module.exports = { loadSegments, loadIntoFlash, FLASH_BASE };
+const SHT_SYMTAB = 2;
+
+/**
+ * Address of the first symbol in the ELF's symbol table named `name` (a string, or a predicate
+ * on the name: Rust's v0 mangling decorates even `rust_begin_unwind`), or null.
+ */
+function symbolAddress(path, name) {
+  const matches = typeof name === 'function' ? name : (n) => n === name;
+  const elf = fs.readFileSync(path);
+  const shoff = elf.readUInt32LE(32);
+  const shentsize = elf.readUInt16LE(46);
+  const shnum = elf.readUInt16LE(48);
+  const section = (i) => {
+    const o = shoff + i * shentsize;
+    return {
+      type: elf.readUInt32LE(o + 4),
+      offset: elf.readUInt32LE(o + 16),
+      size: elf.readUInt32LE(o + 20),
+      link: elf.readUInt32LE(o + 24),
+      entsize: elf.readUInt32LE(o + 36),
+    };
+  };
+  for (let i = 0; i < shnum; i++) {
+    const sym = section(i);
+    if (sym.type !== SHT_SYMTAB) continue;
+    const str = section(sym.link);
+    for (let o = sym.offset; o + 16 <= sym.offset + sym.size; o += sym.entsize || 16) {
+      const nameOff = elf.readUInt32LE(o);
+      let end = str.offset + nameOff;
+      while (elf[end] !== 0) end++;
+      if (matches(elf.toString('latin1', str.offset + nameOff, end))) return elf.readUInt32LE(o + 4);
+    }
+  }
+  return null;
+}
+
+module.exports = { loadSegments, loadIntoFlash, symbolAddress, FLASH_BASE };

@@ -180,17 +180,24 @@ test('garbage, corrupted and oversized frames: counted, and the link keeps worki
   assert.equal(dev.request({ type: 'Ping' }).ok.type, 'Pong');
 });
 
-test('USB link drop mid-session: the session goes on, no record lost after reconnect', { skip }, () => {
+test('USB link drop mid-session: the shot in flight ends, the session pauses until the host is back, no record lost', { skip }, () => {
   const dev = ready({ flash: { recycleUs: 150_000 } });
   dev.request({ type: 'LoadPlan', plan: plan({ count: 4 }) });
   dev.request({ type: 'Run', first_group: 0, last_group: 0 });
   dev.waitEvent('Record', 3_000_000);
+  // Into the second shot's press, then the cable goes.
+  dev.runUntil(() => dev.times('shutter').length >= 2, 1_000_000, 'second press');
   dev.board.reconnectUsb();
   dev.runUntil(() => dev.board.connected, 1_000_000, 'USB re-enumeration');
-  dev.runFor(5_000);
+  // No host talks for 2 s: the press in flight finishes, no other starts, every line released.
+  dev.runFor(2_000_000);
+  assert.equal(dev.times('shutter').length, 2, 'no press while the host is away');
+  assert.equal(dev.times('shutter', false).length, 2, 'the press in flight was released');
+  assert.deepEqual(dev.outputsAsserted(), { shutter: false, focus: false, flash_trigger: false });
   dev.messages = [];
   dev.decoder = new (require('../lib/protocol').FrameDecoder)();
   assert.equal(dev.request({ type: 'ReadClock' }).err?.type, 'HandshakeRequired', 'a new link needs a new handshake');
+  assert.equal(dev.request({ type: 'GetStatus' }).err?.type, 'HandshakeRequired');
   dev.hello();
   for (let i = 0; dev.request({ type: 'GetStatus' }).ok.state !== 'Completed'; i++) {
     assert.ok(i < 100, 'session did not complete');
@@ -216,3 +223,130 @@ test('sustained traffic: 500 requests in a row, every one answered (TX ring wrap
   }
   assert.equal(dev.request({ type: 'GetStatus' }).ok.bad_frames, 0);
 });
+
+/** Two one-shot groups with no pre-focus whose 10 ms interval is shorter than the 100 ms pulse. */
+function mergedPressPlan() {
+  const g = plan({ count: 1, min_interval_us: 10_000, pre_focus_us: 0, shutter_pulse_us: 100_000 }).groups[0];
+  return {
+    groups: [{ ...g, label: 'a' }, { ...g, label: 'b' }],
+    policy: { max_retries: 0, on_exhausted: 'AbortSession' },
+    flash_trigger_pulse_us: 1_000,
+  };
+}
+
+test('a plan whose interval is shorter than its pulse: two clean presses, released >= 50 ms between', { skip }, (t) => {
+  // The plan and rig that once gave one press (16.70..116.64 ms) for two shots, the second
+  // ending MissingXsync: a fast camera and a flash that recycles within the pulse.
+  const dev = ready({ camera: { lagMinUs: 20_000, lagMaxUs: 30_000 }, flash: { recycleUs: 30_000 } });
+  assert.equal(dev.request({ type: 'LoadPlan', plan: mergedPressPlan() }).ok.total_shots, 2);
+  dev.request({ type: 'Run', first_group: 0, last_group: 1 });
+  const done = dev.waitEvent('SessionDone', 3_000_000);
+  assert.equal(done.outcome, 'Completed');
+  const logs = dev.takeEvents('Log').map((l) => l.text);
+  assert.ok(logs.some((l) => l.includes('group 1') && l.includes('50 ms')), `warning about the plan: ${JSON.stringify(logs)}`);
+  assert.deepEqual(dev.takeEvents('Record').map((r) => r.outcome), ['Ok', 'Ok']);
+  const on = dev.times('shutter', true);
+  const off = dev.times('shutter', false);
+  assert.equal(on.length, 2, `presses at ${on} ns`);
+  assert.equal(off.length, 2, `releases at ${off} ns`);
+  const offMs = (on[1] - off[0]) / 1e6;
+  t.diagnostic(`press 1 ${(on[0] / 1e6).toFixed(2)}..${(off[0] / 1e6).toFixed(2)} ms, press 2 ${(on[1] / 1e6).toFixed(2)}..${(off[1] / 1e6).toFixed(2)} ms, off ${offMs.toFixed(3)} ms`);
+  // The sequencer spaces its decisions by 50 ms; the pins follow each decision after the
+  // driver's output latency (~4-11 us), whose jitter may shave a few microseconds off.
+  assert.ok(offMs >= 49.95, `shutter released for only ${offMs} ms between presses`);
+  assert.equal(dev.times('xsync').length, 2, 'the camera took two pictures');
+});
+
+test('SetWatchdog 0 is bounded, not disabled', { skip }, () => {
+  const dev = ready();
+  assert.equal(dev.request({ type: 'SetWatchdog', timeout_us: 0 }).ok.timeout_us, 600_000_000);
+  assert.equal(dev.request({ type: 'GetStatus' }).ok.watchdog_us, 600_000_000);
+});
+
+test('the host closes the port (DTR drops) mid-session: the shot ends, the session pauses, resumes after the handshake', { skip }, () => {
+  const dev = ready({ flash: { recycleUs: 150_000 } });
+  dev.request({ type: 'LoadPlan', plan: plan({ count: 4 }) });
+  dev.request({ type: 'Run', first_group: 0, last_group: 0 });
+  dev.runUntil(() => dev.times('shutter').length >= 2, 3_000_000, 'second press');
+  dev.board.setDtr(false);
+  dev.runFor(2_000_000);
+  assert.equal(dev.times('shutter').length, 2, 'no press after the port closed');
+  assert.deepEqual(dev.outputsAsserted(), { shutter: false, focus: false, flash_trigger: false });
+  dev.board.setDtr(true);
+  dev.runFor(5_000);
+  dev.messages = [];
+  dev.decoder = new (require('../lib/protocol').FrameDecoder)();
+  assert.equal(dev.request({ type: 'GetStatus' }).err?.type, 'HandshakeRequired', 'a reopened port needs a handshake');
+  dev.hello();
+  assert.equal(dev.waitEvent('SessionDone', 5_000_000).outcome, 'Completed');
+  assert.equal(dev.times('shutter').length, 4);
+  assert.equal(dev.request({ type: 'FetchRecords', from_index: 0 }).ok.count, 4);
+});
+
+test('a firmware hang: the watchdog resets the chip within 500 ms, every output released, the device re-enumerates, unacknowledged records are gone', { skip }, (t) => {
+  const dev = ready({ camera: { lagMinUs: 300_000, lagMaxUs: 300_000 }, flash: { recycleUs: 100_000 } });
+  dev.request({ type: 'LoadPlan', plan: plan({ count: 4, shutter_pulse_us: 400_000, xsync_timeout_us: 500_000 }) });
+  dev.request({ type: 'Run', first_group: 0, last_group: 0 });
+  // The first shot completes and is acknowledged (as the skinbrdf host does after every shot).
+  const first = dev.waitEvent('Record', 3_000_000);
+  assert.equal(dev.request({ type: 'AckRecords', next_index: first.index + 1 }).ok.unacked, 0);
+  dev.runUntil(() => dev.rig.outputs.shutter, 3_000_000, 'second press');
+  const hungAt = dev.board.nanos;
+  dev.board.hang();
+  dev.runUntil(() => dev.board.resets > 0, 1_000_000, 'watchdog reset');
+  const resetAt = dev.board.nanos;
+  const released = dev.times('shutter', false).filter((ns) => ns >= hungAt);
+  assert.ok(released.length > 0 && released[0] <= resetAt, 'the shutter was released by the reset');
+  const heldMs = (released[0] - hungAt) / 1e6;
+  t.diagnostic(`hang -> watchdog reset, shutter released: ${heldMs.toFixed(1)} ms`);
+  assert.ok(heldMs <= 500, `outputs held ${heldMs} ms after the hang`);
+  assert.deepEqual(dev.outputsAsserted(), { shutter: false, focus: false, flash_trigger: false });
+  dev.runUntil(() => dev.board.connected, 1_000_000, 're-enumeration after the reset');
+  dev.runFor(5_000);
+  dev.messages = [];
+  dev.decoder = new (require('../lib/protocol').FrameDecoder)();
+  const hello = dev.hello();
+  assert.ok(hello.ok, 'handshake with the rebooted firmware');
+  const st = dev.request({ type: 'GetStatus' }).ok;
+  // The ring was in RAM: the session and the shot in flight (never acknowledged) are gone.
+  assert.equal(st.state, 'Idle');
+  assert.equal(st.unacked, 0);
+  assert.equal(st.next_index, 0);
+  // It stays released and works: a new plan runs.
+  assert.deepEqual(dev.outputsAsserted(), { shutter: false, focus: false, flash_trigger: false });
+  assert.equal(dev.request({ type: 'LoadPlan', plan: plan({ count: 1 }) }).ok.total_shots, 1);
+});
+
+test('the panic path releases every output at once, then the chip resets and re-enumerates', { skip }, (t) => {
+  const { symbolAddress } = require('../lib/elf');
+  const panicAt = symbolAddress(dev0Elf(), (n) => n.endsWith('rust_begin_unwind'));
+  assert.ok(panicAt, 'the ELF has a panic handler symbol');
+  const dev = ready({ camera: { lagMinUs: 300_000, lagMaxUs: 300_000 }, flash: { firesOn: 'trigger' } });
+  dev.request({ type: 'LoadPlan', plan: plan({ count: 2, shutter_pulse_us: 400_000, xsync_timeout_us: 500_000 }) });
+  dev.request({ type: 'Run', first_group: 0, last_group: 0 });
+  dev.runUntil(() => dev.rig.outputs.shutter && dev.rig.outputs.focus, 3_000_000, 'press');
+  const at = dev.board.nanos;
+  let cause = null;
+  dev.board.onReset((c) => (cause = c));
+  // A PanicInfo of zeros in unused SRAM: the handler releases before it formats anything.
+  dev.board.enterPanicHandler(panicAt, 0x20041000);
+  dev.runFor(100);
+  const released = dev.times('shutter', false).filter((ns) => ns >= at);
+  assert.ok(released.length > 0, 'shutter released by the panic handler');
+  const us = (released[0] - at) / 1000;
+  t.diagnostic(`panic handler entry -> shutter released: ${us.toFixed(2)} us`);
+  assert.ok(us < 50, `released ${us} us after the panic`);
+  assert.deepEqual(dev.outputsAsserted(), { shutter: false, focus: false, flash_trigger: false });
+  dev.runUntil(() => dev.board.resets > 0, 1_000_000, 'reset after the panic');
+  t.diagnostic(`panic -> reset (${cause}): ${((dev.board.nanos - at) / 1e6).toFixed(2)} ms`);
+  dev.runUntil(() => dev.board.connected, 1_000_000, 're-enumeration');
+  dev.runFor(5_000);
+  dev.messages = [];
+  dev.decoder = new (require('../lib/protocol').FrameDecoder)();
+  assert.ok(dev.hello().ok);
+  assert.deepEqual(dev.outputsAsserted(), { shutter: false, focus: false, flash_trigger: false });
+});
+
+function dev0Elf() {
+  return require('../lib/device').defaultElf();
+}
