@@ -18,7 +18,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use skinbrdf_derender::{derender_session, DerenderConfig, SessionOptions};
+use skinbrdf_derender::{derender_session, DerenderConfig, ResolvedPoses, TargetMask};
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -74,7 +74,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         skinbrdf_session::Session::load(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let cfg = DerenderConfig::DEFAULT;
     for run in 0..runs.max(1) {
-        let r = derender_session(&session, &SessionOptions::default(), &cfg)?.report;
+        let r =
+            derender_session(&session, &truth_poses(&session)?, TargetMask::Printed, &cfg)?.report;
         let t = &r.times;
         let decode = t.image_load_s;
         let proper = t.total_s - decode;
@@ -110,4 +111,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     Ok(())
+}
+
+/// Every pose from the synthetic session's `truth.json` (derendering in isolation from the pose
+/// stage).
+fn truth_poses(
+    session: &skinbrdf_session::Session,
+) -> Result<ResolvedPoses, Box<dyn std::error::Error>> {
+    let truth = session
+        .load_truth()
+        .ok_or("no truth.json: these examples derender synthetic sessions")??;
+    Ok(ResolvedPoses::from_truth(session, &truth)?)
 }

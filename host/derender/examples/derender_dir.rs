@@ -1,12 +1,12 @@
-//! Derenders one session directory with the default settings (poses, light and camera from
-//! `session.toml` or `truth.json`) and prints the stage times, the ray throughput and, when
-//! `truth.json` is present, the error against the true BRDF. Nothing is written.
+//! Derenders one synthetic session directory with the default settings (poses, light and
+//! camera from `truth.json`: the pipeline resolves a real session's poses) and prints the stage
+//! times, the ray throughput and the error against the true BRDF. Nothing is written.
 //!
 //! ```text
 //! cargo run --release -p skinbrdf-derender --example derender_dir -- SESSION_DIR [--bvh-quality Q] [--stride N]
 //! ```
 
-use skinbrdf_derender::{derender_session, DerenderConfig, SessionOptions};
+use skinbrdf_derender::{derender_session, DerenderConfig, ResolvedPoses, TargetMask};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -27,7 +27,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let session = skinbrdf_session::Session::load(std::path::Path::new(dir))
         .map_err(|e| format!("{dir}: {e}"))?;
-    let run = derender_session(&session, &SessionOptions::default(), &cfg)?;
+    let run = derender_session(&session, &truth_poses(&session)?, TargetMask::Printed, &cfg)?;
     let r = &run.report;
     let t = &r.times;
     let (w, h) = session
@@ -78,4 +78,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
     }
     Ok(())
+}
+
+/// Every pose from the synthetic session's `truth.json` (derendering in isolation from the pose
+/// stage).
+fn truth_poses(
+    session: &skinbrdf_session::Session,
+) -> Result<ResolvedPoses, Box<dyn std::error::Error>> {
+    let truth = session
+        .load_truth()
+        .ok_or("no truth.json: these examples derender synthetic sessions")??;
+    Ok(ResolvedPoses::from_truth(session, &truth)?)
 }

@@ -10,7 +10,7 @@
 
 use std::path::PathBuf;
 
-use skinbrdf_derender::{derender_session, DerenderConfig, SessionOptions, ShadowMode};
+use skinbrdf_derender::{derender_session, DerenderConfig, ResolvedPoses, ShadowMode, TargetMask};
 use skinbrdf_mesh::NormalMethod;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -93,7 +93,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ),
         ];
         for (name, cfg) in settings {
-            let run = derender_session(&session, &SessionOptions::default(), &cfg)?;
+            let run =
+                derender_session(&session, &truth_poses(&session)?, TargetMask::Printed, &cfg)?;
             let r = &run.report;
             let e = r.truth_error.as_ref();
             println!(
@@ -120,4 +121,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let _ = std::fs::remove_dir_all(&base);
     }
     Ok(())
+}
+
+/// Every pose from the synthetic session's `truth.json` (derendering in isolation from the pose
+/// stage).
+fn truth_poses(
+    session: &skinbrdf_session::Session,
+) -> Result<ResolvedPoses, Box<dyn std::error::Error>> {
+    let truth = session
+        .load_truth()
+        .ok_or("no truth.json: these examples derender synthetic sessions")??;
+    Ok(ResolvedPoses::from_truth(session, &truth)?)
 }

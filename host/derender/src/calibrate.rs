@@ -27,6 +27,10 @@ use crate::{DerenderConfig, DerenderError};
 /// Fraction of the standard's width and height used (centred).
 pub const STANDARD_INSET: f64 = 0.8;
 
+/// Fewest usable standard pixels C is estimated from (a median of fewer says little about
+/// its spread).
+pub const MIN_STANDARD_PIXELS: usize = 10;
+
 /// How C is averaged over the standard's pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 pub enum CEstimator {
@@ -170,19 +174,17 @@ pub fn calibrate_c(
     for s in images {
         all.extend(standard_pixels(&rays, light_world_m, brdf, size_m, s, cfg));
     }
-    if all.len() < 10 {
-        return Err(DerenderError::Calibration(format!(
-            "only {} usable pixels on the reflectance standard in {} image(s) (need 10)",
-            all.len(),
-            images.len()
-        )));
+    if all.len() < MIN_STANDARD_PIXELS {
+        return Err(DerenderError::TooFewStandardPixels {
+            pixels: all.len(),
+            images: images.len(),
+            needed: MIN_STANDARD_PIXELS,
+        });
     }
     let mut stats = Vec::with_capacity(3);
     for c in 0..3 {
         let v: Vec<f64> = all.iter().map(|p| p[c]).collect();
-        stats.push(RobustStats::of(&v).ok_or_else(|| {
-            DerenderError::Calibration(format!("channel {c}: no finite C values"))
-        })?);
+        stats.push(RobustStats::of(&v).ok_or(DerenderError::NoFiniteC { channel: c })?);
     }
     let stats: [RobustStats; 3] = [stats[0], stats[1], stats[2]];
     let c = stats.map(|s| match estimator {

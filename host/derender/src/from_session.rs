@@ -1,22 +1,19 @@
 //! Derendering a `skinbrdf-session` directory: [`derender_session`].
 //!
-//! Inputs are resolved in this order, and the report says where each came from:
+//! The poses come resolved ([`ResolvedPoses`]: the pipeline's `pose_inputs::resolve_poses`, or
+//! [`ResolvedPoses::from_truth`]); this module adds what only the session directory has:
 //!
-//! * **camera**: `[camera]` when calibrated, else `truth.json`'s camera (synthetic sessions);
-//! * **poses**: per image `world_from_camera` / `world_from_head` from `session.toml` (a
-//!   stationary sample reuses the first head pose), else `truth.json`, or the pose stage's
-//!   result (`PoseChoice::Estimated`, `out/poses.json`);
-//! * **light**: `known.light_position_m`, else `known.world_from_flash` applied to the flash's
-//!   emitting point, else truth;
-//! * **C**: `known.calibration_c`, else from the `reference-standard` images (the standard's
-//!   pose from `known.world_from_standard`, else truth);
+//! * **C**: `known.calibration_c`, else from the `reference-standard` images
+//!   ([`DerenderInputs::new`]);
 //! * **geometry**: the scan (units from `session.toml`, validated and repaired), or a
 //!   tessellated sphere/cylinder at about [`SHAPE_EDGE_M`] edge length;
 //! * **masks**: a per-image user mask (`images[].mask`), and the printed targets of the
 //!   headdress, the reference structure and the flash projected into each image
 //!   ([`target_depths`]: each printed square with its white ring, plus
 //!   [`TARGET_MASK_MARGIN_PX`]); a target masks a pixel only where it lies in front of the
-//!   surface the pixel sees (a target behind the head hides nothing).
+//!   surface the pixel sees (a target behind the head hides nothing);
+//! * **scoring**: when `truth.json` is present, the samples' error against the true BRDF (the
+//!   only use of the truth here).
 
 use std::path::Path;
 use std::time::Instant;
@@ -25,12 +22,12 @@ use glam::{DVec2, DVec3};
 use serde::Serialize;
 use skinbrdf_core::Pose;
 use skinbrdf_mesh::{load_mesh, CameraRays, LengthUnit, LoadOptions, MeshReport};
-use skinbrdf_session::{GeometrySpec, ImageRole, Session, Target, Truth};
+use skinbrdf_session::{GeometrySpec, Session, Target};
 
 use crate::geometry::{Geometry, Roi};
+use crate::poses::ResolvedPoses;
 use crate::session::{
-    derender_with_loader, CalibrationInput, DerenderInputs, DerenderReport, ImagePoses, OwnedImage,
-    PoseSource,
+    derender_with_loader, CalibrationSource, DerenderInputs, DerenderReport, OwnedImage, PoseSource,
 };
 use crate::{truth_error, DerenderConfig, DerenderError};
 
@@ -38,32 +35,14 @@ use crate::{truth_error, DerenderConfig, DerenderError};
 /// 1.6 µm, far below any effect on D or the normal).
 pub const SHAPE_EDGE_M: f64 = 0.001;
 
-/// Which poses to use.
+/// Whether the printed targets are masked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-pub enum PoseChoice {
-    /// `session.toml` where every measurement image has them, else `truth.json`.
+pub enum TargetMask {
+    /// Project the headdress, reference and flash targets and drop the pixels they hide.
     #[default]
-    Auto,
-    /// Only `session.toml`.
-    Session,
-    /// Only `truth.json`.
-    Truth,
-    /// The pose stage's output ([`SessionOptions::estimated`]): camera, per-image poses,
-    /// light and standard; known quantities in `session.toml` still take precedence for the
-    /// light and the standard.
-    Estimated,
-}
-
-/// Options of [`derender_session`] besides the [`DerenderConfig`].
-#[derive(Debug, Clone, Default)]
-pub struct SessionOptions {
-    /// Pose source.
-    pub poses: PoseChoice,
+    Printed,
     /// Do not mask the printed targets.
-    pub skip_target_mask: bool,
-    /// The pose stage's result (`skinbrdf_poses::estimate_session`, or `out/poses.json`),
-    /// used with [`PoseChoice::Estimated`].
-    pub estimated: Option<skinbrdf_poses::SessionPoses>,
+    Skip,
 }
 
 /// What [`derender_session`] returns besides the report.
@@ -76,15 +55,13 @@ pub struct SessionRun {
     /// Triangles of the geometry.
     pub triangles: usize,
     /// Where the camera model came from.
-    pub camera_source: &'static str,
+    pub camera_source: PoseSource,
     /// Where the light position came from.
-    pub light_source: &'static str,
+    pub light_source: PoseSource,
     /// Where C came from.
-    pub c_source: &'static str,
-}
-
-fn input<T>(v: Option<T>, what: &str) -> Result<T, DerenderError> {
-    v.ok_or_else(|| DerenderError::Input(what.to_string()))
+    pub c_source: CalibrationSource,
+    /// Measurement images left out for want of poses.
+    pub unposed: Vec<usize>,
 }
 
 /// Loads the session's geometry as a mesh in metres (head frame).
@@ -243,302 +220,43 @@ pub fn target_depths(
     depth
 }
 
-/// Resolves every input from the session (and `truth.json` where allowed).
-pub fn session_inputs(
-    session: &Session,
-    truth: Option<&Truth>,
-    opts: &SessionOptions,
-) -> Result<(DerenderInputs, [&'static str; 3]), DerenderError> {
-    let f = &session.file;
-    if opts.poses == PoseChoice::Estimated {
-        return estimated_inputs(session, opts);
-    }
-    let use_truth = opts.poses != PoseChoice::Session;
-    let truth_ok = truth.filter(|_| use_truth);
-    let (camera, camera_source) = match (f.camera.model(), truth_ok) {
-        (Some(m), _) => (*m, "session"),
-        (None, Some(t)) => (t.camera, "truth"),
-        (None, None) => {
-            return Err(DerenderError::Input(
-                "the camera is not calibrated in session.toml and there is no truth.json".into(),
-            ))
-        }
-    };
-    let meas: Vec<usize> = session
-        .images_with_role(ImageRole::Measurement)
-        .map(|(i, _)| i)
-        .collect();
-    if meas.is_empty() {
-        return Err(DerenderError::Input(
-            "the session has no measurement images".into(),
-        ));
-    }
-    let first_head = meas
-        .iter()
-        .find_map(|&i| f.images[i].world_from_head)
-        .unwrap_or(Pose::IDENTITY);
-    let session_pose = |i: usize| -> Option<ImagePoses> {
-        let e = &f.images[i];
-        let head = e
-            .world_from_head
-            .or(f.known.stationary_sample.then_some(first_head))?;
-        Some(ImagePoses {
-            world_from_camera: e.world_from_camera?,
-            world_from_head: head,
-        })
-    };
-    let truth_pose = |i: usize| -> Option<ImagePoses> {
-        let t = truth_ok?.image(&f.images[i].file)?;
-        Some(ImagePoses {
-            world_from_camera: t.world_from_camera,
-            world_from_head: t.world_from_head,
-        })
-    };
-    let all_session = meas.iter().all(|&i| session_pose(i).is_some());
-    let (measurements, pose_source) = match opts.poses {
-        PoseChoice::Session | PoseChoice::Auto if all_session => (
-            meas.iter()
-                .filter_map(|&i| Some((i, session_pose(i)?)))
-                .collect::<Vec<_>>(),
-            PoseSource::Session,
-        ),
-        PoseChoice::Session => {
-            return Err(DerenderError::Input(
-                "some measurement images have no world_from_camera/world_from_head in session.toml (run the pose stage)".into(),
-            ))
-        }
-        _ => {
-            let mut v = Vec::new();
-            for &i in &meas {
-                let p = input(
-                    truth_pose(i),
-                    &format!(
-                        "image {i} ({}): no poses in session.toml or truth.json (run the pose stage)",
-                        f.images[i].file
-                    ),
-                )?;
-                v.push((i, p));
-            }
-            (v, PoseSource::Truth)
-        }
-    };
-    let (light_position_m, light_source) = if let Some(l) = f.known.light_position_m {
-        (l, "session known.light_position_m")
-    } else if let Some(wff) = f.known.world_from_flash {
-        (
-            wff.transform_point(f.flash.light_centre_m),
-            "session known.world_from_flash",
-        )
-    } else {
-        (
-            input(
-                truth_ok.map(|t| t.light_position_m),
-                "no light position (known.light_position_m / world_from_flash) and no truth.json",
-            )?,
-            "truth",
-        )
-    };
-    let (calibration, c_source) = if let Some(c) = f.known.calibration_c {
-        (CalibrationInput::Known(c), "session known.calibration_c")
-    } else {
-        let std = input(
-            f.standard.as_ref(),
-            "no known.calibration_c and no [standard] to calibrate from",
-        )?;
-        let world_from_standard = match f.known.world_from_standard {
-            Some(p) => p,
-            None => input(
-                truth_ok.map(|t| t.world_from_standard),
-                "no known.world_from_standard and no truth.json",
-            )?,
-        };
-        let mut images = Vec::new();
-        for (i, e) in session.images_with_role(ImageRole::ReferenceStandard) {
-            let wfc = match e.world_from_camera {
-                Some(p) => p,
-                None => input(
-                    truth_ok
-                        .and_then(|t| t.image(&e.file))
-                        .map(|t| t.world_from_camera),
-                    &format!("standard image {i} ({}): no camera pose", e.file),
-                )?,
-            };
-            images.push((i, wfc));
-        }
-        if images.is_empty() {
-            return Err(DerenderError::Input(
-                "no reference-standard images and no known.calibration_c".into(),
-            ));
-        }
-        (
-            CalibrationInput::Standard {
-                brdf: std.brdf.clone(),
-                size_m: std.size_m,
-                world_from_standard,
-                images,
-            },
-            "reference standard (equation 3)",
-        )
-    };
-    Ok((
-        DerenderInputs {
-            camera,
-            light_position_m,
-            calibration,
-            measurements,
-            pose_source,
-        },
-        [camera_source, light_source, c_source],
-    ))
-}
-
-/// Inputs from the pose stage's result.
-fn estimated_inputs(
-    session: &Session,
-    opts: &SessionOptions,
-) -> Result<(DerenderInputs, [&'static str; 3]), DerenderError> {
-    let f = &session.file;
-    let est = input(
-        opts.estimated.as_ref(),
-        "--poses estimated needs the pose stage's result (out/poses.json)",
-    )?;
-    if est.images.len() != f.images.len() {
-        return Err(DerenderError::Input(format!(
-            "poses.json has {} images but the session has {}",
-            est.images.len(),
-            f.images.len()
-        )));
-    }
-    let mut measurements = Vec::new();
-    for (i, e) in session.images_with_role(ImageRole::Measurement) {
-        let p = &est.images[i];
-        match (&p.world_from_camera, &p.world_from_head) {
-            (Some(c), Some(h)) => measurements.push((
-                i,
-                ImagePoses {
-                    world_from_camera: c.pose,
-                    world_from_head: h.pose,
-                },
-            )),
-            // An image whose poses could not be estimated is skipped (the pose stage reports why).
-            _ => tracing_skip(i, &e.file),
-        }
-    }
-    if measurements.is_empty() {
-        return Err(DerenderError::Input(
-            "the pose stage found poses for no measurement image".into(),
-        ));
-    }
-    let (light_position_m, light_source) = match (f.known.light_position_m, est.light_position_m) {
-        (Some(l), _) => (l, "session known.light_position_m"),
-        (None, Some(l)) => (l, "pose stage"),
-        (None, None) => {
-            return Err(DerenderError::Input(
-                "no light position: neither known nor estimated".into(),
-            ))
-        }
-    };
-    let (calibration, c_source) = if let Some(c) = f.known.calibration_c {
-        (CalibrationInput::Known(c), "session known.calibration_c")
-    } else {
-        let std = input(
-            f.standard.as_ref(),
-            "no known.calibration_c and no [standard]",
-        )?;
-        let world_from_standard = input(
-            f.known
-                .world_from_standard
-                .or(est.world_from_standard.as_ref().map(|p| p.pose)),
-            "no world_from_standard: neither known nor estimated",
-        )?;
-        let images: Vec<(usize, Pose)> = session
-            .images_with_role(ImageRole::ReferenceStandard)
-            .filter_map(|(i, _)| Some((i, est.images[i].world_from_camera.as_ref()?.pose)))
-            .collect();
-        if images.is_empty() {
-            return Err(DerenderError::Input(
-                "no reference-standard image with an estimated camera pose".into(),
-            ));
-        }
-        (
-            CalibrationInput::Standard {
-                brdf: std.brdf.clone(),
-                size_m: std.size_m,
-                world_from_standard,
-                images,
-            },
-            "reference standard (equation 3)",
-        )
-    };
-    Ok((
-        DerenderInputs {
-            camera: est.camera,
-            light_position_m,
-            calibration,
-            measurements,
-            pose_source: PoseSource::Estimated,
-        },
-        ["pose stage", light_source, c_source],
-    ))
-}
-
-fn tracing_skip(index: usize, file: &str) {
-    tracing::warn!("image {index} ({file}) has no estimated poses; skipped");
-}
-
-/// Derenders a session end to end (see the module docs).
+/// Derenders a session end to end with resolved poses (see the module docs).
 pub fn derender_session(
     session: &Session,
-    opts: &SessionOptions,
+    poses: &ResolvedPoses,
+    mask: TargetMask,
     cfg: &DerenderConfig,
 ) -> Result<SessionRun, DerenderError> {
     cfg.validate()?;
     let start = Instant::now();
-    let truth = match session.load_truth() {
-        None => None,
-        Some(r) => Some(r.map_err(|e| DerenderError::Input(e.to_string()))?),
-    };
-    let (inputs, [camera_source, light_source, c_source]) =
-        session_inputs(session, truth.as_ref(), opts)?;
+    let inputs = DerenderInputs::new(session, poses)?;
     let (geom, mesh_report, mesh_load_s) = session_geometry(session, cfg)?;
     let f = &session.file;
     let camera_rays = CameraRays::new(&inputs.camera);
-    let world_from_flash = f
-        .known
-        .world_from_flash
-        .or(opts
-            .estimated
-            .as_ref()
-            .and_then(|e| e.world_from_flash.as_ref().map(|p| p.pose)))
-        .or(truth.as_ref().map(|t| t.world_from_flash));
-    let poses_of = |i: usize| {
-        inputs
-            .measurements
-            .iter()
-            .find(|(k, _)| *k == i)
-            .map(|(_, p)| *p)
-    };
+    let world_from_flash = poses.world_from_flash.map(|p| p.value);
     let loader = |i: usize| -> Result<OwnedImage, DerenderError> {
         let img = session
             .load_image(i)
-            .map_err(|e| DerenderError::Input(e.to_string()))?;
+            .map_err(|error| DerenderError::Image { index: i, error })?;
         let e = &f.images[i];
-        let mask = match &e.mask {
+        let mask_px = match &e.mask {
             Some(m) => {
-                let mk = skinbrdf_session::load_mask(&session.path(m))
-                    .map_err(|e| DerenderError::Input(e.to_string()))?;
+                let file = session.path(m);
+                let mk = skinbrdf_session::load_mask(&file)
+                    .map_err(|error| DerenderError::Mask { index: i, error })?;
                 if (mk.width, mk.height) != (img.width, img.height) {
-                    return Err(DerenderError::Input(format!(
-                        "{m}: mask is {}x{} but the image is {}x{}",
-                        mk.width, mk.height, img.width, img.height
-                    )));
+                    return Err(DerenderError::MaskSize {
+                        file,
+                        mask_px: [mk.width, mk.height],
+                        image_px: [img.width, img.height],
+                    });
                 }
                 Some(mk.data)
             }
             None => None,
         };
-        let targets = match poses_of(i) {
-            Some(p) if !opts.skip_target_mask => {
+        let targets = match poses.image(i) {
+            Some(p) if mask == TargetMask::Printed => {
                 let cam_from_world = p.world_from_camera.inverse();
                 let mut quads: Vec<(Pose, &Target)> = Vec::new();
                 let cfh = cam_from_world * p.world_from_head;
@@ -556,13 +274,15 @@ pub fn derender_session(
             height: img.height,
             rgb: img.rgb,
             saturated: img.saturated,
-            mask,
+            mask: mask_px,
             targets,
         })
     };
     let mut report = derender_with_loader(&geom, &inputs, cfg, loader)?;
     report.times.mesh_load_s = mesh_load_s;
-    if let Some(t) = &truth {
+    // Scoring only: the truth never feeds the derender itself.
+    if let Some(t) = session.load_truth() {
+        let t = t.map_err(|error| DerenderError::Truth { error })?;
         report.truth_error = truth_error(&report.samples, &t.brdf);
     }
     report.times.total_s = start.elapsed().as_secs_f64();
@@ -570,9 +290,10 @@ pub fn derender_session(
         triangles: geom.mesh.indices.len(),
         report,
         mesh_report,
-        camera_source,
-        light_source,
-        c_source,
+        camera_source: poses.camera.source,
+        light_source: poses.light_position_m.source,
+        c_source: inputs.calibration.source(),
+        unposed: poses.unposed.clone(),
     })
 }
 
@@ -583,10 +304,6 @@ pub fn write_samples(
     run: &SessionRun,
     session: &Session,
 ) -> Result<(), DerenderError> {
-    let out = |e: skinbrdf_samples::SamplesError, p: &Path| DerenderError::Output {
-        path: p.to_path_buf(),
-        reason: e.to_string(),
-    };
     let mut header = skinbrdf_samples::SampleHeader::new(
         &format!("skinbrdf derender {}", session.dir.display()),
         &format!(
@@ -600,10 +317,9 @@ pub fn write_samples(
     header.image_count = Some(session.file.images.len() as u32);
     header.calibration_c = Some(run.report.c);
     header.extra = serde_json::to_value(&run.report).unwrap_or(serde_json::Value::Null);
-    skinbrdf_samples::write_samples(path, &header, &run.report.samples)
-        .map_err(|e| out(e, path))?;
+    skinbrdf_samples::write_samples(path, &header, &run.report.samples)?;
     if let Some(c) = csv {
-        skinbrdf_samples::write_csv(c, &run.report.samples).map_err(|e| out(e, c))?;
+        skinbrdf_samples::write_csv(c, &run.report.samples)?;
     }
     Ok(())
 }

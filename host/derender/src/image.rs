@@ -7,7 +7,8 @@
 //!    bounding boxes, grown by [`REGION_MARGIN_PX`], get rays — no ray is spent on pixels that
 //!    cannot see the region. Pixels off the user mask (when given) are dropped before any ray.
 //!    Pixels under a printed target's projection are traced and dropped when the target lies
-//!    in front of the surface point (within [`TARGET_DEPTH_TOL_M`]) or the ray misses the scan.
+//!    in front of the surface point (within [`TARGET_DEPTH_TOL_M`]); a ray that misses the scan
+//!    is `no_surface` whether or not a target projects there.
 //! 2. **Ray.** The pixel centre is undistorted with the camera's table
 //!    ([`skinbrdf_mesh::CameraRays`]: exact nodes every 8 px, bilinear, one Newton step; equal
 //!    to `CameraModel::pixel_ray` within 1e-9 rad); the ray moves to the head frame by
@@ -24,11 +25,12 @@
 //!    from the point (offset [`SHADOW_OFFSET_M`] along the normal) to the light; all of an
 //!    image's shadow rays at once with the coherent any-hit tracer
 //!    ([`skinbrdf_mesh::MeshBvh::occluded_toward_grid`], the per-ray verdict exactly).
-//! 6. **Value.** The linearized pixel value `V`; saturated pixels and pixels with any channel
-//!    below the noise floor are dropped; `rho_c = C_c · D² · V_c / cos θ_i`.
+//! 6. **Value.** The linearized pixel value `V`; saturated pixels, pixels with a NaN or −∞
+//!    channel and pixels with any channel below the noise floor are dropped;
+//!    `rho_c = C_c · D² · V_c / cos θ_i`.
 //!
-//! Every dropped pixel is counted under exactly one reason (the first that applies, in the
-//! order of [`FilterCounts`]).
+//! Every dropped pixel is counted under exactly one reason: the first that is true of it, in
+//! the order documented on [`FilterCounts`].
 
 use glam::{DVec2, DVec3, Vec3};
 use rayon::prelude::*;
@@ -85,17 +87,33 @@ pub struct Measurement<'a> {
 }
 
 /// Why pixels were dropped, and how many were kept.
+///
+/// Every considered pixel is counted exactly once: under the first of these reasons that is
+/// true of it, in this order (the order of the fields and of [`FilterCounts::reasons`]), or as
+/// `kept`. The order follows what is known about the pixel: the mask before any ray, the ray,
+/// what the ray meets, the geometry of the sample, and only then the pixel's value.
+///
+/// 1. `off_mask`: outside the user mask;
+/// 2. `no_ray`: no camera ray (outside the distortion model's invertible range);
+/// 3. `no_surface`: the ray misses the scan (whether or not a printed target projects there:
+///    a target over empty background hides no skin);
+/// 4. `on_target`: a printed target lies in front of the surface point the ray meets;
+/// 5. `back_facing`, 6. `off_region`, 7. `grazing`, 8. `shadowed`: the surface point;
+/// 9. `saturated`: flagged saturated, or a channel is +∞ (an overflowed value);
+/// 10. `non_finite`: a channel is NaN or −∞ (a broken value, not a dark one);
+/// 11. `below_noise_floor`: a finite channel below the noise floor.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 pub struct FilterCounts {
     /// Pixels considered (inside the projected region's bounding box, at the stride).
     pub considered: u64,
     /// Outside the user mask.
     pub off_mask: u64,
-    /// On a printed target that lies in front of the surface point (or the ray misses the
-    /// scan, or has no camera ray).
-    pub on_target: u64,
-    /// Ray hit nothing.
+    /// Pixels with no valid camera ray (outside the distortion model's invertible range).
+    pub no_ray: u64,
+    /// Ray hit nothing (a printed target projecting there does not change that).
     pub no_surface: u64,
+    /// On a printed target that lies in front of the surface point the ray meets.
+    pub on_target: u64,
     /// Hit a back face (ray leaked through the mesh, or the scan's winding is wrong).
     pub back_facing: u64,
     /// Hit outside the region of interest.
@@ -104,14 +122,12 @@ pub struct FilterCounts {
     pub grazing: u64,
     /// Shadowed from the light.
     pub shadowed: u64,
-    /// Saturated pixel.
+    /// Saturated pixel (flagged, or a channel +∞).
     pub saturated: u64,
-    /// A channel NaN or -inf (a damaged or mis-decoded pixel, not a dark one).
+    /// A channel NaN or −∞.
     pub non_finite: u64,
     /// A channel below the noise floor.
     pub below_noise_floor: u64,
-    /// Pixels with no valid camera ray (outside the distortion model's invertible range).
-    pub no_ray: u64,
     /// Samples kept.
     pub kept: u64,
 }
@@ -121,8 +137,9 @@ impl FilterCounts {
     pub fn add(&mut self, o: &Self) {
         self.considered += o.considered;
         self.off_mask += o.off_mask;
-        self.on_target += o.on_target;
+        self.no_ray += o.no_ray;
         self.no_surface += o.no_surface;
+        self.on_target += o.on_target;
         self.back_facing += o.back_facing;
         self.off_region += o.off_region;
         self.grazing += o.grazing;
@@ -130,17 +147,16 @@ impl FilterCounts {
         self.saturated += o.saturated;
         self.non_finite += o.non_finite;
         self.below_noise_floor += o.below_noise_floor;
-        self.no_ray += o.no_ray;
         self.kept += o.kept;
     }
 
-    /// The drop reasons and counts, in filter order.
+    /// The drop reasons and counts, in filter order (see [`FilterCounts`]).
     pub fn reasons(&self) -> [(&'static str, u64); 11] {
         [
             ("off_mask", self.off_mask),
-            ("on_target", self.on_target),
             ("no_ray", self.no_ray),
             ("no_surface", self.no_surface),
+            ("on_target", self.on_target),
             ("back_facing", self.back_facing),
             ("off_region", self.off_region),
             ("grazing", self.grazing),
@@ -149,6 +165,11 @@ impl FilterCounts {
             ("non_finite", self.non_finite),
             ("below_noise_floor", self.below_noise_floor),
         ]
+    }
+
+    /// Pixels dropped, all reasons.
+    pub fn dropped(&self) -> u64 {
+        self.reasons().iter().map(|(_, n)| n).sum()
     }
 }
 
@@ -434,27 +455,19 @@ pub fn derender_image_with_rays(
                 if srow[k] == PixelState::OffMask {
                     continue;
                 }
+                if srow[k] == PixelState::NoRay {
+                    c.no_ray += 1;
+                    continue;
+                }
+                let Some(hit) = hrow[k] else {
+                    c.no_surface += 1;
+                    continue;
+                };
                 let idx = y as usize * w + x as usize;
                 // The nearest printed target along the ray, if any.
                 let target_m = m.targets.map_or(f32::INFINITY, |t| t[idx]);
-                if srow[k] == PixelState::NoRay {
-                    if target_m.is_finite() {
-                        c.on_target += 1;
-                    } else {
-                        c.no_ray += 1;
-                    }
-                    continue;
-                }
                 let hidden_by_target = |surface_m: f64| {
                     target_m.is_finite() && f64::from(target_m) <= surface_m + TARGET_DEPTH_TOL_M
-                };
-                let Some(hit) = hrow[k] else {
-                    if target_m.is_finite() {
-                        c.on_target += 1;
-                        continue;
-                    }
-                    c.no_surface += 1;
-                    continue;
                 };
                 let d_ray = drow[k].as_dvec3();
                 if hidden_by_target(f64::from(hit.t_m) * d_ray.length()) {
@@ -554,7 +567,7 @@ pub fn derender_image_with_rays(
                     c.non_finite += 1;
                     continue;
                 }
-                if v.iter().any(|&ch| (ch as f64) < cfg.noise_floor) {
+                if v.iter().any(|&ch| f64::from(ch) < cfg.noise_floor) {
                     c.below_noise_floor += 1;
                     continue;
                 }

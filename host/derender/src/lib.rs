@@ -15,32 +15,37 @@
 //! * [`calibrate`]: C from the standard's pixels, robust average with its spread.
 //! * [`session`]: the whole derender from plain data ([`derender_with_loader`]: poses per
 //!   image, light, C or the standard, images loaded one at a time), timings per stage.
+//! * [`poses`]: the poses as plain, already-resolved data ([`ResolvedPoses`], each quantity
+//!   with its [`PoseSource`]) and the one constructor of [`DerenderInputs`] from a session.
 //! * [`from_session`]: the same from a `skinbrdf-session` directory ([`derender_session`]),
 //!   with, when `truth.json` is present, the samples' error against the true BRDF.
 //! * [`figures`]: coverage figures (pixels used per image; the exitant hemisphere for one θ_i
 //!   with the reciprocal samples in another colour), PNG and SVG.
 //!
 //! The API takes poses as plain data (`world_from_camera`, `world_from_head` per image, the
-//! light position in the world), so it works from known poses before pose estimation exists.
+//! light position in the world): where they come from (the session, the pose stage, the
+//! truth) is decided by the caller (the pipeline's `pose_inputs`), not here.
 
 pub mod calibrate;
 pub mod figures;
 pub mod from_session;
 pub mod geometry;
 pub mod image;
+pub mod poses;
 pub mod session;
 pub mod stats;
 
 pub use calibrate::{calibrate_c, CEstimator, Calibration, StandardImage};
-pub use from_session::{derender_session, PoseChoice, SessionOptions, SessionRun};
+pub use from_session::{derender_session, SessionRun, TargetMask};
 pub use geometry::{Geometry, Roi};
 pub use image::{
     derender_image, derender_image_with_rays, region_pixels, FilterCounts, ImageSamples, ImageView,
     Measurement, RegionPixels,
 };
+pub use poses::{ResolvedImage, ResolvedPoses, ResolvedStandard, Sourced};
 pub use session::{
-    derender_with_loader, CalibrationInput, DerenderInputs, DerenderReport, ImagePoses, OwnedImage,
-    PoseSource, StageTimes,
+    derender_with_loader, CalibrationInput, CalibrationSource, DerenderInputs, DerenderReport,
+    ImagePoses, OwnedImage, PoseSource, StageTimes,
 };
 pub use stats::RobustStats;
 
@@ -49,7 +54,8 @@ use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::BrdfSample;
 use skinbrdf_mesh::{BuildQuality, NormalMethod};
 
-/// Errors of derendering.
+/// Errors of derendering. Each names what is wrong and, where there is one, the file; a
+/// wrapped error is printed in the message (and not also exposed as `source`).
 #[derive(Debug, thiserror::Error)]
 pub enum DerenderError {
     /// The mesh could not be used.
@@ -58,19 +64,136 @@ pub enum DerenderError {
     /// No scan vertex lies in the region of interest.
     #[error("the region of interest contains no vertex of the scan")]
     EmptyRegion,
-    /// C could not be estimated.
-    #[error("calibration: {0}")]
-    Calibration(String),
-    /// A session input is missing or unusable.
-    #[error("{0}")]
-    Input(String),
-    /// Writing an output failed.
-    #[error("{path}: {reason}")]
-    Output {
-        /// The file.
-        path: std::path::PathBuf,
-        /// What went wrong.
-        reason: String,
+    /// A setting of [`DerenderConfig`] is out of range.
+    #[error("{setting} = {value}: {requirement}")]
+    Config {
+        /// The setting.
+        setting: ConfigSetting,
+        /// Its value.
+        value: f64,
+        /// What it must satisfy, and why.
+        requirement: &'static str,
+    },
+    /// Too few pixels of the reflectance standard passed the filters to estimate C.
+    #[error(
+        "calibration: only {pixels} usable pixels on the reflectance standard in {images} \
+         image(s) (need {needed})"
+    )]
+    TooFewStandardPixels {
+        /// Usable pixels found.
+        pixels: usize,
+        /// Standard images searched.
+        images: usize,
+        /// Pixels needed.
+        needed: usize,
+    },
+    /// A channel's per-pixel C values were all non-finite.
+    #[error("calibration: channel {channel}: no finite C value")]
+    NoFiniteC {
+        /// The channel (0 = red).
+        channel: usize,
+    },
+    /// A session input derendering needs is missing.
+    #[error("{file}: {missing}", file = file.display())]
+    Missing {
+        /// The file that should provide it (`session.toml`, `truth.json`).
+        file: std::path::PathBuf,
+        /// What is missing.
+        missing: MissingInput,
+    },
+    /// An image could not be loaded.
+    #[error("images[{index}]: {error}")]
+    Image {
+        /// Session image index.
+        index: usize,
+        /// The loader's error (names the file).
+        error: skinbrdf_session::FileError,
+    },
+    /// A user mask could not be loaded.
+    #[error("images[{index}].mask: {error}")]
+    Mask {
+        /// Session image index.
+        index: usize,
+        /// The loader's error (names the file).
+        error: skinbrdf_session::FileError,
+    },
+    /// A user mask's size differs from its image's.
+    #[error(
+        "{file}: mask is {}x{} but the image is {}x{}",
+        mask_px[0], mask_px[1], image_px[0], image_px[1], file = file.display()
+    )]
+    MaskSize {
+        /// The mask file.
+        file: std::path::PathBuf,
+        /// Mask width and height, pixels.
+        mask_px: [u32; 2],
+        /// Image width and height, pixels.
+        image_px: [u32; 2],
+    },
+    /// `truth.json` exists but could not be read (it is read for scoring only).
+    #[error("scoring: {error}")]
+    Truth {
+        /// The loader's error (names the file).
+        error: skinbrdf_session::FileError,
+    },
+    /// A session image index does not fit the samples' 16-bit image index.
+    #[error("image index {index} exceeds 65535 (samples store it in 16 bits)")]
+    ImageIndex {
+        /// The index.
+        index: usize,
+    },
+    /// Writing the samples failed.
+    #[error(transparent)]
+    Output(#[from] skinbrdf_samples::SamplesError),
+}
+
+/// A setting of [`DerenderConfig`] (named in [`DerenderError::Config`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum ConfigSetting {
+    /// [`DerenderConfig::grazing_limit_deg`].
+    GrazingLimitDeg,
+    /// [`DerenderConfig::noise_floor`].
+    NoiseFloor,
+    /// [`DerenderConfig::stride`].
+    Stride,
+}
+
+impl std::fmt::Display for ConfigSetting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::GrazingLimitDeg => "grazing_limit_deg",
+            Self::NoiseFloor => "noise_floor",
+            Self::Stride => "stride",
+        })
+    }
+}
+
+/// What a session lacks for derendering (named in [`DerenderError::Missing`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MissingInput {
+    /// C is not known and there is no standard to calibrate from.
+    #[error("no known.calibration_c and no [standard] to calibrate from")]
+    Calibration,
+    /// C is to come from the standard but its pose, or every standard image's camera pose, is
+    /// unknown.
+    #[error(
+        "no known.calibration_c, and the reflectance standard's pose or every \
+         reference-standard image's camera pose is unknown"
+    )]
+    StandardPoses,
+    /// No measurement image has both poses.
+    #[error("no measurement image has both a camera and a head pose ({unposed} without)")]
+    PosedMeasurement {
+        /// Measurement images without poses.
+        unposed: usize,
+    },
+    /// `truth.json` has no entry for an image.
+    #[error("no entry for images[{index}] ({image})")]
+    ImageTruth {
+        /// Session image index.
+        index: usize,
+        /// Its file.
+        image: String,
     },
 }
 
@@ -133,20 +256,33 @@ impl DerenderConfig {
 
     /// Checks ranges.
     pub fn validate(&self) -> Result<(), DerenderError> {
+        let bad = |setting, value, requirement| {
+            Err(DerenderError::Config {
+                setting,
+                value,
+                requirement,
+            })
+        };
         if !(self.grazing_limit_deg > 0.0 && self.grazing_limit_deg < 90.0) {
-            return Err(DerenderError::Input(format!(
-                "grazing limit {}° must be in (0, 90): cos θ must stay bounded away from 0",
-                self.grazing_limit_deg
-            )));
+            return bad(
+                ConfigSetting::GrazingLimitDeg,
+                self.grazing_limit_deg,
+                "must be in (0, 90) degrees: cos θ must stay bounded away from 0",
+            );
         }
         if !(self.noise_floor.is_finite() && self.noise_floor >= 0.0) {
-            return Err(DerenderError::Input(format!(
-                "noise floor {} must be finite and non-negative",
-                self.noise_floor
-            )));
+            return bad(
+                ConfigSetting::NoiseFloor,
+                self.noise_floor,
+                "must be finite and non-negative",
+            );
         }
         if self.stride == 0 {
-            return Err(DerenderError::Input("stride must be at least 1".into()));
+            return bad(
+                ConfigSetting::Stride,
+                f64::from(self.stride),
+                "must be at least 1",
+            );
         }
         Ok(())
     }

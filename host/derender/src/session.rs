@@ -25,15 +25,44 @@ pub struct ImagePoses {
     pub world_from_head: Pose,
 }
 
-/// Where the poses came from (reported).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+/// Where a pose (or the camera, the light, the standard's pose) came from. Ordered from the
+/// most direct to the least: a set of poses is reported by its least direct member.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
 pub enum PoseSource {
-    /// `truth.json` (synthetic sessions).
-    Truth,
-    /// Known poses in `session.toml`.
+    /// Known in `session.toml` (a stationary sample's head frame included).
     Session,
-    /// The pose stage's `poses.json`.
+    /// The pose stage's result (`poses.json`).
     Estimated,
+    /// `truth.json` (synthetic sessions; only when asked for).
+    Truth,
+}
+
+impl std::fmt::Display for PoseSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Session => "session.toml",
+            Self::Estimated => "the pose stage",
+            Self::Truth => "truth.json",
+        })
+    }
+}
+
+/// Where C came from (reported).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum CalibrationSource {
+    /// `known.calibration_c` in `session.toml`.
+    Known,
+    /// The reference standard's images (equation 3).
+    Standard,
+}
+
+impl std::fmt::Display for CalibrationSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Known => "session known.calibration_c",
+            Self::Standard => "reference standard (equation 3)",
+        })
+    }
 }
 
 /// A decoded linear image owned by the caller's loader.
@@ -85,7 +114,18 @@ pub enum CalibrationInput {
     },
 }
 
-/// Everything derendering needs besides the geometry and the pixels.
+impl CalibrationInput {
+    /// Where C comes from.
+    pub fn source(&self) -> CalibrationSource {
+        match self {
+            Self::Known(_) => CalibrationSource::Known,
+            Self::Standard { .. } => CalibrationSource::Standard,
+        }
+    }
+}
+
+/// Everything derendering needs besides the geometry and the pixels (built from a session by
+/// [`DerenderInputs::new`]).
 #[derive(Debug, Clone)]
 pub struct DerenderInputs {
     /// The calibrated camera.
@@ -96,7 +136,7 @@ pub struct DerenderInputs {
     pub calibration: CalibrationInput,
     /// `(session image index, poses)` per measurement image.
     pub measurements: Vec<(usize, ImagePoses)>,
-    /// Where the poses came from.
+    /// Where the measurement poses came from (the least direct of them).
     pub pose_source: PoseSource,
 }
 
@@ -250,8 +290,7 @@ pub fn derender_with_loader(
         for ((i, poses), img) in chunk.iter().zip(loaded) {
             let img = img?;
             let t = Instant::now();
-            let index = u16::try_from(*i)
-                .map_err(|_| DerenderError::Input(format!("image index {i} exceeds 65535")))?;
+            let index = u16::try_from(*i).map_err(|_| DerenderError::ImageIndex { index: *i })?;
             let m = Measurement {
                 image_index: index,
                 image: img.view(),

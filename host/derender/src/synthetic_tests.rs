@@ -208,8 +208,7 @@ fn noise_free_sphere_derenders_within_half_a_percent() {
     let e = truth_error(&r.samples, &brdf()).unwrap();
     assert!(e.median_rel_error < 0.005, "{e:?}");
     // Counts add up.
-    let dropped: u64 = r.counts.reasons().iter().map(|(_, n)| n).sum();
-    assert_eq!(dropped + r.counts.kept, r.counts.considered);
+    assert_eq!(r.counts.dropped() + r.counts.kept, r.counts.considered);
 }
 
 #[test]
@@ -267,8 +266,7 @@ fn saturation_floor_and_masks_are_counted() {
             && c.non_finite > 0,
         "{c:?}"
     );
-    let dropped: u64 = c.reasons().iter().map(|(_, n)| n).sum();
-    assert_eq!(dropped + c.kept, c.considered);
+    assert_eq!(c.dropped() + c.kept, c.considered);
     for smp in &r.samples {
         let i = smp.pixel[1] as usize * img.width as usize + smp.pixel[0] as usize;
         assert!(i % 7 != 0 && i % 5 != 0 && i % 11 != 0 && i % 13 != 0);
@@ -295,7 +293,71 @@ fn bad_config_is_refused() {
     ] {
         assert!(matches!(
             derender_with_loader(&geom, &s.inputs, &cfg, |i| Ok(s.images[i].clone())),
-            Err(DerenderError::Input(_))
+            Err(DerenderError::Config { .. })
         ));
     }
+}
+
+/// One measurement image with known C: the counts of `img` derendered alone.
+fn counts_of(img: &OwnedImage) -> FilterCounts {
+    let s = scene();
+    let geom = geometry(NormalMethod::Vertex);
+    let mut inputs = s.inputs.clone();
+    inputs.calibration = CalibrationInput::Known(C_TRUE);
+    inputs.measurements.truncate(1);
+    let r = derender_with_loader(
+        &geom,
+        &inputs,
+        &DerenderConfig::DEFAULT,
+        |_| Ok(img.clone()),
+    )
+    .unwrap();
+    assert_eq!(r.counts.dropped() + r.counts.kept, r.counts.considered);
+    r.counts
+}
+
+#[test]
+fn a_ray_that_misses_the_scan_under_a_target_counts_no_surface() {
+    let clean = scene().images[0].clone();
+    let base = counts_of(&clean);
+    // The region's bounding box reaches past the sphere's outline: some rays miss it.
+    assert!(base.no_surface > 0, "{base:?}");
+    // A target at distance 0 hides every surface: it projects onto every pixel.
+    let mut img = clean.clone();
+    img.targets = Some(vec![0.0; img.rgb.len()]);
+    let c = counts_of(&img);
+    assert_eq!(c.no_surface, base.no_surface, "{c:?}");
+    assert_eq!(c.kept, 0, "{c:?}");
+    assert_eq!(
+        c.on_target,
+        base.considered - base.off_mask - base.no_ray - base.no_surface,
+        "{c:?}"
+    );
+}
+
+#[test]
+fn non_finite_values_are_not_below_the_noise_floor() {
+    let clean = scene().images[0].clone();
+    let base = counts_of(&clean);
+    let mut img = clean.clone();
+    let mut poisoned = 0u64;
+    for (i, v) in img.rgb.iter_mut().enumerate() {
+        // Only pixels that were kept: each moves from kept to one reason.
+        if i % 13 == 0
+            && v.iter()
+                .all(|&c| f64::from(c) >= DerenderConfig::DEFAULT.noise_floor)
+        {
+            v[i % 3] = if i % 2 == 0 {
+                f32::NAN
+            } else {
+                f32::NEG_INFINITY
+            };
+            poisoned += 1;
+        }
+    }
+    let c = counts_of(&img);
+    assert!(c.non_finite > 0, "{c:?}");
+    assert_eq!(c.below_noise_floor, base.below_noise_floor, "{c:?}");
+    assert_eq!(c.kept + c.non_finite, base.kept, "{c:?}");
+    assert!(c.non_finite <= poisoned);
 }

@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use skinbrdf_derender::{derender_session, DerenderConfig, PoseChoice, SessionOptions};
+use skinbrdf_derender::{derender_session, DerenderConfig, ResolvedPoses, TargetMask};
 use skinbrdf_session::Session;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
@@ -35,25 +35,10 @@ fn no_kept_sample_sees_a_printed_target() {
     let session = Session::load(&dir.0).expect("session");
     let truth = session.load_truth().expect("truth.json").expect("truth");
     let cfg = DerenderConfig::DEFAULT;
-    let masked = derender_session(
-        &session,
-        &SessionOptions {
-            poses: PoseChoice::Truth,
-            ..Default::default()
-        },
-        &cfg,
-    )
-    .expect("derender");
-    let unmasked = derender_session(
-        &session,
-        &SessionOptions {
-            poses: PoseChoice::Truth,
-            skip_target_mask: true,
-            ..Default::default()
-        },
-        &cfg,
-    )
-    .expect("derender without the mask");
+    let poses = ResolvedPoses::from_truth(&session, &truth).expect("truth poses");
+    let masked = derender_session(&session, &poses, TargetMask::Printed, &cfg).expect("derender");
+    let unmasked = derender_session(&session, &poses, TargetMask::Skip, &cfg)
+        .expect("derender without the mask");
     // The truth: pixels touching any printed target (paper included), per image.
     let on_target = |samples: &[skinbrdf_core::BrdfSample]| {
         let mut masks = std::collections::HashMap::new();
@@ -85,6 +70,5 @@ fn no_kept_sample_sees_a_printed_target() {
         r.counts.kept,
         r.counts
     );
-    let dropped: u64 = r.counts.reasons().iter().map(|(_, n)| n).sum();
-    assert_eq!(dropped + r.counts.kept, r.counts.considered);
+    assert_eq!(r.counts.dropped() + r.counts.kept, r.counts.considered);
 }

@@ -20,8 +20,9 @@ use std::time::Instant;
 
 use glam::{DVec2, Vec3};
 use skinbrdf_brdf::{BrdfModel, ChannelModel, Geom, ModelSpec, ParamBound, StartHint};
+use skinbrdf_core::stats::median;
 use skinbrdf_core::BrdfSample;
-use skinbrdf_derender::{DerenderConfig, PoseChoice, SessionOptions};
+use skinbrdf_derender::DerenderConfig;
 use skinbrdf_fit::loess::{choose_span_gcv, Bandwidth, Loess, LoessConfig};
 use skinbrdf_fit::plot::{write_figure, Figure, Panel, Series, SeriesKind};
 use skinbrdf_fit::report::SPAN_CANDIDATES;
@@ -43,8 +44,13 @@ pub enum BenchError {
     #[error("synthesis: {0}")]
     Synth(#[from] skinbrdf_synth::SynthError),
     /// The session did not load.
-    #[error("session: {0}")]
-    Session(String),
+    #[error("{dir}: the session is not valid:\n{source}")]
+    Session {
+        /// Session directory.
+        dir: PathBuf,
+        /// Every problem.
+        source: skinbrdf_session::SessionErrors,
+    },
     /// The bench needs a `truth.json`.
     #[error("{0}: the bench needs a synthetic session with truth.json")]
     NoTruth(PathBuf),
@@ -54,6 +60,9 @@ pub enum BenchError {
     /// Derendering.
     #[error("derendering: {0}")]
     Derender(#[from] skinbrdf_derender::DerenderError),
+    /// Resolving the poses for derendering, or derendering, failed.
+    #[error(transparent)]
+    DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Ray casting.
     #[error("ray casting: {0}")]
     Mesh(#[from] skinbrdf_mesh::MeshError),
@@ -69,6 +78,8 @@ pub enum BenchError {
     /// Output.
     #[error(transparent)]
     Output(#[from] crate::ledger::LedgerError),
+    #[error(transparent)]
+    Stage(#[from] Box<crate::process::ProcessError>),
 }
 
 /// Settings of the bench.
@@ -86,11 +97,36 @@ pub struct BenchConfig {
     pub quick: bool,
 }
 
+/// The stage a bench row measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BenchStage {
+    /// Pixels to samples.
+    Derender,
+    /// BVH build and primary-ray traversal.
+    RayCasting,
+    /// Local quadratic regression.
+    Smoothing,
+    /// The model fit.
+    Fit,
+}
+
+impl std::fmt::Display for BenchStage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            BenchStage::Derender => "derender",
+            BenchStage::RayCasting => "ray casting",
+            BenchStage::Smoothing => "smoothing",
+            BenchStage::Fit => "fit",
+        })
+    }
+}
+
 /// One measured setting.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct BenchRow {
     /// Stage affected.
-    pub stage: &'static str,
+    pub stage: BenchStage,
     /// Setting swept.
     pub setting: &'static str,
     /// Its value.
@@ -122,15 +158,6 @@ pub struct BenchOutput {
     pub files: Vec<PathBuf>,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Median relative error (percent) of `model` against `truth` at the samples' angles.
 pub fn model_error_pct(model: &BrdfModel, truth: &BrdfModel, samples: &[BrdfSample]) -> f64 {
     let step = (samples.len() / 20_000).max(1);
@@ -150,18 +177,18 @@ pub fn model_error_pct(model: &BrdfModel, truth: &BrdfModel, samples: &[BrdfSamp
                 .map(move |c| ((f[c] - t[c]) / t[c]).abs())
         })
         .collect();
-    median(errs) * 100.0
+    median(&errs) * 100.0
 }
 
 fn mark_pareto(rows: &mut [BenchRow]) {
-    let snapshot: Vec<(String, f64, f64)> = rows
+    let snapshot: Vec<(BenchStage, f64, f64)> = rows
         .iter()
-        .map(|r| (r.stage.to_string(), r.time_s, r.error_pct))
+        .map(|r| (r.stage, r.time_s, r.error_pct))
         .collect();
     for r in rows.iter_mut() {
         r.pareto = r.error_pct.is_finite()
             && !snapshot.iter().any(|(st, t, e)| {
-                st == r.stage
+                *st == r.stage
                     && *t <= r.time_s
                     && *e <= r.error_pct
                     && (*t < r.time_s || *e < r.error_pct)
@@ -295,7 +322,7 @@ fn smoother_error_pct(l: &Loess, floor: f64, truth: &BrdfModel, held_out: &[Brdf
             (t > 0.0 && v.is_finite()).then(|| ((v - t) / t).abs())
         })
         .collect();
-    median(errs) * 100.0
+    median(&errs) * 100.0
 }
 
 /// The smoother's inputs: `n` evenly strided samples as (theta_i, theta_e, phi_d) and
@@ -320,7 +347,7 @@ fn smoother_data(samples: &[BrdfSample], n: usize) -> (Vec<Vec<f64>>, Vec<f64>, 
         .iter()
         .map(|&i| f64::from(samples[i].rho.iter().sum::<f32>()) / 3.0)
         .collect();
-    let floor = (0.01 * median(raw.clone())).max(1e-9);
+    let floor = (0.01 * median(&raw)).max(1e-9);
     let y = raw.iter().map(|v| (v.max(0.0) + floor).ln()).collect();
     (x, y, floor)
 }
@@ -344,14 +371,14 @@ fn write_outputs(
     );
     let mut csv =
         String::from("stage,setting,value,error_name,error_pct,time_s,samples,default,pareto\n");
-    let mut last_stage = "";
+    let mut last_stage = None;
     for r in rows {
-        if r.stage != last_stage {
+        if Some(r.stage) != last_stage {
             md.push_str(&format!(
                 "| **{}** | | | *{}* | | | |\n",
                 r.stage, r.error_name
             ));
-            last_stage = r.stage;
+            last_stage = Some(r.stage);
         }
         md.push_str(&format!(
             "| {} | {} | {}{} | {:.3} | {:.3} | {} | {} |\n",
@@ -383,7 +410,7 @@ fn write_outputs(
     let p = cfg.out_dir.join("table.csv");
     write_atomic(&p, csv.as_bytes())?;
     files.push(p);
-    let panel = |stage: &str| -> Panel {
+    let panel = |stage: BenchStage| -> Panel {
         let mut settings: Vec<&'static str> = Vec::new();
         for r in rows.iter().filter(|r| r.stage == stage) {
             if !settings.contains(&r.setting) {
@@ -426,14 +453,14 @@ fn write_outputs(
             series,
         }
     };
-    let mut stages: Vec<&'static str> = Vec::new();
+    let mut stages: Vec<BenchStage> = Vec::new();
     for r in rows {
         if !stages.contains(&r.stage) {
             stages.push(r.stage);
         }
     }
     let fig = Figure {
-        panels: stages.iter().map(|s| panel(s)).collect(),
+        panels: stages.iter().map(|&s| panel(s)).collect(),
         panel_px: (640, 480),
     };
     files.extend(write_figure(&cfg.out_dir.join("pareto"), &fig)?);
@@ -465,7 +492,10 @@ pub fn run_bench(cfg: &BenchConfig, log: &mut dyn FnMut(&str)) -> Result<BenchOu
             d
         }
     };
-    let session = Session::load(&dir).map_err(|e| BenchError::Session(e.to_string()))?;
+    let session = Session::load(&dir).map_err(|source| BenchError::Session {
+        dir: dir.clone(),
+        source,
+    })?;
     let truth = match session.load_truth() {
         Some(Ok(t)) => t,
         _ => return Err(BenchError::NoTruth(dir.clone())),
@@ -476,7 +506,7 @@ pub fn run_bench(cfg: &BenchConfig, log: &mut dyn FnMut(&str)) -> Result<BenchOu
     let poses: SessionPoses = skinbrdf_poses::estimate_session(&session, &PoseConfig::DEFAULT)?;
     let poses_s = t.elapsed().as_secs_f64();
     let cam_err_mm =
-        median(skinbrdf_poses::session::compare_truth(&poses, &truth).camera_position_error_m)
+        median(&skinbrdf_poses::session::compare_truth(&poses, &truth).camera_position_error_m)
             * 1e3;
 
     let mut rows = Vec::new();
@@ -529,29 +559,27 @@ fn sweep_derender(
                         default: bool|
      -> Result<Vec<BrdfSample>, BenchError> {
         log(&format!("derender {setting} = {value}"));
-        let opts = SessionOptions {
-            poses: PoseChoice::Estimated,
-            skip_target_mask: false,
-            estimated: Some(p.clone()),
-        };
-        let run = skinbrdf_derender::derender_session(s, &opts, &c)?;
+        // The pipeline's own derender stage, with this row's settings.
+        let (run, samples) =
+            crate::stages::derender_stage(s, Some(p), &c, &crate::plan::PlanOptions::default())
+                .map_err(Box::new)?;
         let err = run
             .report
             .truth_error
             .as_ref()
             .map_or(f64::NAN, |e| e.median_rel_error * 100.0);
         rows.push(BenchRow {
-            stage: "derender",
+            stage: BenchStage::Derender,
             setting,
             value,
             error_name: "sample median rel. error vs true BRDF",
             error_pct: err,
             time_s: run.report.times.total_s,
-            samples: run.report.samples.len(),
+            samples: samples.len(),
             default,
             pareto: false,
         });
-        Ok(run.report.samples)
+        Ok(samples)
     };
     let base_samples = derender("defaults", "-".into(), session, poses, base, true)?;
 
@@ -672,7 +700,7 @@ fn sweep_derender(
     }
     let base_err = rows
         .iter()
-        .find(|r| r.default && r.stage == "derender")
+        .find(|r| r.default && r.stage == BenchStage::Derender)
         .map_or(f64::NAN, |r| r.error_pct);
 
     // BVH build quality: build over the session's geometry, then cast the primary rays of
@@ -705,7 +733,7 @@ fn sweep_derender(
             reference = Some(hits);
         }
         rows.push(BenchRow {
-            stage: "ray casting",
+            stage: BenchStage::RayCasting,
             setting: "BVH build quality",
             value: format!(
                 "{}: build {:.1} ms + {:.2} M rays {:.1} ms ({:.1} Mrays/s){}",
@@ -776,7 +804,7 @@ fn sweep_smoothing(
         )?;
         let time_s = t.elapsed().as_secs_f64();
         rows.push(BenchRow {
-            stage: "smoothing",
+            stage: BenchStage::Smoothing,
             setting,
             value: if default {
                 format!("{value} (chose {span})")
@@ -836,7 +864,7 @@ fn sweep_fit(
         };
         let time_s = t.elapsed().as_secs_f64();
         rows.push(BenchRow {
-            stage: "fit",
+            stage: BenchStage::Fit,
             setting,
             value,
             error_name: "model median rel. error vs true BRDF",
@@ -918,7 +946,7 @@ fn sweep_fit(
 mod tests {
     use super::*;
 
-    fn row(stage: &'static str, t: f64, e: f64) -> BenchRow {
+    fn row(stage: BenchStage, t: f64, e: f64) -> BenchRow {
         BenchRow {
             stage,
             setting: "s",
@@ -935,11 +963,11 @@ mod tests {
     #[test]
     fn pareto_front_keeps_only_undominated_rows_per_stage() {
         let mut rows = vec![
-            row("a", 1.0, 5.0),
-            row("a", 2.0, 3.0),
-            row("a", 3.0, 4.0),
-            row("b", 10.0, 10.0),
-            row("a", 0.5, f64::NAN),
+            row(BenchStage::Derender, 1.0, 5.0),
+            row(BenchStage::Derender, 2.0, 3.0),
+            row(BenchStage::Derender, 3.0, 4.0),
+            row(BenchStage::Fit, 10.0, 10.0),
+            row(BenchStage::Derender, 0.5, f64::NAN),
         ];
         mark_pareto(&mut rows);
         let front: Vec<bool> = rows.iter().map(|r| r.pareto).collect();

@@ -11,7 +11,6 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::plan::Stage;
 use crate::report::StageReport;
 
 /// Errors of the ledger.
@@ -25,6 +24,14 @@ pub enum LedgerError {
         /// The I/O error.
         #[source]
         source: std::io::Error,
+    },
+    /// Another run is processing the same output directory.
+    #[error("{path}: another run (process {pid}) is using this output directory; wait for it or stop it")]
+    Locked {
+        /// The lock file.
+        path: PathBuf,
+        /// The process holding it.
+        pid: u32,
     },
     /// The ledger file is not valid JSON of the expected shape.
     #[error("{path}: not a valid ledger: {source}")]
@@ -102,22 +109,80 @@ impl FingerprintBuilder {
     }
 }
 
-/// What the ledger remembers of one stage.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LedgerEntry {
-    /// Fingerprint of the inputs it ran on.
-    pub fingerprint: Fingerprint,
-    /// Output files, relative to the `out/` directory.
-    pub outputs: Vec<String>,
-    /// Its report from that run.
-    pub report: StageReport,
+/// The typed units of work the ledger remembers: each produces one or more stages' reports
+/// and a set of output files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Unit {
+    /// Photogrammetry: calibration, camera and head poses, flash, the standard's pose
+    /// (`poses.json`).
+    Poses,
+    /// Scan preparation, shadow rays and derendering (`samples.skbs`).
+    Derender,
+    /// Smoothing and the model fit (`fit/`).
+    Fit,
+    /// The head rendering of the report (`render/`).
+    Render,
 }
 
+/// An output file and the BLAKE3 digest of its contents when it was written.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OutputDigest {
+    /// The file, relative to the output directory.
+    pub file: String,
+    /// BLAKE3 (hex) of its contents.
+    pub blake3: String,
+}
+
+/// What the ledger remembers of one unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LedgerEntry {
+    /// Fingerprint of every input it read.
+    pub fingerprint: Fingerprint,
+    /// Every file it wrote, with its digest.
+    pub outputs: Vec<OutputDigest>,
+    /// Its stages' reports from that run.
+    pub reports: Vec<StageReport>,
+}
+
+/// The ledger's format version: a ledger of another version is ignored (everything reruns).
+pub const LEDGER_VERSION: u32 = 2;
+
 /// `out/ledger.json`.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Ledger {
-    /// Entries by stage.
-    pub stages: BTreeMap<Stage, LedgerEntry>,
+    /// Format version ([`LEDGER_VERSION`]).
+    pub version: u32,
+    /// Entries by unit.
+    pub units: BTreeMap<Unit, LedgerEntry>,
+}
+
+impl Default for Ledger {
+    fn default() -> Self {
+        Self {
+            version: LEDGER_VERSION,
+            units: BTreeMap::new(),
+        }
+    }
+}
+
+/// BLAKE3 (hex) of a file's contents.
+pub fn digest_file(path: &Path) -> Result<String, LedgerError> {
+    let io = |source| LedgerError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut f = std::fs::File::open(path).map_err(io)?;
+    let mut hasher = blake3::Hasher::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = f.read(&mut buf).map_err(io)?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+    }
+    Ok(hasher.finalize().to_hex().to_string())
 }
 
 impl Ledger {
@@ -126,18 +191,34 @@ impl Ledger {
         out_dir.join("ledger.json")
     }
 
-    /// Loads the ledger; a missing file is an empty ledger.
+    /// Loads the ledger. A missing file, or one of another format version, is an empty ledger
+    /// (so everything reruns); a file that is not a ledger at all is an error.
     pub fn load(out_dir: &Path) -> Result<Self, LedgerError> {
+        #[derive(Deserialize)]
+        struct Version {
+            #[serde(default)]
+            version: u32,
+        }
         let path = Self::path(out_dir);
         match std::fs::read(&path) {
-            Ok(bytes) => serde_json::from_slice(&bytes)
-                .map_err(|source| LedgerError::Corrupt { path, source }),
+            Ok(bytes) => {
+                let v: Version =
+                    serde_json::from_slice(&bytes).map_err(|source| LedgerError::Corrupt {
+                        path: path.clone(),
+                        source,
+                    })?;
+                if v.version != LEDGER_VERSION {
+                    return Ok(Self::default());
+                }
+                serde_json::from_slice(&bytes)
+                    .map_err(|source| LedgerError::Corrupt { path, source })
+            }
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(Self::default()),
             Err(source) => Err(LedgerError::Io { path, source }),
         }
     }
 
-    /// Saves atomically (temp file + rename).
+    /// Saves atomically (temp file + rename, both synced).
     pub fn save(&self, out_dir: &Path) -> Result<(), LedgerError> {
         let path = Self::path(out_dir);
         let json = serde_json::to_vec_pretty(self).map_err(|source| LedgerError::Corrupt {
@@ -147,30 +228,115 @@ impl Ledger {
         write_atomic(&path, &json)
     }
 
-    /// The recorded entry if the stage can be reused: same fingerprint, outputs all present.
-    pub fn reusable(&self, stage: Stage, fp: &Fingerprint, out_dir: &Path) -> Option<&LedgerEntry> {
-        let entry = self.stages.get(&stage)?;
-        let fresh =
-            entry.fingerprint == *fp && entry.outputs.iter().all(|o| out_dir.join(o).exists());
-        fresh.then_some(entry)
+    /// The recorded entry if the unit can be reused: the same fingerprint, and every output it
+    /// recorded still on disk with the digest it had when written.
+    pub fn reusable(&self, unit: Unit, fp: &Fingerprint, out_dir: &Path) -> Option<&LedgerEntry> {
+        let entry = self.units.get(&unit)?;
+        if entry.fingerprint != *fp {
+            return None;
+        }
+        let intact = entry
+            .outputs
+            .iter()
+            .all(|o| digest_file(&out_dir.join(&o.file)).is_ok_and(|d| d == o.blake3));
+        intact.then_some(entry)
     }
 
-    /// Records a stage's run.
+    /// Forgets a unit (it is about to rerun: a crash midway must not leave its old entry
+    /// pointing at half-replaced outputs).
+    pub fn forget(&mut self, unit: Unit) {
+        self.units.remove(&unit);
+    }
+
+    /// Records a unit's run: digests its outputs as they are now.
     pub fn record(
         &mut self,
-        stage: Stage,
+        unit: Unit,
         fingerprint: Fingerprint,
-        outputs: Vec<String>,
-        report: StageReport,
-    ) {
-        self.stages.insert(
-            stage,
+        outputs: &[String],
+        reports: Vec<StageReport>,
+        out_dir: &Path,
+    ) -> Result<(), LedgerError> {
+        let outputs = outputs
+            .iter()
+            .map(|f| {
+                Ok(OutputDigest {
+                    file: f.clone(),
+                    blake3: digest_file(&out_dir.join(f))?,
+                })
+            })
+            .collect::<Result<Vec<_>, LedgerError>>()?;
+        self.units.insert(
+            unit,
             LedgerEntry {
                 fingerprint,
                 outputs,
-                report,
+                reports,
             },
         );
+        Ok(())
+    }
+}
+
+/// Exclusive use of an output directory by one run: `out/.lock` holds the run's process id.
+/// A second run on the same directory is refused while the first is alive; a lock left by a
+/// run that died is taken over. Dropping the lock removes the file.
+#[derive(Debug)]
+pub struct RunLock {
+    path: PathBuf,
+}
+
+impl RunLock {
+    /// Takes the lock of `out_dir` or says which process holds it.
+    pub fn acquire(out_dir: &Path) -> Result<Self, LedgerError> {
+        use std::io::Write;
+        let path = out_dir.join(".lock");
+        for _ in 0..2 {
+            match std::fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(&path)
+            {
+                Ok(mut f) => {
+                    let _ = writeln!(f, "{}", std::process::id());
+                    return Ok(Self { path });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let holder = std::fs::read_to_string(&path)
+                        .ok()
+                        .and_then(|s| s.trim().parse::<u32>().ok());
+                    match holder {
+                        Some(pid) if pid_alive(pid) => {
+                            return Err(LedgerError::Locked { path, pid });
+                        }
+                        // The holder is gone (or wrote nothing): take the lock over.
+                        _ => {
+                            let _ = std::fs::remove_file(&path);
+                        }
+                    }
+                }
+                Err(source) => return Err(LedgerError::Io { path, source }),
+            }
+        }
+        Err(LedgerError::Locked { path, pid: 0 })
+    }
+}
+
+impl Drop for RunLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// Whether a process exists (Linux: `/proc/PID`; elsewhere assumed alive).
+fn pid_alive(pid: u32) -> bool {
+    if pid == std::process::id() {
+        return true;
+    }
+    if cfg!(target_os = "linux") {
+        Path::new(&format!("/proc/{pid}")).exists()
+    } else {
+        true
     }
 }
 
@@ -185,17 +351,19 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), LedgerError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::plan::Stage;
 
-    fn report() -> StageReport {
-        StageReport::ran(Stage::Derender, 0.5)
+    fn report() -> Vec<StageReport> {
+        vec![StageReport::ran(Stage::Derender, 0.5)]
     }
 
     #[test]
-    fn reuse_needs_same_inputs_and_existing_outputs() {
+    fn reuse_needs_same_inputs_and_unchanged_outputs() {
         let dir = tempfile::tempdir().unwrap();
         let input = dir.path().join("input.bin");
         std::fs::write(&input, b"abc").unwrap();
-        std::fs::write(dir.path().join("samples.bin"), b"xyz").unwrap();
+        let out = dir.path().join("samples.bin");
+        std::fs::write(&out, b"xyz").unwrap();
         let fp = FingerprintBuilder::new()
             .file(&input)
             .unwrap()
@@ -203,15 +371,18 @@ mod tests {
             .finish();
 
         let mut ledger = Ledger::default();
-        ledger.record(
-            Stage::Derender,
-            fp.clone(),
-            vec!["samples.bin".into()],
-            report(),
-        );
+        ledger
+            .record(
+                Unit::Derender,
+                fp.clone(),
+                &["samples.bin".into()],
+                report(),
+                dir.path(),
+            )
+            .unwrap();
         ledger.save(dir.path()).unwrap();
         let ledger = Ledger::load(dir.path()).unwrap();
-        assert!(ledger.reusable(Stage::Derender, &fp, dir.path()).is_some());
+        assert!(ledger.reusable(Unit::Derender, &fp, dir.path()).is_some());
 
         // Changed input: new fingerprint, not reusable.
         std::fs::write(&input, b"abd").unwrap();
@@ -221,7 +392,7 @@ mod tests {
             .value("cfg", &3)
             .finish();
         assert_ne!(fp, fp2);
-        assert!(ledger.reusable(Stage::Derender, &fp2, dir.path()).is_none());
+        assert!(ledger.reusable(Unit::Derender, &fp2, dir.path()).is_none());
 
         // Changed config: new fingerprint.
         let fp3 = FingerprintBuilder::new()
@@ -231,13 +402,19 @@ mod tests {
             .finish();
         assert_ne!(fp2, fp3);
 
+        // An output changed behind the ledger's back: not reusable.
+        std::fs::write(&out, b"xyZ").unwrap();
+        assert!(ledger.reusable(Unit::Derender, &fp, dir.path()).is_none());
+        std::fs::write(&out, b"xyz").unwrap();
+        assert!(ledger.reusable(Unit::Derender, &fp, dir.path()).is_some());
+
         // Missing output: not reusable.
-        std::fs::remove_file(dir.path().join("samples.bin")).unwrap();
-        assert!(ledger.reusable(Stage::Derender, &fp, dir.path()).is_none());
+        std::fs::remove_file(&out).unwrap();
+        assert!(ledger.reusable(Unit::Derender, &fp, dir.path()).is_none());
     }
 
     #[test]
-    fn corrupt_ledger_is_a_precise_error() {
+    fn corrupt_ledger_is_a_precise_error_and_an_old_one_is_ignored() {
         let dir = tempfile::tempdir().unwrap();
         std::fs::write(Ledger::path(dir.path()), b"{not json").unwrap();
         let err = Ledger::load(dir.path()).unwrap_err().to_string();
@@ -245,6 +422,20 @@ mod tests {
             err.contains("ledger.json") && err.contains("not a valid ledger"),
             "{err}"
         );
+        std::fs::write(Ledger::path(dir.path()), br#"{"stages": {}}"#).unwrap();
+        assert_eq!(Ledger::load(dir.path()).unwrap(), Ledger::default());
+    }
+
+    #[test]
+    fn a_second_run_is_refused_while_the_first_holds_the_lock() {
+        let dir = tempfile::tempdir().unwrap();
+        let lock = RunLock::acquire(dir.path()).unwrap();
+        let err = RunLock::acquire(dir.path()).unwrap_err().to_string();
+        assert!(err.contains("another run"), "{err}");
+        drop(lock);
+        // A lock left by a dead process is taken over.
+        std::fs::write(dir.path().join(".lock"), "4294967295\n").unwrap();
+        assert!(RunLock::acquire(dir.path()).is_ok());
     }
 
     #[test]

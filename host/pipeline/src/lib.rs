@@ -9,11 +9,16 @@
 pub mod bench;
 pub mod demo;
 pub mod ledger;
+pub mod metrics;
 pub mod plan;
+pub mod pose_inputs;
 pub mod process;
 pub mod report;
+pub mod scenes;
+pub mod stages;
 
-pub use ledger::{Fingerprint, Ledger, LedgerError};
+pub use ledger::{Fingerprint, Ledger, LedgerError, RunLock, Unit};
+pub use metrics::StageMetrics;
 pub use plan::{Action, Geometry, Plan, PlanOptions, PlannedStage, SceneFacts, Stage};
 pub use process::{process, Event, ProcessConfig, ProcessError, ProcessOutput};
 pub use report::{Metric, RunReport, StageReport};

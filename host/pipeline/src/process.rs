@@ -1,78 +1,107 @@
-//! `skinbrdf process SESSION_DIR`: the planned pipeline.
+//! `skinbrdf process SESSION_DIR`: the planned pipeline as a loop over its units.
 //!
-//! 1. Load and validate the session; derive [`SceneFacts`] from what it already has.
-//! 2. Derive and announce the [`Plan`].
-//! 3. Photogrammetry (camera calibration, camera poses, head tracking, flash triangulation and
-//!    the standard's pose) through `skinbrdf-poses`, which itself skips every quantity the
-//!    session gives.
-//! 4. Derendering uses the estimated poses (`PoseChoice::Estimated`) or the session's own known
-//!    poses, never the ground truth: truth is only read to score each stage.
-//! 5. Scan preparation (BVH, planar-fit normals, convexity test), derendering, smoothing and
-//!    fitting; then the report.
+//! 1. Load and validate the session; derive [`SceneFacts`] from what it already has, and the
+//!    [`Plan`] from them.
+//! 2. Take the output directory's lock (a second run on it is refused), remove temporary files
+//!    that dead runs left, and load the ledger.
+//! 3. For each unit of [`crate::stages`] in order (photogrammetry, derendering, smoothing and
+//!    fitting, the head rendering): skip it when the plan runs none of its stages; reuse it when
+//!    the fingerprint of every input it reads *and* the digests of every output it wrote match
+//!    the ledger; otherwise run it, and record it in the ledger (written atomically) before the
+//!    next unit starts, so an interrupted run resumes after the last finished unit.
+//! 4. Write `report.md`, `report.html` and `report.json`: the same figures whether a stage ran
+//!    now or was reused.
 //!
-//! Every stage is fingerprinted (see [`crate::ledger`]): running `process` again on unchanged
-//! inputs reuses the previous results.
+//! Derendering uses the pose stage's poses when it ran, else the session's own known poses,
+//! never the ground truth: truth is only read to score each stage.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use skinbrdf_derender::{DerenderConfig, PoseChoice, SessionOptions, SessionRun};
-use skinbrdf_fit::report::{fit_and_report, FitReport, Input, ReportOptions};
+use skinbrdf_derender::DerenderConfig;
+use skinbrdf_fit::report::{FitReport, ReportOptions};
 use skinbrdf_fit::FitConfig;
-use skinbrdf_poses::{PoseConfig, SessionPoses};
-use skinbrdf_samples::SampleHeader;
-use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, Session, Truth};
+use skinbrdf_poses::PoseConfig;
+use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, Session};
 
-use crate::ledger::{write_atomic, FingerprintBuilder, Ledger};
+use crate::ledger::{write_atomic, Ledger, RunLock};
 use crate::plan::{Geometry, Plan, PlanOptions, SceneFacts, Stage};
-use crate::report::{Metric, MetricKind, RunReport, StageReport, StageStatus};
+use crate::report::{Metric, MetricKind, RunReport, StageReport};
+use crate::stages::{Ctx, DerenderUnit, FitUnit, PoseUnit, RenderUnit, StageUnit};
 
-/// Accuracy bounds the issues state for the default scene (reported, not asserted here).
-pub mod bounds {
-    /// Camera position, median, mm.
-    pub const CAMERA_POSITION_MM: f64 = 1.0;
-    /// Camera orientation, median, degrees.
-    pub const CAMERA_ORIENTATION_DEG: f64 = 0.02;
-    /// Head position, median, mm.
-    pub const HEAD_POSITION_MM: f64 = 0.5;
-    /// Flash position, mm.
-    pub const FLASH_POSITION_MM: f64 = 2.0;
-    /// Derendered samples' median relative error against the true BRDF, percent.
-    pub const SAMPLE_MEDIAN_REL_ERROR_PCT: f64 = 3.0;
-}
+pub use crate::metrics::bounds;
+pub use crate::stages::RENDER_FIGURE;
 
 /// Errors of `process`.
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessError {
     /// The session did not load.
-    #[error("{dir}: the session is not valid:\n{problems}")]
+    #[error("{dir}: the session is not valid:\n{source}")]
     Session {
         /// Session directory.
         dir: PathBuf,
-        /// Every problem, one per line.
-        problems: String,
+        /// Every problem.
+        source: skinbrdf_session::SessionErrors,
+    },
+    /// Some images are unreadable or implausible (and `skip_bad_images` is off).
+    #[error("{dir}: unusable images (--skip-bad-images leaves them out and lists them in the report):\n{source}")]
+    Images {
+        /// Session directory.
+        dir: PathBuf,
+        /// One problem per image, naming the file and the cause.
+        source: skinbrdf_session::SessionErrors,
     },
     /// `truth.json` is present but unreadable.
-    #[error("{0}")]
-    Truth(String),
+    #[error("{source}")]
+    Truth {
+        /// Why it did not load (names the file).
+        source: skinbrdf_session::FileError,
+    },
     /// Photogrammetry failed.
     #[error("photogrammetry: {0}")]
     Poses(#[from] skinbrdf_poses::PoseError),
     /// Derendering failed.
     #[error("derendering: {0}")]
     Derender(#[from] skinbrdf_derender::DerenderError),
+    /// The poses for derendering could not be resolved, or derendering failed.
+    #[error(transparent)]
+    DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Smoothing or fitting failed.
     #[error("fitting: {0}")]
     Fit(#[from] skinbrdf_fit::report::ReportError),
     /// Sample file I/O.
     #[error(transparent)]
     Samples(#[from] skinbrdf_samples::SamplesError),
-    /// Ledger or output I/O.
+    /// Ledger, lock or output I/O.
     #[error(transparent)]
     Ledger(#[from] crate::ledger::LedgerError),
+    /// An output or stage file could not be read.
+    #[error("{path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// A JSON output could not be written or a stage file not parsed.
+    #[error("{path}: {source}")]
+    Json {
+        /// The file.
+        path: PathBuf,
+        /// The serde error.
+        source: serde_json::Error,
+    },
+    /// A stage needs poses that no earlier stage produced.
+    #[error("{dir}: no poses: the session gives none and {poses} does not exist; run `skinbrdf poses {dir}` (or `skinbrdf process {dir}`) first")]
+    NoPoses {
+        /// Session directory.
+        dir: PathBuf,
+        /// The pose stage's output it looked for.
+        poses: PathBuf,
+    },
     /// No samples survived derendering.
-    #[error("no BRDF samples survived derendering ({0}); nothing to fit")]
-    NoSamples(String),
+    #[error("no BRDF samples survived derendering (see the derender stage's drop counts); nothing to fit")]
+    NoSamples,
 }
 
 /// Settings of `process`.
@@ -188,14 +217,6 @@ fn input_findings(session: &Session) -> (Metric, Vec<String>) {
     (metric, notes)
 }
 
-fn session_fingerprint(session: &Session) -> Result<FingerprintBuilder, ProcessError> {
-    let mut fp = FingerprintBuilder::new().file(&session.dir.join("session.toml"))?;
-    for img in &session.file.images {
-        fp = fp.file(&session.path(&img.file))?;
-    }
-    Ok(fp)
-}
-
 /// Runs the pipeline on a session directory.
 pub fn process(
     dir: &Path,
@@ -203,9 +224,9 @@ pub fn process(
     on_event: &mut dyn FnMut(Event<'_>),
 ) -> Result<ProcessOutput, ProcessError> {
     let t0 = Instant::now();
-    let mut session = Session::load(dir).map_err(|e| ProcessError::Session {
+    let mut session = Session::load(dir).map_err(|source| ProcessError::Session {
         dir: dir.to_path_buf(),
-        problems: e.to_string(),
+        source,
     })?;
     let policy = if cfg.skip_bad_images {
         BadImagePolicy::Skip
@@ -214,254 +235,65 @@ pub fn process(
     };
     session
         .check_images(policy)
-        .map_err(|e| ProcessError::Session {
+        .map_err(|source| ProcessError::Images {
             dir: dir.to_path_buf(),
-            problems: format!(
-                "{e}\n(--skip-bad-images leaves unusable images out and lists them in the report)"
-            ),
+            source,
         })?;
     // What the input check found, on the first line of the report's first table.
     let (input_metric, input_notes) = input_findings(&session);
     let truth = match session.load_truth() {
         None => None,
-        Some(r) => Some(r.map_err(|e| ProcessError::Truth(e.to_string()))?),
+        Some(r) => Some(r.map_err(|source| ProcessError::Truth { source })?),
     };
     let out_dir = cfg.out_dir.clone().unwrap_or_else(|| dir.join("out"));
     std::fs::create_dir_all(&out_dir).map_err(|source| crate::ledger::LedgerError::Io {
         path: out_dir.clone(),
         source,
     })?;
+    let _lock = RunLock::acquire(&out_dir)?;
+    let stale = skinbrdf_core::fsio::remove_stale_temp_files(&out_dir);
     let mut ledger = if cfg.force {
         Ledger::default()
     } else {
         Ledger::load(&out_dir)?
     };
 
-    let mut facts = scene_facts(&session);
+    let facts = scene_facts(&session);
     let plan = Plan::derive(&facts, &cfg.plan);
     on_event(Event::Plan(&plan));
+    let mut ctx = Ctx {
+        session: &session,
+        truth: truth.as_ref(),
+        cfg,
+        out_dir: out_dir.clone(),
+        facts,
+        plan,
+        poses: None,
+        samples: None,
+        fit: None,
+    };
+    let units: [&dyn StageUnit; 4] = [&PoseUnit, &DerenderUnit, &FitUnit, &RenderUnit];
     let mut reports: Vec<StageReport> = Vec::new();
-    let emit = |mut r: StageReport,
-                reports: &mut Vec<StageReport>,
-                on_event: &mut dyn FnMut(Event<'_>)| {
-        if reports.is_empty() {
-            r.metrics.insert(0, input_metric.clone());
-            r.notes.extend(input_notes.iter().cloned());
-        }
-        on_event(Event::Finished(&r));
-        reports.push(r);
-    };
-
-    // --- photogrammetry -------------------------------------------------------------------
-    let pose_stages = [
-        Stage::CameraCalibration,
-        Stage::CameraPoses,
-        Stage::HeadTracking,
-        Stage::FlashTriangulation,
-        Stage::RadiometricCalibration,
-    ];
-    let session_fp = session_fingerprint(&session)?.finish();
-    let poses_fp = FingerprintBuilder::new()
-        .upstream(&session_fp)
-        .value("poses", &cfg.poses)
-        .finish();
-    let needs_poses = pose_stages.iter().any(|&s| plan.runs(s));
-    let poses_path = out_dir.join("poses.json");
-    let mut estimated: Option<SessionPoses> = None;
-    if needs_poses {
-        on_event(Event::Started(Stage::CameraPoses));
-        let reused = ledger
-            .reusable(Stage::CameraPoses, &poses_fp, &out_dir)
-            .and_then(|_| std::fs::read(&poses_path).ok())
-            .and_then(|b| serde_json::from_slice::<SessionPoses>(&b).ok());
-        let (poses, run_time_s, status) = match reused {
-            Some(p) => (p, 0.0, StageStatus::Reused),
-            None => {
-                let t = Instant::now();
-                let p = skinbrdf_poses::estimate_session(&session, &cfg.poses)?;
-                let s = t.elapsed().as_secs_f64();
-                let json = serde_json::to_vec_pretty(&p).unwrap_or_default();
-                write_atomic(&poses_path, &json)?;
-                (p, s, StageStatus::Ran)
+    for unit in units {
+        for mut r in run_unit(unit, &mut ctx, &mut ledger, cfg.force, on_event)? {
+            if reports.is_empty() {
+                r.metrics.insert(0, input_metric.clone());
+                r.notes.extend(input_notes.iter().cloned());
             }
-        };
-        let pose_reports = pose_stage_reports(&plan, &poses, truth.as_ref(), run_time_s, &status);
-        if status == StageStatus::Ran {
-            if let Some(r) = pose_reports.iter().find(|r| r.stage == Stage::CameraPoses) {
-                ledger.record(
-                    Stage::CameraPoses,
-                    poses_fp.clone(),
-                    vec!["poses.json".into()],
-                    r.clone(),
-                );
-            }
+            on_event(Event::Finished(&r));
+            reports.push(r);
         }
-        for r in pose_reports {
-            emit(r, &mut reports, on_event);
-        }
-        estimated = Some(poses);
-    } else {
-        for &s in &pose_stages {
-            if let Some(r) = RunReport::skipped_from_plan(&plan)
-                .into_iter()
-                .find(|r| r.stage == s)
-            {
-                emit(r, &mut reports, on_event);
-            }
+    }
+    if let Some(r) = reports.iter_mut().find(|r| r.stage == Stage::Report) {
+        if !stale.is_empty() {
+            r.notes.push(format!(
+                "removed {} temporary file(s) left by an interrupted run",
+                stale.len()
+            ));
         }
     }
 
-    // --- scan preparation and derendering ---------------------------------------------------
-    let derender_fp = FingerprintBuilder::new()
-        .upstream(&poses_fp)
-        .upstream(&session_fp)
-        .value("derender", &cfg.derender)
-        .value("plane", &cfg.plan)
-        .finish();
-    let samples_path = out_dir.join("samples.skbs");
-    let reuse = ledger
-        .reusable(Stage::Derender, &derender_fp, &out_dir)
-        .map(|e| e.report.clone());
-    let samples = match reuse {
-        Some(prev) => {
-            let (_, samples) = skinbrdf_samples::read_samples(&samples_path)?;
-            for stage in [Stage::ScanPreparation, Stage::ShadowRays, Stage::Derender] {
-                if !plan.runs(stage) {
-                    emit(skipped(&plan, stage), &mut reports, on_event);
-                    continue;
-                }
-                let mut r = if stage == Stage::Derender {
-                    prev.clone()
-                } else {
-                    StageReport::ran(stage, 0.0)
-                };
-                r.stage = stage;
-                r.status = StageStatus::Reused;
-                r.run_time_s = 0.0;
-                emit(r, &mut reports, on_event);
-            }
-            samples
-        }
-        None => {
-            on_event(Event::Started(Stage::Derender));
-            // Shadow rays follow the plan: forced, skipped (a region known to be convex), or
-            // left to scan preparation's convexity test (a scan).
-            let mut dcfg = cfg.derender;
-            if cfg.plan.force_shadow_rays {
-                dcfg.shadows = skinbrdf_derender::ShadowMode::Always;
-            } else if !plan.runs(Stage::ShadowRays) {
-                dcfg.shadows = skinbrdf_derender::ShadowMode::Never;
-            }
-            // Estimated poses when the pose stage ran, else the session's own (all known);
-            // never the ground truth.
-            let opts = SessionOptions {
-                poses: if estimated.is_some() {
-                    PoseChoice::Estimated
-                } else {
-                    PoseChoice::Session
-                },
-                skip_target_mask: false,
-                estimated: estimated.clone(),
-            };
-            let run = skinbrdf_derender::derender_session(&session, &opts, &dcfg)?;
-            if facts.region_convex.is_none() {
-                facts.region_convex = Some(!run.report.region_can_self_shadow);
-            }
-            let [scan, shadow, der] = derender_reports(&plan, &run);
-            for r in [scan, shadow] {
-                emit(r, &mut reports, on_event);
-            }
-            let mut samples = run.report.samples;
-            if cfg.plan.incidence_plane_only {
-                samples.retain(near_incidence_plane);
-            }
-            let mut header = SampleHeader::new("derender", &session.file.description);
-            header.origin = Some(dir.display().to_string());
-            header.calibration_c = Some(run.report.c);
-            skinbrdf_samples::write_samples(&samples_path, &header, &samples)?;
-            ledger.record(
-                Stage::Derender,
-                derender_fp.clone(),
-                vec!["samples.skbs".into()],
-                der.clone(),
-            );
-            emit(der, &mut reports, on_event);
-            samples
-        }
-    };
-    if samples.is_empty() {
-        return Err(ProcessError::NoSamples(
-            "see the derender stage's drop counts".into(),
-        ));
-    }
-
-    // --- smoothing and fitting ---------------------------------------------------------------
-    let fit_fp = FingerprintBuilder::new()
-        .upstream(&derender_fp)
-        .value("model", &format!("{:?}", cfg.fit.model))
-        .value("fit", &cfg.fit.fit)
-        .value("figures", &cfg.fit.figures)
-        .finish();
-    let fit_dir = out_dir.join("fit");
-    let mut fit_out = None;
-    match ledger
-        .reusable(Stage::Fit, &fit_fp, &out_dir)
-        .map(|e| e.report.clone())
-    {
-        Some(prev) => {
-            for stage in [
-                Stage::SmoothIncidencePlane,
-                Stage::SmoothHemisphere,
-                Stage::Fit,
-            ] {
-                let mut r = if stage == Stage::Fit {
-                    prev.clone()
-                } else {
-                    StageReport::ran(stage, 0.0)
-                };
-                r.stage = stage;
-                r.status = StageStatus::Reused;
-                r.run_time_s = 0.0;
-                if stage == Stage::SmoothHemisphere && !plan.runs(stage) {
-                    r = skipped(&plan, stage);
-                }
-                emit(r, &mut reports, on_event);
-            }
-        }
-        None => {
-            on_event(Event::Started(Stage::Fit));
-            let input = Input {
-                path: dir.to_path_buf(),
-                label: dir
-                    .file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_default(),
-                samples,
-                cornell: None,
-                truth: truth.as_ref().map(|t| t.brdf.clone()),
-            };
-            let fr = fit_and_report(&input, &fit_dir, &cfg.fit)?;
-            let [plane, hemi, fit] = fit_reports(&plan, &fr);
-            ledger.record(
-                Stage::Fit,
-                fit_fp,
-                vec!["fit/params.json".into()],
-                fit.clone(),
-            );
-            for r in [plane, hemi, fit] {
-                emit(r, &mut reports, on_event);
-            }
-            fit_out = Some(fr);
-        }
-    }
-    ledger.save(&out_dir)?;
-
-    // --- rendering (Figures 7 and 10): part of the report stage ----------------------------
-    let t_render = Instant::now();
-    let render_note = render_head(&session, &out_dir, fit_out.is_some());
-
-    // --- report ----------------------------------------------------------------------------
-    let mut final_plan = Plan::derive(&facts, &cfg.plan);
+    let mut final_plan = Plan::derive(&ctx.facts, &cfg.plan);
     final_plan.convexity_pending = false;
     let mut report = RunReport {
         session: dir.display().to_string(),
@@ -470,6 +302,62 @@ pub fn process(
         total_time_s: 0.0,
     };
     report.total_time_s = t0.elapsed().as_secs_f64();
+    write_reports(dir, &out_dir, &report, &input_notes)?;
+    Ok(ProcessOutput {
+        report,
+        out_dir,
+        fit: ctx.fit,
+    })
+}
+
+/// Runs one unit under the ledger's contract (see the module docs); returns its stages'
+/// reports.
+fn run_unit(
+    unit: &dyn StageUnit,
+    ctx: &mut Ctx<'_>,
+    ledger: &mut Ledger,
+    force: bool,
+    on_event: &mut dyn FnMut(Event<'_>),
+) -> Result<Vec<StageReport>, ProcessError> {
+    if !unit.planned(ctx) {
+        return Ok(unit.skipped(ctx));
+    }
+    let fp = unit.fingerprint(ctx)?;
+    let mut note = None;
+    if !force {
+        if let Some(entry) = ledger.reusable(unit.unit(), &fp, &ctx.out_dir).cloned() {
+            match unit.load(ctx, &entry.reports) {
+                Ok(()) => return Ok(crate::stages::as_reused(&entry.reports)),
+                Err(e) => {
+                    note = Some(format!(
+                        "the recorded outputs did not load ({e}): ran again"
+                    ))
+                }
+            }
+        }
+    }
+    // Forget the old entry before touching its outputs: a run that dies midway reruns it.
+    if ledger.units.contains_key(&unit.unit()) {
+        ledger.forget(unit.unit());
+        ledger.save(&ctx.out_dir)?;
+    }
+    on_event(Event::Started(unit.first_stage()));
+    let (mut reports, outputs) = unit.run(ctx)?;
+    if let (Some(n), Some(r)) = (note, reports.last_mut()) {
+        r.notes.push(n);
+    }
+    ledger.record(unit.unit(), fp, &outputs, reports.clone(), &ctx.out_dir)?;
+    ledger.save(&ctx.out_dir)?;
+    Ok(reports)
+}
+
+/// Writes `report.md`, `report.html` and `report.json` into the output directory.
+fn write_reports(
+    dir: &Path,
+    out_dir: &Path,
+    report: &RunReport,
+    input_notes: &[String],
+) -> Result<(), ProcessError> {
     let input_section = if input_notes.is_empty() {
         String::new()
     } else {
@@ -483,7 +371,7 @@ pub fn process(
         report.to_markdown()
     );
     write_atomic(&out_dir.join("report.md"), md.as_bytes())?;
-    let mut figures: Vec<(String, String)> = png_figures(&out_dir, "fit")
+    let mut figures: Vec<(String, String)> = png_figures(out_dir, "fit")
         .into_iter()
         .map(|rel| (rel.clone(), rel))
         .collect();
@@ -499,79 +387,17 @@ pub fn process(
     let html = crate::report::html_page(
         &format!("skinbrdf process: {}", dir.display()),
         "",
-        &report,
+        report,
         &figures,
     );
     write_atomic(&out_dir.join("report.html"), html.as_bytes())?;
-    // The report stage's time includes the head rendering.
-    let mut r = StageReport::ran(Stage::Report, t_render.elapsed().as_secs_f64());
-    match render_note {
-        Ok(Some(stats)) => {
-            r.metrics.push(Metric::new(
-                "render_rays",
-                stats.rays as f64,
-                "",
-                MetricKind::Cost,
-            ));
-            r.metrics.push(Metric::new(
-                "render_time",
-                t_render.elapsed().as_secs_f64(),
-                "s",
-                MetricKind::Cost,
-            ));
-            r.notes.push(format!(
-                "{RENDER_FIGURE}: the scan rendered with a Lambertian BRDF and with the fitted model"
-            ));
-        }
-        Ok(None) => {}
-        Err(note) => r.notes.push(note),
-    }
-    on_event(Event::Finished(&r));
-    report.stages.push(r);
-    let json = serde_json::to_vec_pretty(&report).unwrap_or_default();
-    write_atomic(&out_dir.join("report.json"), &json)?;
-    Ok(ProcessOutput {
-        report,
-        out_dir,
-        fit: fit_out,
-    })
-}
-
-/// The head rendering (Lambertian against the fitted BRDF), relative to the output directory.
-pub const RENDER_FIGURE: &str = "render/head_comparison.png";
-
-/// Renders the scan with a Lambertian BRDF and with the fitted model side by side (the method's
-/// Figures 7 and 10) into `out/render/`. `Ok(None)`: nothing to do (not a scan, or the figure
-/// is current); `Err`: why it could not be drawn (reported as a note, never fatal).
-fn render_head(
-    session: &Session,
-    out_dir: &Path,
-    fit_ran: bool,
-) -> Result<Option<skinbrdf_render::RenderStats>, String> {
-    let GeometrySpec::Scan { file, units } = &session.file.geometry else {
-        return Ok(None);
-    };
-    if !fit_ran && out_dir.join(RENDER_FIGURE).is_file() {
-        return Ok(None);
-    }
-    let model = skinbrdf_render::load_model(&out_dir.join("fit/params.json"))
-        .map_err(|e| format!("head rendering skipped: {e}"))?;
-    let mesh = skinbrdf_mesh::load_mesh(
-        &session.path(file),
-        &skinbrdf_mesh::LoadOptions {
-            unit: skinbrdf_mesh::LengthUnit::Custom(units.to_m()),
-            ..Default::default()
-        },
-    )
-    .map_err(|e| format!("head rendering skipped: {e}"))?;
-    let cfg = skinbrdf_render::RenderConfig::default();
-    let img = skinbrdf_render::render_comparison(&mesh.mesh, &model, &cfg)
-        .map_err(|e| format!("head rendering failed: {e}"))?;
-    let dir = out_dir.join("render");
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    img.write(&dir.join("head_comparison"), &cfg.labels)
-        .map_err(|e| format!("head rendering not written: {e}"))?;
-    Ok(Some(img.stats))
+    let path = out_dir.join("report.json");
+    let json = serde_json::to_vec_pretty(report).map_err(|source| ProcessError::Json {
+        path: path.clone(),
+        source,
+    })?;
+    write_atomic(&path, &json)?;
+    Ok(())
 }
 
 /// The PNG figures in `base/sub`, as paths relative to `base` (`sub/name.png`), sorted.
@@ -587,432 +413,4 @@ pub fn png_figures(base: &Path, sub: &str) -> Vec<String> {
         .unwrap_or_default();
     v.sort();
     v
-}
-
-/// Within 5 degrees of the incidence plane (`phi_d` near 0 or pi).
-fn near_incidence_plane(s: &skinbrdf_core::BrdfSample) -> bool {
-    f64::from(s.phi_d_rad).sin().abs() * f64::from(s.theta_e_rad).sin() <= 5f64.to_radians().sin()
-}
-
-fn skipped(plan: &Plan, stage: Stage) -> StageReport {
-    RunReport::skipped_from_plan(plan)
-        .into_iter()
-        .find(|r| r.stage == stage)
-        .unwrap_or_else(|| StageReport::skipped(stage, "not planned"))
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.retain(|x| x.is_finite());
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-fn pose_stage_reports(
-    plan: &Plan,
-    poses: &SessionPoses,
-    truth: Option<&Truth>,
-    run_time_s: f64,
-    status: &StageStatus,
-) -> Vec<StageReport> {
-    let errs = truth.map(|t| skinbrdf_poses::session::compare_truth(poses, t));
-    let corners = errs
-        .as_ref()
-        .map(|e| e.corner_summary())
-        .unwrap_or_default();
-    // The detector's own accuracy for a layout's targets: corners against their true positions.
-    let corner_metric = |r: &mut StageReport, layout: &str| {
-        if let Some(c) = corners.get(layout) {
-            r.metrics.push(Metric::new(
-                &format!("{layout}_corner_error_median"),
-                c.corner_error_median_px,
-                "px",
-                MetricKind::Error,
-            ));
-        }
-    };
-    let mk = |stage: Stage, time: f64| -> StageReport {
-        if !plan.runs(stage) {
-            return skipped(plan, stage);
-        }
-        let mut r = StageReport::ran(stage, time);
-        r.status = status.clone();
-        r
-    };
-    let mut out = Vec::new();
-
-    let mut r = mk(Stage::CameraCalibration, 0.0);
-    if let Some(c) = &poses.calibration {
-        r.metrics.push(Metric::new(
-            "reprojection_rms",
-            c.rms_px,
-            "px",
-            MetricKind::Quality,
-        ));
-    }
-    if let Some(fe) = errs.as_ref().and_then(|e| e.focal_error_px) {
-        r.metrics.push(Metric::new(
-            "focal_length_error",
-            fe,
-            "px",
-            MetricKind::Error,
-        ));
-    }
-    out.push(r);
-
-    let mut r = mk(Stage::CameraPoses, run_time_s);
-    let cams: Vec<_> = poses
-        .images
-        .iter()
-        .filter_map(|i| i.world_from_camera.as_ref())
-        .collect();
-    r.metrics.push(Metric::new(
-        "images_with_camera_pose",
-        cams.len() as f64,
-        "",
-        MetricKind::Count,
-    ));
-    r.metrics.push(Metric::new(
-        "reprojection_rms_median",
-        median(cams.iter().map(|p| p.rms_px).collect()),
-        "px",
-        MetricKind::Quality,
-    ));
-    r.metrics.push(Metric::new(
-        "detect_plus_pose_per_image_median",
-        median(
-            poses
-                .images
-                .iter()
-                .map(|i| i.detect_ms + i.pose_ms)
-                .collect(),
-        ),
-        "ms",
-        MetricKind::Cost,
-    ));
-    if let Some(e) = &errs {
-        r.metrics.push(
-            Metric::new(
-                "camera_position_error_median",
-                median(e.camera_position_error_m.clone()) * 1e3,
-                "mm",
-                MetricKind::Error,
-            )
-            .with_bound(bounds::CAMERA_POSITION_MM),
-        );
-        r.metrics.push(
-            Metric::new(
-                "camera_orientation_error_median",
-                median(e.camera_orientation_error_deg.clone()),
-                "deg",
-                MetricKind::Error,
-            )
-            .with_bound(bounds::CAMERA_ORIENTATION_DEG),
-        );
-        corner_metric(&mut r, "reference");
-    }
-    let failures: usize = poses.images.iter().map(|i| i.errors.len()).sum();
-    if failures > 0 {
-        r.notes.push(format!(
-            "{failures} individual pose estimates failed (see poses.json)"
-        ));
-    }
-    out.push(r);
-
-    let mut r = mk(Stage::HeadTracking, 0.0);
-    if plan.runs(Stage::HeadTracking) {
-        let heads: Vec<_> = poses
-            .images
-            .iter()
-            .filter_map(|i| i.world_from_head.as_ref())
-            .collect();
-        r.metrics.push(Metric::new(
-            "images_with_head_pose",
-            heads.len() as f64,
-            "",
-            MetricKind::Count,
-        ));
-        if let Some(e) = &errs {
-            r.metrics.push(
-                Metric::new(
-                    "head_position_error_median",
-                    median(e.head_position_error_m.clone()) * 1e3,
-                    "mm",
-                    MetricKind::Error,
-                )
-                .with_bound(bounds::HEAD_POSITION_MM),
-            );
-            r.metrics.push(Metric::new(
-                "head_orientation_error_median",
-                median(e.head_orientation_error_deg.clone()),
-                "deg",
-                MetricKind::Error,
-            ));
-            corner_metric(&mut r, "headdress");
-        }
-        r.notes.push("timed together with camera poses".into());
-    }
-    out.push(r);
-
-    let mut r = mk(Stage::FlashTriangulation, 0.0);
-    if plan.runs(Stage::FlashTriangulation) {
-        if let Some(e) = errs.as_ref().and_then(|e| e.light_position_error_m) {
-            r.metrics.push(
-                Metric::new("flash_position_error", e * 1e3, "mm", MetricKind::Error)
-                    .with_bound(bounds::FLASH_POSITION_MM),
-            );
-        }
-        if poses.light_position_cov_m2.len() == 9 {
-            let c = &poses.light_position_cov_m2;
-            r.metrics.push(Metric::new(
-                "flash_position_sigma",
-                (c[0] + c[4] + c[8]).max(0.0).sqrt() * 1e3,
-                "mm",
-                MetricKind::Quality,
-            ));
-        }
-        r.notes.push("timed together with camera poses".into());
-    }
-    out.push(r);
-
-    let mut r = mk(Stage::RadiometricCalibration, 0.0);
-    if plan.runs(Stage::RadiometricCalibration) {
-        if let Some(e) = errs.as_ref().and_then(|e| e.standard_position_error_m) {
-            r.metrics.push(Metric::new(
-                "standard_position_error",
-                e * 1e3,
-                "mm",
-                MetricKind::Error,
-            ));
-        }
-        r.notes
-            .push("standard pose here; C itself is estimated during derendering".into());
-    }
-    out.push(r);
-    out
-}
-
-fn derender_reports(plan: &Plan, run: &SessionRun) -> [StageReport; 3] {
-    let d = &run.report;
-    let t = &d.times;
-    let mut scan = if plan.runs(Stage::ScanPreparation) {
-        StageReport::ran(
-            Stage::ScanPreparation,
-            t.mesh_load_s + t.bvh_s + t.normals_s + t.convexity_s,
-        )
-    } else {
-        let mut r = skipped(plan, Stage::ScanPreparation);
-        r.notes.push(format!(
-            "the ideal shape was tessellated instead ({} triangles, {:.3} s)",
-            run.triangles,
-            t.mesh_load_s + t.bvh_s + t.normals_s
-        ));
-        r
-    };
-    scan.metrics.push(Metric::new(
-        "triangles",
-        run.triangles as f64,
-        "",
-        MetricKind::Count,
-    ));
-    if let Some(m) = &run.mesh_report {
-        scan.metrics.push(Metric::new(
-            "scan_triangles_dropped",
-            m.dropped_triangles() as f64,
-            "",
-            MetricKind::Count,
-        ));
-        if m.summary() != "no problems" {
-            scan.notes.push(format!("scan repaired: {}", m.summary()));
-        }
-    }
-    scan.metrics.push(Metric::new(
-        "normal_fit_radius",
-        d.normal_radius_m * 1e3,
-        "mm",
-        MetricKind::Quality,
-    ));
-    let shadow = if !plan.runs(Stage::ShadowRays) {
-        let mut r = skipped(plan, Stage::ShadowRays);
-        if d.region_can_self_shadow {
-            r.notes.push(
-                "the tessellated shape failed the convexity test within its tolerance; the plan's geometric fact wins".into(),
-            );
-        }
-        r
-    } else if d.shadow_rays {
-        let mut r = StageReport::ran(Stage::ShadowRays, 0.0);
-        r.metrics.push(Metric::new(
-            "shadow_rays_cast",
-            d.shadow_rays_cast as f64,
-            "",
-            MetricKind::Cost,
-        ));
-        r.notes.push(if d.region_can_self_shadow {
-            "the convexity test found the region can shadow itself".into()
-        } else {
-            "forced although the region is convex".into()
-        });
-        r.notes.push("timed within derender".into());
-        r
-    } else if d.region_can_self_shadow {
-        StageReport::skipped(Stage::ShadowRays, "disabled by the derender settings")
-    } else {
-        // The same reason the final plan gives, with where the fact came from.
-        let mut r = StageReport::skipped(
-            Stage::ShadowRays,
-            "the region is convex: it cannot shadow itself",
-        );
-        r.notes
-            .push("found by scan preparation's convexity test".into());
-        r
-    };
-    let mut der = StageReport::ran(
-        Stage::Derender,
-        t.image_load_s + t.calibration_s + t.derender_s,
-    );
-    der.metrics.push(Metric::new(
-        "samples_kept",
-        d.counts.kept as f64,
-        "",
-        MetricKind::Count,
-    ));
-    let k = &d.counts;
-    for (reason, n) in [
-        ("off_mask", k.off_mask),
-        ("on_target", k.on_target),
-        ("no_surface", k.no_surface),
-        ("back_facing", k.back_facing),
-        ("off_region", k.off_region),
-        ("grazing", k.grazing),
-        ("shadowed", k.shadowed),
-        ("saturated", k.saturated),
-        ("below_noise_floor", k.below_noise_floor),
-        ("no_ray", k.no_ray),
-    ] {
-        if n > 0 {
-            der.metrics.push(Metric::new(
-                &format!("dropped_{reason}"),
-                n as f64,
-                "",
-                MetricKind::Count,
-            ));
-        }
-    }
-    der.metrics.push(Metric::new(
-        "C_green",
-        d.c[1],
-        "sr^-1 m^-2",
-        MetricKind::Quality,
-    ));
-    if let Some(c) = &d.calibration {
-        der.metrics.push(Metric::new(
-            "C_relative_spread_green",
-            c.rel_spread[1] * 100.0,
-            "%",
-            MetricKind::Quality,
-        ));
-        der.metrics.push(Metric::new(
-            "C_standard_pixels",
-            c.pixels as f64,
-            "",
-            MetricKind::Count,
-        ));
-    }
-    let secs = t.derender_s.max(1e-9);
-    der.metrics.push(Metric::new(
-        "primary_rays_per_s",
-        d.primary_rays as f64 / secs / 1e6,
-        "Mrays/s",
-        MetricKind::Cost,
-    ));
-    if let Some(te) = &d.truth_error {
-        der.metrics.push(
-            Metric::new(
-                "sample_median_rel_error",
-                te.median_rel_error * 100.0,
-                "%",
-                MetricKind::Error,
-            )
-            .with_bound(bounds::SAMPLE_MEDIAN_REL_ERROR_PCT),
-        );
-        der.metrics.push(Metric::new(
-            "sample_p90_rel_error",
-            te.p90_rel_error * 100.0,
-            "%",
-            MetricKind::Error,
-        ));
-    }
-    der.notes.push(format!(
-        "camera from {}, light from {}, C from {}",
-        run.camera_source, run.light_source, run.c_source
-    ));
-    [scan, shadow, der]
-}
-
-fn fit_reports(plan: &Plan, fr: &FitReport) -> [StageReport; 3] {
-    let time_of = |name: &str| {
-        fr.timings_s
-            .iter()
-            .filter(|(n, _)| n == name)
-            .map(|(_, t)| *t)
-            .sum::<f64>()
-    };
-    let mut plane = StageReport::ran(Stage::SmoothIncidencePlane, time_of("smooth"));
-    plane.metrics.push(Metric::new(
-        "loess_span",
-        fr.smooth_span,
-        "",
-        MetricKind::Quality,
-    ));
-    plane.metrics.push(Metric::new(
-        "loess_residual_sigma",
-        fr.smooth_sigma * 100.0,
-        "% (log)",
-        MetricKind::Quality,
-    ));
-    let hemi = if plan.runs(Stage::SmoothHemisphere) {
-        let mut r = StageReport::ran(Stage::SmoothHemisphere, 0.0);
-        r.notes.push("the same local quadratic fit spans (theta_i, theta_e, phi_d); timed with the incidence plane".into());
-        r
-    } else {
-        skipped(plan, Stage::SmoothHemisphere)
-    };
-    let mut fit = StageReport::ran(Stage::Fit, fr.fit.fit_time_s);
-    fit.metrics.push(Metric::new(
-        "samples_fitted",
-        fr.n_samples as f64,
-        "",
-        MetricKind::Count,
-    ));
-    let g = &fr.fit.channels;
-    if let Some(c) = g.get(1) {
-        fit.metrics.push(Metric::new(
-            "log_rmse_vs_samples_green",
-            c.error.log_rmse,
-            "",
-            MetricKind::Quality,
-        ));
-    }
-    if let Some(t) = &fr.truth {
-        let c = &t.channels;
-        fit.metrics.push(Metric::new(
-            "model_log_rmse_vs_truth",
-            (c.iter().map(|m| m.log_rmse * m.log_rmse).sum::<f64>() / 3.0).sqrt(),
-            "",
-            MetricKind::Error,
-        ));
-        fit.metrics.push(Metric::new(
-            "model_median_rel_error_vs_truth",
-            median(c.iter().map(|m| m.median_rel_err * 100.0).collect()),
-            "%",
-            MetricKind::Error,
-        ));
-    }
-    for w in &fr.fit.warnings {
-        fit.notes.push(w.clone());
-    }
-    [plane, hemi, fit]
 }

@@ -2,6 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::metrics::StageMetrics;
 use crate::plan::{Action, Plan, Stage};
 
 /// What a metric measures.
@@ -83,7 +84,10 @@ pub struct StageReport {
     pub status: StageStatus,
     /// Wall-clock time of the stage, seconds (0 when skipped or reused).
     pub run_time_s: f64,
-    /// Accuracy, quality, count and cost figures.
+    /// The stage's typed figures (what code reads).
+    #[serde(default)]
+    pub figures: StageMetrics,
+    /// The same figures as rows for people and other tools (derived from `figures`).
     pub metrics: Vec<Metric>,
     /// Free-form notes (warnings, diagnostics).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -97,9 +101,17 @@ impl StageReport {
             stage,
             status: StageStatus::Ran,
             run_time_s,
+            figures: StageMetrics::None,
             metrics: Vec::new(),
             notes: Vec::new(),
         }
+    }
+
+    /// Sets the stage's typed figures (and the rows derived from them).
+    pub fn with_figures(mut self, figures: StageMetrics) -> Self {
+        self.metrics = figures.rows();
+        self.figures = figures;
+        self
     }
 
     /// A skipped stage.
@@ -110,6 +122,7 @@ impl StageReport {
                 reason: reason.to_string(),
             },
             run_time_s: 0.0,
+            figures: StageMetrics::None,
             metrics: Vec::new(),
             notes: Vec::new(),
         }
@@ -136,6 +149,54 @@ pub struct RunReport {
 }
 
 impl RunReport {
+    /// The typed figures of a stage (`StageMetrics::None` when it did not run).
+    pub fn figures(&self, stage: Stage) -> &StageMetrics {
+        self.stages
+            .iter()
+            .find(|s| s.stage == stage)
+            .map_or(&StageMetrics::None, |s| &s.figures)
+    }
+
+    /// The camera poses' figures, if that stage ran (or was reused).
+    pub fn camera_poses(&self) -> Option<&crate::metrics::CameraPoseMetrics> {
+        match self.figures(Stage::CameraPoses) {
+            StageMetrics::CameraPoses(m) => Some(m),
+            _ => None,
+        }
+    }
+
+    /// Head tracking's figures.
+    pub fn head_tracking(&self) -> Option<&crate::metrics::HeadTrackingMetrics> {
+        match self.figures(Stage::HeadTracking) {
+            StageMetrics::HeadTracking(m) => Some(m),
+            _ => None,
+        }
+    }
+
+    /// Flash triangulation's figures.
+    pub fn flash(&self) -> Option<&crate::metrics::FlashMetrics> {
+        match self.figures(Stage::FlashTriangulation) {
+            StageMetrics::Flash(m) => Some(m),
+            _ => None,
+        }
+    }
+
+    /// Derendering's figures.
+    pub fn derender(&self) -> Option<&crate::metrics::DerenderMetrics> {
+        match self.figures(Stage::Derender) {
+            StageMetrics::Derender(m) => Some(m),
+            _ => None,
+        }
+    }
+
+    /// The fit's figures.
+    pub fn fit(&self) -> Option<&crate::metrics::FitMetrics> {
+        match self.figures(Stage::Fit) {
+            StageMetrics::Fit(m) => Some(m),
+            _ => None,
+        }
+    }
+
     /// Skipped-stage reports for every stage the plan skips.
     pub fn skipped_from_plan(plan: &Plan) -> Vec<StageReport> {
         plan.stages

@@ -24,7 +24,7 @@ use std::path::Path;
 use skinbrdf_pipeline::plan::Action;
 use skinbrdf_pipeline::process::{process, Event, ProcessConfig};
 use skinbrdf_pipeline::report::{MetricKind, StageStatus};
-use skinbrdf_pipeline::{RunReport, Stage};
+use skinbrdf_pipeline::Stage;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
 /// Measurement images per test session (the scenes have 30).
@@ -50,15 +50,6 @@ const DEFAULT: Bounds = Bounds {
     model_pct: 3.0,
     min_samples: 2_000.0,
 };
-
-fn metric(report: &RunReport, stage: Stage, name: &str) -> Option<f64> {
-    report
-        .stages
-        .iter()
-        .find(|s| s.stage == stage)
-        .and_then(|s| s.metrics.iter().find(|m| m.name == name))
-        .map(|m| m.value)
-}
 
 fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
     let dir = tempfile::tempdir().expect("tempdir");
@@ -164,16 +155,24 @@ fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
             );
         }
     }
-    let get = |stage, m| {
-        metric(report, stage, m).unwrap_or_else(|| panic!("{name}: {stage:?} has no {m}"))
-    };
-    let cam = get(Stage::CameraPoses, "camera_position_error_median");
+    let cam = report
+        .camera_poses()
+        .and_then(|c| c.camera_position_error_median_mm)
+        .unwrap_or_else(|| panic!("{name}: no camera position error"));
     assert!(cam <= bounds.camera_mm, "{name}: camera position {cam} mm");
-    let kept = get(Stage::Derender, "samples_kept");
+    let der = report
+        .derender()
+        .unwrap_or_else(|| panic!("{name}: no derender figures"));
+    let kept = der.samples_kept as f64;
     assert!(kept >= bounds.min_samples, "{name}: {kept} samples kept");
-    let se = get(Stage::Derender, "sample_median_rel_error");
+    let se = der
+        .sample_median_rel_error_pct
+        .unwrap_or_else(|| panic!("{name}: no sample error"));
     assert!(se <= bounds.samples_pct, "{name}: samples {se} %");
-    let me = get(Stage::Fit, "model_median_rel_error_vs_truth");
+    let me = report
+        .fit()
+        .and_then(|f| f.model_median_rel_error_vs_truth_pct)
+        .unwrap_or_else(|| panic!("{name}: no model error"));
     assert!(me <= bounds.model_pct, "{name}: model {me} %");
     assert!(Path::new(&report.session).ends_with("session"));
 }

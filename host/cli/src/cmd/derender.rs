@@ -3,10 +3,11 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use skinbrdf_derender::{
-    derender_session, CEstimator, DerenderConfig, PoseChoice, SessionOptions, ShadowMode,
-};
+use skinbrdf_derender::{CEstimator, DerenderConfig, ShadowMode};
 use skinbrdf_mesh::NormalMethod;
+use skinbrdf_pipeline::pose_inputs::{derender_session, PoseChoice, SessionOptions};
+use skinbrdf_pipeline::process::{scene_facts, ProcessError};
+use skinbrdf_pipeline::{stages, Plan, PlanOptions};
 
 /// Flags of `skinbrdf derender`.
 #[derive(Debug, clap::Args)]
@@ -25,26 +26,29 @@ pub struct Args {
     /// Drop samples with a linear channel value below this (1.0 = white).
     #[arg(long, default_value_t = DerenderConfig::DEFAULT.noise_floor)]
     pub noise_floor: f64,
-    /// Shadow rays: auto (only if the geometry can shadow the region), always, never.
-    #[arg(long, default_value = "auto")]
-    pub shadows: String,
+    /// Shadow rays: plan (as `process` plans them), auto (only if the geometry can shadow the
+    /// region), always, never.
+    #[arg(long, value_enum, default_value_t = Shadows::Plan)]
+    pub shadows: Shadows,
     /// Normals: auto (planar fit, radius from the scan's noise), fit (needs --normal-radius-mm),
     /// vertex.
-    #[arg(long, default_value = "auto")]
-    pub normals: String,
+    #[arg(long, value_enum, default_value_t = Normals::Auto)]
+    pub normals: Normals,
     /// Planar-fit radius in millimetres (implies --normals fit).
     #[arg(long)]
     pub normal_radius_mm: Option<f64>,
-    /// Average of C over the standard: median or trimmed.
-    #[arg(long, default_value = "median")]
-    pub c_estimator: String,
+    /// Average of C over the standard.
+    #[arg(long, value_enum, default_value_t = CAverage::Median)]
+    pub c_estimator: CAverage,
     /// BVH build preset: fastest, very_fast, fast, medium, high, very_high.
     #[arg(long, default_value = "medium")]
     pub bvh_quality: String,
-    /// Poses: auto (session.toml, else truth.json), session, truth, estimated (the pose
-    /// stage's output, --poses-file or SESSION/out/poses.json).
-    #[arg(long, default_value = "auto")]
-    pub poses: String,
+    /// Poses: auto (those session.toml gives, else the pose stage's SESSION/out/poses.json, as
+    /// `process` does), session, estimated (the pose stage's output, --poses-file or
+    /// SESSION/out/poses.json), truth (truth.json: a check of the derendering alone, marked as
+    /// such in the output).
+    #[arg(long, value_enum, default_value_t = Poses::Auto)]
+    pub poses: Poses,
     /// The pose stage's output (implies --poses estimated).
     #[arg(long)]
     pub poses_file: Option<PathBuf>,
@@ -69,6 +73,52 @@ pub struct Args {
     pub figure_tol_deg: f64,
 }
 
+/// `--shadows`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Shadows {
+    /// As `process` plans them (skipped for a region known to be convex).
+    Plan,
+    /// Only if the geometry can shadow the region.
+    Auto,
+    /// Always.
+    Always,
+    /// Never.
+    Never,
+}
+
+/// `--normals`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Normals {
+    /// Planar fit, radius from the scan's noise.
+    Auto,
+    /// Planar fit of --normal-radius-mm.
+    Fit,
+    /// The scan's vertex normals.
+    Vertex,
+}
+
+/// `--c-estimator`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum CAverage {
+    /// Median.
+    Median,
+    /// Trimmed mean.
+    Trimmed,
+}
+
+/// `--poses`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Poses {
+    /// The session's, else the pose stage's.
+    Auto,
+    /// Only the session's.
+    Session,
+    /// The pose stage's output.
+    Estimated,
+    /// The ground truth (synthetic sessions).
+    Truth,
+}
+
 fn write_figures(
     args: &Args,
     out: &std::path::Path,
@@ -80,9 +130,7 @@ fn write_figures(
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let samples = &run.report.samples;
     for im in &run.report.images {
-        let img = session
-            .load_image(im.image_index)
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let img = session.load_image(im.image_index)?;
         let view = skinbrdf_derender::ImageView {
             width: img.width,
             height: img.height,
@@ -91,16 +139,14 @@ fn write_figures(
         };
         let rgb = figures::pixels_used_rgb8(&view, samples, im.image_index as u16);
         let p = dir.join(format!("pixels_used_{:03}.png", im.image_index));
-        skinbrdf_session::write::write_png_rgb8(&p, img.width, img.height, &rgb)
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        skinbrdf_session::write::write_png_rgb8(&p, img.width, img.height, &rgb)?;
     }
     let (ti, tol) = (args.figure_theta_i_deg, args.figure_tol_deg);
     let svg = figures::hemisphere_svg(samples, ti, tol);
     skinbrdf_session::write_atomic(
         &dir.join(format!("hemisphere_theta_i_{ti}.svg")),
         svg.as_bytes(),
-    )
-    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    )?;
     let size = 600;
     let png = figures::hemisphere_rgb8(samples, ti, tol, size);
     skinbrdf_session::write::write_png_rgb8(
@@ -108,37 +154,25 @@ fn write_figures(
         size,
         size,
         &png,
-    )
-    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    )?;
     Ok(())
 }
 
-fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
-    let shadows = match args.shadows.as_str() {
-        "auto" => ShadowMode::Auto,
-        "always" => ShadowMode::Always,
-        "never" => ShadowMode::Never,
-        o => anyhow::bail!("--shadows: `{o}` is not one of auto, always, never"),
+fn config(args: &Args) -> anyhow::Result<DerenderConfig> {
+    let shadows = match args.shadows {
+        Shadows::Plan | Shadows::Auto => ShadowMode::Auto,
+        Shadows::Always => ShadowMode::Always,
+        Shadows::Never => ShadowMode::Never,
     };
-    let normals = match (args.normals.as_str(), args.normal_radius_mm) {
+    let normals = match (args.normals, args.normal_radius_mm) {
         (_, Some(r)) => NormalMethod::PlanarFit { radius_m: r * 1e-3 },
-        ("auto", None) => NormalMethod::PlanarFitAuto,
-        ("vertex", None) => NormalMethod::Vertex,
-        ("fit", None) => anyhow::bail!("--normals fit needs --normal-radius-mm"),
-        (o, None) => anyhow::bail!("--normals: `{o}` is not one of auto, fit, vertex"),
+        (Normals::Auto, None) => NormalMethod::PlanarFitAuto,
+        (Normals::Vertex, None) => NormalMethod::Vertex,
+        (Normals::Fit, None) => anyhow::bail!("--normals fit needs --normal-radius-mm"),
     };
-    let c_estimator = match args.c_estimator.as_str() {
-        "median" => CEstimator::Median,
-        "trimmed" => CEstimator::TrimmedMean,
-        o => anyhow::bail!("--c-estimator: `{o}` is not one of median, trimmed"),
-    };
-    let poses = match args.poses.as_str() {
-        _ if args.poses_file.is_some() => PoseChoice::Estimated,
-        "estimated" => PoseChoice::Estimated,
-        "auto" => PoseChoice::Auto,
-        "session" => PoseChoice::Session,
-        "truth" => PoseChoice::Truth,
-        o => anyhow::bail!("--poses: `{o}` is not one of auto, session, truth, estimated"),
+    let c_estimator = match args.c_estimator {
+        CAverage::Median => CEstimator::Median,
+        CAverage::Trimmed => CEstimator::TrimmedMean,
     };
     let cfg = DerenderConfig {
         stride: args.stride,
@@ -153,47 +187,77 @@ fn config(args: &Args) -> anyhow::Result<(DerenderConfig, SessionOptions)> {
             .map_err(|e| anyhow::anyhow!("--bvh-quality: {e}"))?,
     };
     cfg.validate()?;
-    Ok((
-        cfg,
-        SessionOptions {
-            poses,
-            skip_target_mask: args.no_target_mask,
-            estimated: None,
-        },
-    ))
+    Ok(cfg)
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (cfg, mut opts) = config(&args)?;
-    if opts.poses == PoseChoice::Estimated {
-        let p = args
-            .poses_file
-            .clone()
-            .unwrap_or_else(|| args.session.join("out").join("poses.json"));
-        let text = std::fs::read(&p).with_context(|| format!("reading {}", p.display()))?;
-        opts.estimated = Some(
-            serde_json::from_slice(&text).with_context(|| format!("parsing {}", p.display()))?,
-        );
-    }
+    let mut cfg = config(&args)?;
     let session = skinbrdf_session::Session::load(&args.session)
-        .map_err(|e| anyhow::anyhow!("{e}"))
         .with_context(|| format!("loading session {}", args.session.display()))?;
-    let run = derender_session(&session, &opts, &cfg)?;
+    let plan_opts = PlanOptions::default();
+    if args.shadows == Shadows::Plan {
+        let plan = Plan::derive(&scene_facts(&session), &plan_opts);
+        cfg = stages::planned_derender_config(&cfg, &plan, &plan_opts);
+    }
     let out = args.out.clone().unwrap_or_else(|| args.session.join("out"));
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let csv = args.csv.then(|| out.join("samples.csv"));
-    skinbrdf_derender::from_session::write_samples(
-        &out.join("samples.skbs"),
-        csv.as_deref(),
-        &run,
-        &session,
-    )?;
+    let poses_file = args
+        .poses_file
+        .clone()
+        .unwrap_or_else(|| args.session.join("out").join(stages::POSES_FILE));
+    let choice = if args.poses_file.is_some() {
+        Poses::Estimated
+    } else {
+        args.poses
+    };
+    if args.no_target_mask && choice != Poses::Truth {
+        anyhow::bail!("--no-target-mask is only for --poses truth (a check of the mask itself)");
+    }
+    let facts = scene_facts(&session);
+    let session_has_poses =
+        facts.camera_poses_known && (facts.head_poses_known || facts.stationary_sample);
+    let (run, mut samples) = match choice {
+        Poses::Truth => {
+            let opts = SessionOptions {
+                poses: PoseChoice::Truth,
+                skip_target_mask: args.no_target_mask,
+                estimated: None,
+            };
+            let mut run = derender_session(&session, &opts, &cfg)?;
+            let samples = std::mem::take(&mut run.report.samples);
+            eprintln!("note: derendered with the TRUE poses of truth.json (a check of derendering alone, not a measurement)");
+            (run, samples)
+        }
+        Poses::Session => stages::derender_stage(&session, None, &cfg, &plan_opts)?,
+        Poses::Auto if session_has_poses => {
+            stages::derender_stage(&session, None, &cfg, &plan_opts)?
+        }
+        Poses::Auto | Poses::Estimated => {
+            if !poses_file.is_file() {
+                return Err(ProcessError::NoPoses {
+                    dir: args.session.clone(),
+                    poses: poses_file,
+                }
+                .into());
+            }
+            let poses = stages::read_poses(&poses_file)?;
+            stages::derender_stage(&session, Some(&poses), &cfg, &plan_opts)?
+        }
+    };
+    let mut header = stages::samples_header(&session, &run);
+    if choice == Poses::Truth {
+        header.description = format!("{} (poses from truth.json)", header.description);
+    }
+    skinbrdf_samples::write_samples(&out.join(stages::SAMPLES_FILE), &header, &samples)?;
+    if args.csv {
+        skinbrdf_samples::write_csv(&out.join("samples.csv"), &samples)?;
+    }
+    let mut run = run;
+    run.report.samples = std::mem::take(&mut samples);
     if args.figures {
         write_figures(&args, &out, &session, &run)?;
     }
     let json = serde_json::to_string_pretty(&run)?;
-    skinbrdf_session::write_atomic(&out.join("derender.json"), json.as_bytes())
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    skinbrdf_session::write_atomic(&out.join("derender.json"), json.as_bytes())?;
     if args.json {
         println!("{json}");
         return Ok(());

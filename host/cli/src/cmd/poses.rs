@@ -50,9 +50,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return bench_scenes(list, &args);
     }
     let dir = args.session.clone().context("SESSION_DIR is required")?;
-    let session = Session::load(&dir)
-        .map_err(|e| anyhow::anyhow!("{e}"))
-        .with_context(|| format!("loading session {}", dir.display()))?;
+    let session =
+        Session::load(&dir).with_context(|| format!("loading session {}", dir.display()))?;
     let cfg = PoseConfig {
         recalibrate: args.recalibrate,
         ..PoseConfig::default()
@@ -65,11 +64,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    write_json_atomic(&out, &est).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let truth = session
-        .load_truth()
-        .transpose()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    write_json_atomic(&out, &est)?;
+    let truth = session.load_truth().transpose()?;
     let errs = truth.as_ref().map(|t| compare_truth(&est, t));
     if args.json {
         let images: Vec<_> = est
@@ -235,144 +231,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// One row of the per-scene benchmark.
-#[derive(Debug, serde::Serialize)]
-struct SceneRow {
-    scene: String,
-    measurement_images: usize,
-    images_with_camera_pose: usize,
-    measurement_images_with_head_pose: usize,
-    camera_position_error_median_mm: f64,
-    camera_orientation_error_median_deg: f64,
-    head_position_error_median_mm: f64,
-    head_position_error_max_mm: f64,
-    head_position_error_median_before_bundle_mm: f64,
-    bundle_cost_before: Option<f64>,
-    bundle_cost_after: Option<f64>,
-    bundle_ms: Option<f64>,
-    head_orientation_error_median_deg: f64,
-    flash_position_error_mm: Option<f64>,
-    standard_position_error_mm: Option<f64>,
-    detect_plus_pose_per_image_median_ms: f64,
-    poses_total_s: f64,
-}
-
 fn bench_scenes(list: &str, args: &Args) -> anyhow::Result<()> {
-    use skinbrdf_session::ImageRole;
-    use skinbrdf_synth::{generate, Scene, SynthOptions, BUILTIN_SCENES};
-    let names: Vec<String> = if list == "all" {
-        BUILTIN_SCENES.iter().map(|(n, _)| n.to_string()).collect()
-    } else {
-        list.split(',').map(|s| s.trim().to_string()).collect()
+    let cfg = skinbrdf_pipeline::scenes::ScenesConfig {
+        scenes: if list == "all" {
+            Vec::new()
+        } else {
+            list.split(',').map(|s| s.trim().to_string()).collect()
+        },
+        work: args.work.clone(),
+        reuse: args.reuse,
+        keep: args.keep,
     };
-    let mut rows = Vec::new();
-    for name in &names {
-        let dir = args.work.join(name);
-        if !(args.reuse && dir.join("session.toml").is_file()) {
-            let scene = Scene::load(name).with_context(|| format!("scene {name}"))?;
-            generate(&scene, &SynthOptions::default(), &dir)
-                .with_context(|| format!("rendering scene {name} into {}", dir.display()))?;
-        }
-        let session = Session::load(&dir)
-            .map_err(|e| anyhow::anyhow!("{e}"))
-            .with_context(|| format!("loading session {}", dir.display()))?;
-        let truth = session
-            .load_truth()
-            .transpose()
-            .map_err(|e| anyhow::anyhow!("{e}"))?
-            .with_context(|| format!("{}: no truth.json", dir.display()))?;
-        let (before, est) =
-            skinbrdf_poses::session::estimate_session_stages(&session, &PoseConfig::default())
-                .with_context(|| format!("estimating the poses of {name}"))?;
-        let e = compare_truth(&est, &truth);
-        let e0 = compare_truth(&before, &truth);
-        let meas: Vec<usize> = est
-            .images
-            .iter()
-            .enumerate()
-            .filter(|(_, im)| im.role == ImageRole::Measurement)
-            .map(|(i, _)| i)
-            .collect();
-        let head_mm: Vec<f64> = meas
-            .iter()
-            .map(|&i| e.head_position_error_m[i] * 1e3)
-            .collect();
-        let per_image: Vec<f64> = est
-            .images
-            .iter()
-            .map(|im| im.detect_ms + im.pose_ms)
-            .collect();
-        let row = SceneRow {
-            scene: name.clone(),
-            measurement_images: meas.len(),
-            images_with_camera_pose: est
-                .images
-                .iter()
-                .filter(|im| im.world_from_camera.is_some())
-                .count(),
-            measurement_images_with_head_pose: meas
-                .iter()
-                .filter(|&&i| est.images[i].world_from_head.is_some())
-                .count(),
-            camera_position_error_median_mm: median(&e.camera_position_error_m) * 1e3,
-            camera_orientation_error_median_deg: median(&e.camera_orientation_error_deg),
-            head_position_error_median_mm: median(&head_mm),
-            head_position_error_max_mm: head_mm
-                .iter()
-                .copied()
-                .filter(|v| v.is_finite())
-                .fold(f64::NAN, f64::max),
-            head_position_error_median_before_bundle_mm: median(
-                &meas
-                    .iter()
-                    .map(|&i| e0.head_position_error_m[i] * 1e3)
-                    .collect::<Vec<_>>(),
-            ),
-            bundle_cost_before: est.bundle.as_ref().map(|b| b.initial_cost),
-            bundle_cost_after: est.bundle.as_ref().map(|b| b.final_cost),
-            bundle_ms: est.bundle.as_ref().map(|b| b.time_ms),
-            head_orientation_error_median_deg: median(&e.head_orientation_error_deg),
-            flash_position_error_mm: e.light_position_error_m.map(|v| v * 1e3),
-            standard_position_error_mm: e.standard_position_error_m.map(|v| v * 1e3),
-            detect_plus_pose_per_image_median_ms: median(&per_image),
-            poses_total_s: est.total_ms * 1e-3,
-        };
-        if !args.json {
+    let json = args.json;
+    let rows = skinbrdf_pipeline::scenes::pose_scenes(&cfg, &mut |name| {
+        if !json {
             eprintln!("{name}: done");
         }
-        rows.push(row);
-        if !args.keep {
-            std::fs::remove_dir_all(&dir).with_context(|| format!("removing {}", dir.display()))?;
-        }
-    }
-    if args.json {
+    })?;
+    if json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
-        return Ok(());
-    }
-    println!("| scene | camera pos. (mm) | camera orient. (deg) | head pos. median / max (mm) | head pos. before BA (mm) | head posed | head orient. (deg) | flash (mm) | standard (mm) | BA cost before -> after | BA (ms) | detect+pose per image (ms) | poses total (s) |");
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
-    let opt = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
-    for r in &rows {
-        println!(
-            "| {} | {:.3} | {:.4} | {:.3} / {:.3} | {:.3} | {}/{} | {:.4} | {} | {} | {} | {} | {:.0} | {:.1} |",
-            r.scene,
-            r.camera_position_error_median_mm,
-            r.camera_orientation_error_median_deg,
-            r.head_position_error_median_mm,
-            r.head_position_error_max_mm,
-            r.head_position_error_median_before_bundle_mm,
-            r.measurement_images_with_head_pose,
-            r.measurement_images,
-            r.head_orientation_error_median_deg,
-            opt(r.flash_position_error_mm),
-            opt(r.standard_position_error_mm),
-            match (r.bundle_cost_before, r.bundle_cost_after) {
-                (Some(a), Some(b)) => format!("{a:.0} -> {b:.0}"),
-                _ => "-".into(),
-            },
-            r.bundle_ms.map_or_else(|| "-".into(), |v| format!("{v:.0}")),
-            r.detect_plus_pose_per_image_median_ms,
-            r.poses_total_s
-        );
+    } else {
+        print!("{}", skinbrdf_pipeline::scenes::markdown(&rows));
     }
     Ok(())
 }

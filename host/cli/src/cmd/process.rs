@@ -18,7 +18,7 @@ pub struct Args {
     pub out: Option<PathBuf>,
     /// Model: lambertian, lafortune1, lafortune2, lafortune3, cook-torrance.
     #[arg(long, default_value = "lafortune2")]
-    pub model: String,
+    pub model: skinbrdf_brdf::ModelSpec,
     /// Only the incidence plane: skip the rest of the hemisphere.
     #[arg(long)]
     pub incidence_plane_only: bool,
@@ -57,10 +57,7 @@ pub fn config(args: &Args) -> anyhow::Result<ProcessConfig> {
         anyhow::bail!("--stride must be at least 1");
     }
     cfg.derender.stride = args.stride;
-    cfg.fit.model = args
-        .model
-        .parse()
-        .map_err(|e| anyhow::anyhow!("--model `{}`: {e}", args.model))?;
+    cfg.fit.model = args.model;
     cfg.fit.figures = !args.no_figures;
     cfg.fit.merl = args.merl;
     cfg.force = args.force;

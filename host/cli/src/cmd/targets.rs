@@ -132,7 +132,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some("pdf") => sheet.to_pdf(),
         _ => anyhow::bail!("{}: the output must end in .svg or .pdf", out.display()),
     };
-    write_atomic(&out, &bytes).map_err(|e| anyhow::anyhow!("{e}"))?;
+    write_atomic(&out, &bytes)?;
     let targets: Vec<Target> = sheet
         .tags
         .iter()
@@ -182,8 +182,7 @@ fn write_layout(
         targets,
     })
     .context("serialising the layout")?;
-    write_atomic(&layout_path, format!("{header}{text}").as_bytes())
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    write_atomic(&layout_path, format!("{header}{text}").as_bytes())?;
     Ok(layout_path)
 }
 
@@ -215,8 +214,7 @@ fn scene_cutouts(scene_name: &str, kind: SheetKind, out: &std::path::Path) -> an
     let mut written = Vec::new();
     match ext.as_deref() {
         Some("pdf") => {
-            write_atomic(out, &skinbrdf_targets::sheet::pdf_document(&pages))
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            write_atomic(out, &skinbrdf_targets::sheet::pdf_document(&pages))?;
             written.push(out.to_path_buf());
         }
         Some("svg") => {
@@ -230,7 +228,7 @@ fn scene_cutouts(scene_name: &str, kind: SheetKind, out: &std::path::Path) -> an
                         .unwrap_or("targets");
                     out.with_file_name(format!("{stem}-{}.svg", i + 1))
                 };
-                write_atomic(&path, p.to_svg().as_bytes()).map_err(|e| anyhow::anyhow!("{e}"))?;
+                write_atomic(&path, p.to_svg().as_bytes())?;
                 written.push(path);
             }
         }

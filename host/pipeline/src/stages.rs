@@ -1,0 +1,757 @@
+//! The pipeline's typed units of work, each a [`StageUnit`]: its inputs (a [`Fingerprint`] of
+//! every file and option it reads), `run` (which writes its outputs and returns its stages'
+//! reports with typed figures) and `load` (which reads a previous run's outputs back when the
+//! ledger says they are current).
+//!
+//! | unit | stages | reads | writes |
+//! |---|---|---|---|
+//! | [`PoseUnit`] | calibration, camera poses, head tracking, flash, standard | session files | `poses.json` |
+//! | [`DerenderUnit`] | scan preparation, shadow rays, derender | session files, `poses.json` | `samples.skbs` |
+//! | [`FitUnit`] | smoothing (plane, hemisphere), fit | `samples.skbs`, truth | `fit/*` |
+//! | [`RenderUnit`] | report (the head rendering) | `fit/params.json`, scan | `render/*` |
+//!
+//! Truth (`truth.json`) is read only to score: it enters each unit's fingerprint because the
+//! figures depend on it, never its results.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use skinbrdf_derender::{DerenderConfig, SessionRun};
+
+use crate::pose_inputs::{PoseChoice, SessionOptions};
+use skinbrdf_fit::report::{fit_and_report, FitReport, Input};
+use skinbrdf_poses::SessionPoses;
+use skinbrdf_samples::SampleHeader;
+use skinbrdf_session::{GeometrySpec, Session, Truth};
+
+use crate::ledger::{write_atomic, Fingerprint, FingerprintBuilder, Unit};
+use crate::metrics::{
+    CalibrationMetrics, CameraPoseMetrics, DerenderMetrics, DropCounts, FitMetrics, FlashMetrics,
+    HeadTrackingMetrics, ReportMetrics, ScanMetrics, ShadowMetrics, SmoothMetrics, StageMetrics,
+    StandardMetrics,
+};
+use crate::plan::{Plan, PlanOptions, SceneFacts, Stage};
+use crate::process::{ProcessConfig, ProcessError};
+use crate::report::{RunReport, StageReport, StageStatus};
+
+/// The pose stage's output file, relative to the output directory.
+pub const POSES_FILE: &str = "poses.json";
+/// The derender stage's output file, relative to the output directory.
+pub const SAMPLES_FILE: &str = "samples.skbs";
+/// The fit's parameter file, relative to the output directory.
+pub const PARAMS_FILE: &str = "fit/params.json";
+/// The head rendering (Lambertian against the fitted BRDF), relative to the output directory.
+pub const RENDER_FIGURE: &str = "render/head_comparison.png";
+
+/// What the units share while a run goes through the plan.
+#[derive(Debug)]
+pub struct Ctx<'a> {
+    /// The session.
+    pub session: &'a Session,
+    /// Ground truth, for scoring only.
+    pub truth: Option<&'a Truth>,
+    /// The run's settings.
+    pub cfg: &'a ProcessConfig,
+    /// Output directory.
+    pub out_dir: PathBuf,
+    /// What the scene has (the convexity fact is filled in by scan preparation).
+    pub facts: SceneFacts,
+    /// The plan.
+    pub plan: Plan,
+    /// The pose stage's result, when it ran or was reused.
+    pub poses: Option<SessionPoses>,
+    /// The derendered samples.
+    pub samples: Option<Vec<skinbrdf_core::BrdfSample>>,
+    /// The fit, when it ran in this run.
+    pub fit: Option<FitReport>,
+}
+
+/// One unit of work (see the module docs).
+pub trait StageUnit {
+    /// The ledger's name for it.
+    fn unit(&self) -> Unit;
+    /// The stage announced when it starts.
+    fn first_stage(&self) -> Stage;
+    /// Whether the plan runs any of its stages.
+    fn planned(&self, ctx: &Ctx<'_>) -> bool;
+    /// The reports of its stages when none runs.
+    fn skipped(&self, ctx: &Ctx<'_>) -> Vec<StageReport>;
+    /// The fingerprint of everything it reads.
+    fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError>;
+    /// Runs: writes its outputs and returns its stages' reports and the files it wrote
+    /// (relative to the output directory).
+    fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError>;
+    /// Reads a previous run's outputs back into the context (`recorded`: that run's reports).
+    fn load(&self, ctx: &mut Ctx<'_>, recorded: &[StageReport]) -> Result<(), ProcessError>;
+}
+
+/// Every file a session's stages read: `session.toml`, the images and their masks, the scan
+/// and the capture record; `truth.json` when present (scoring).
+pub fn session_input_files(session: &Session) -> Vec<PathBuf> {
+    let f = &session.file;
+    let mut v = vec![session.dir.join("session.toml")];
+    for img in &f.images {
+        v.push(session.path(&img.file));
+        if let Some(m) = &img.mask {
+            v.push(session.path(m));
+        }
+    }
+    if let GeometrySpec::Scan { file, .. } = &f.geometry {
+        v.push(session.path(file));
+    }
+    if let Some(c) = &f.capture {
+        v.push(session.path(c));
+    }
+    let truth = session.truth_path();
+    if truth.is_file() {
+        v.push(truth);
+    }
+    v
+}
+
+fn session_fingerprint(session: &Session) -> Result<FingerprintBuilder, ProcessError> {
+    let mut fp = FingerprintBuilder::new();
+    for p in session_input_files(session) {
+        fp = fp.file(&p)?;
+    }
+    Ok(fp)
+}
+
+/// The skipped report of a stage, with the plan's reason.
+pub fn skipped(plan: &Plan, stage: Stage) -> StageReport {
+    RunReport::skipped_from_plan(plan)
+        .into_iter()
+        .find(|r| r.stage == stage)
+        .unwrap_or_else(|| StageReport::skipped(stage, "not planned"))
+}
+
+fn json_bytes<T: serde::Serialize>(path: &Path, v: &T) -> Result<Vec<u8>, ProcessError> {
+    serde_json::to_vec_pretty(v).map_err(|source| ProcessError::Json {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn median(v: &[f64]) -> f64 {
+    skinbrdf_core::stats::median(v)
+}
+
+// --- photogrammetry --------------------------------------------------------------------------
+
+/// Photogrammetry (see the module docs).
+#[derive(Debug)]
+pub struct PoseUnit;
+
+/// The pose stages in order.
+pub const POSE_STAGES: [Stage; 5] = [
+    Stage::CameraCalibration,
+    Stage::CameraPoses,
+    Stage::HeadTracking,
+    Stage::FlashTriangulation,
+    Stage::RadiometricCalibration,
+];
+
+impl StageUnit for PoseUnit {
+    fn unit(&self) -> Unit {
+        Unit::Poses
+    }
+    fn first_stage(&self) -> Stage {
+        Stage::CameraPoses
+    }
+    fn planned(&self, ctx: &Ctx<'_>) -> bool {
+        POSE_STAGES.iter().any(|&s| ctx.plan.runs(s))
+    }
+    fn skipped(&self, ctx: &Ctx<'_>) -> Vec<StageReport> {
+        POSE_STAGES.iter().map(|&s| skipped(&ctx.plan, s)).collect()
+    }
+    fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
+        Ok(session_fingerprint(ctx.session)?
+            .value("poses", &ctx.cfg.poses)
+            .finish())
+    }
+    fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
+        let t = Instant::now();
+        let poses = skinbrdf_poses::estimate_session(ctx.session, &ctx.cfg.poses)?;
+        let run_time_s = t.elapsed().as_secs_f64();
+        let path = ctx.out_dir.join(POSES_FILE);
+        write_atomic(&path, &json_bytes(&path, &poses)?)?;
+        let reports = pose_stage_reports(&ctx.plan, &poses, ctx.truth, run_time_s);
+        ctx.poses = Some(poses);
+        Ok((reports, vec![POSES_FILE.into()]))
+    }
+    fn load(&self, ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
+        ctx.poses = Some(read_poses(&ctx.out_dir.join(POSES_FILE))?);
+        Ok(())
+    }
+}
+
+/// Reads the pose stage's `poses.json`.
+pub fn read_poses(path: &Path) -> Result<SessionPoses, ProcessError> {
+    let bytes = std::fs::read(path).map_err(|source| ProcessError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    serde_json::from_slice(&bytes).map_err(|source| ProcessError::Json {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The pose stages' reports: typed figures from the poses and, with truth, their errors.
+pub fn pose_stage_reports(
+    plan: &Plan,
+    poses: &SessionPoses,
+    truth: Option<&Truth>,
+    run_time_s: f64,
+) -> Vec<StageReport> {
+    let errs = truth.map(|t| skinbrdf_poses::session::compare_truth(poses, t));
+    let corners = errs
+        .as_ref()
+        .map(|e| e.corner_summary())
+        .unwrap_or_default();
+    let corner = |layout: &str| corners.get(layout).map(|c| c.corner_error_median_px);
+    let mk = |stage: Stage, time: f64, figures: StageMetrics| -> StageReport {
+        if !plan.runs(stage) {
+            return skipped(plan, stage);
+        }
+        StageReport::ran(stage, time).with_figures(figures)
+    };
+    let mut out = Vec::new();
+
+    out.push(mk(
+        Stage::CameraCalibration,
+        0.0,
+        StageMetrics::Calibration(CalibrationMetrics {
+            reprojection_rms_px: poses.calibration.as_ref().map(|c| c.rms_px),
+            focal_length_error_px: errs.as_ref().and_then(|e| e.focal_error_px),
+        }),
+    ));
+
+    let cams: Vec<_> = poses
+        .images
+        .iter()
+        .filter_map(|i| i.world_from_camera.as_ref())
+        .collect();
+    let failed_estimates: usize = poses.images.iter().map(|i| i.errors.len()).sum();
+    let mut r = mk(
+        Stage::CameraPoses,
+        run_time_s,
+        StageMetrics::CameraPoses(CameraPoseMetrics {
+            images_with_camera_pose: cams.len(),
+            reprojection_rms_median_px: median(&cams.iter().map(|p| p.rms_px).collect::<Vec<_>>()),
+            detect_plus_pose_per_image_median_ms: median(
+                &poses
+                    .images
+                    .iter()
+                    .map(|i| i.detect_ms + i.pose_ms)
+                    .collect::<Vec<_>>(),
+            ),
+            failed_estimates,
+            camera_position_error_median_mm: errs
+                .as_ref()
+                .map(|e| median(&e.camera_position_error_m) * 1e3),
+            camera_orientation_error_median_deg: errs
+                .as_ref()
+                .map(|e| median(&e.camera_orientation_error_deg)),
+            reference_corner_error_median_px: corner("reference"),
+        }),
+    );
+    if failed_estimates > 0 {
+        r.notes.push(format!(
+            "{failed_estimates} individual pose estimates failed (see poses.json)"
+        ));
+    }
+    out.push(r);
+
+    let mut r = mk(
+        Stage::HeadTracking,
+        0.0,
+        StageMetrics::HeadTracking(HeadTrackingMetrics {
+            images_with_head_pose: poses
+                .images
+                .iter()
+                .filter(|i| i.world_from_head.is_some())
+                .count(),
+            head_position_error_median_mm: errs
+                .as_ref()
+                .map(|e| median(&e.head_position_error_m) * 1e3),
+            head_orientation_error_median_deg: errs
+                .as_ref()
+                .map(|e| median(&e.head_orientation_error_deg)),
+            headdress_corner_error_median_px: corner("headdress"),
+        }),
+    );
+    if plan.runs(Stage::HeadTracking) {
+        r.notes.push("timed together with camera poses".into());
+    }
+    out.push(r);
+
+    let c = &poses.light_position_cov_m2;
+    let mut r = mk(
+        Stage::FlashTriangulation,
+        0.0,
+        StageMetrics::Flash(FlashMetrics {
+            flash_position_error_mm: errs
+                .as_ref()
+                .and_then(|e| e.light_position_error_m)
+                .map(|e| e * 1e3),
+            flash_position_sigma_mm: (c.len() == 9)
+                .then(|| (c[0] + c[4] + c[8]).max(0.0).sqrt() * 1e3),
+        }),
+    );
+    if plan.runs(Stage::FlashTriangulation) {
+        r.notes.push("timed together with camera poses".into());
+    }
+    out.push(r);
+
+    let mut r = mk(
+        Stage::RadiometricCalibration,
+        0.0,
+        StageMetrics::Standard(StandardMetrics {
+            standard_position_error_mm: errs
+                .as_ref()
+                .and_then(|e| e.standard_position_error_m)
+                .map(|e| e * 1e3),
+        }),
+    );
+    if plan.runs(Stage::RadiometricCalibration) {
+        r.notes
+            .push("standard pose here; C itself is estimated during derendering".into());
+    }
+    out.push(r);
+    out
+}
+
+// --- derendering ------------------------------------------------------------------------------
+
+/// Scan preparation, shadow rays and derendering (see the module docs).
+#[derive(Debug)]
+pub struct DerenderUnit;
+
+/// The derender settings the plan implies: shadow rays forced, skipped (a region known to be
+/// convex) or left to scan preparation's convexity test.
+pub fn planned_derender_config(
+    cfg: &DerenderConfig,
+    plan: &Plan,
+    opts: &PlanOptions,
+) -> DerenderConfig {
+    let mut d = *cfg;
+    if opts.force_shadow_rays {
+        d.shadows = skinbrdf_derender::ShadowMode::Always;
+    } else if !plan.runs(Stage::ShadowRays) {
+        d.shadows = skinbrdf_derender::ShadowMode::Never;
+    }
+    d
+}
+
+/// Derenders a session the way `process` does: with the pose stage's poses when given (the
+/// session's own known quantities still take precedence inside), else the session's poses;
+/// never the ground truth. `skinbrdf derender` calls this too, so that running the stages one
+/// at a time gives what `process` gives.
+pub fn derender_stage(
+    session: &Session,
+    poses: Option<&SessionPoses>,
+    dcfg: &DerenderConfig,
+    opts: &PlanOptions,
+) -> Result<(SessionRun, Vec<skinbrdf_core::BrdfSample>), ProcessError> {
+    let session_opts = SessionOptions {
+        poses: if poses.is_some() {
+            PoseChoice::Estimated
+        } else {
+            PoseChoice::Session
+        },
+        skip_target_mask: false,
+        estimated: poses.cloned(),
+    };
+    let mut run = crate::pose_inputs::derender_session(session, &session_opts, dcfg)?;
+    let mut samples = std::mem::take(&mut run.report.samples);
+    if opts.incidence_plane_only {
+        samples.retain(near_incidence_plane);
+    }
+    Ok((run, samples))
+}
+
+/// The header `process` writes into `samples.skbs`.
+pub fn samples_header(session: &Session, run: &SessionRun) -> SampleHeader {
+    let mut header = SampleHeader::new("derender", &session.file.description);
+    header.origin = Some(session.dir.display().to_string());
+    header.calibration_c = Some(run.report.c);
+    header
+}
+
+impl StageUnit for DerenderUnit {
+    fn unit(&self) -> Unit {
+        Unit::Derender
+    }
+    fn first_stage(&self) -> Stage {
+        Stage::Derender
+    }
+    fn planned(&self, _ctx: &Ctx<'_>) -> bool {
+        true
+    }
+    fn skipped(&self, _ctx: &Ctx<'_>) -> Vec<StageReport> {
+        Vec::new()
+    }
+    fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
+        let mut fp = session_fingerprint(ctx.session)?;
+        if ctx.poses.is_some() {
+            fp = fp.file(&ctx.out_dir.join(POSES_FILE))?;
+        }
+        Ok(fp
+            .value("derender", &ctx.cfg.derender)
+            .value("plan", &ctx.cfg.plan)
+            .finish())
+    }
+    fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
+        let dcfg = planned_derender_config(&ctx.cfg.derender, &ctx.plan, &ctx.cfg.plan);
+        let (run, samples) = derender_stage(ctx.session, ctx.poses.as_ref(), &dcfg, &ctx.cfg.plan)?;
+        if ctx.facts.region_convex.is_none() {
+            ctx.facts.region_convex = Some(!run.report.region_can_self_shadow);
+        }
+        let path = ctx.out_dir.join(SAMPLES_FILE);
+        skinbrdf_samples::write_samples(&path, &samples_header(ctx.session, &run), &samples)?;
+        let reports = derender_reports(&ctx.plan, &run, samples.len() as u64).to_vec();
+        ctx.samples = Some(samples);
+        Ok((reports, vec![SAMPLES_FILE.into()]))
+    }
+    fn load(&self, ctx: &mut Ctx<'_>, recorded: &[StageReport]) -> Result<(), ProcessError> {
+        let (_, samples) = skinbrdf_samples::read_samples(ctx.out_dir.join(SAMPLES_FILE))?;
+        if ctx.facts.region_convex.is_none() {
+            ctx.facts.region_convex = recorded.iter().find_map(|r| match &r.figures {
+                StageMetrics::Scan(s) => s.region_can_self_shadow.map(|c| !c),
+                _ => None,
+            });
+        }
+        ctx.samples = Some(samples);
+        Ok(())
+    }
+}
+
+/// Within 5 degrees of the incidence plane (`phi_d` near 0 or pi).
+fn near_incidence_plane(s: &skinbrdf_core::BrdfSample) -> bool {
+    f64::from(s.phi_d_rad).sin().abs() * f64::from(s.theta_e_rad).sin() <= 5f64.to_radians().sin()
+}
+
+/// The reports of scan preparation, shadow rays and derendering.
+pub fn derender_reports(plan: &Plan, run: &SessionRun, samples_kept: u64) -> [StageReport; 3] {
+    let d = &run.report;
+    let t = &d.times;
+    let scan_figures = StageMetrics::Scan(ScanMetrics {
+        triangles: run.triangles,
+        normal_fit_radius_mm: d.normal_radius_m * 1e3,
+        triangles_dropped: run
+            .mesh_report
+            .as_ref()
+            .map_or(0, |m| m.triangles_in.saturating_sub(m.triangles_out)),
+        region_can_self_shadow: Some(d.region_can_self_shadow),
+    });
+    let scan = if plan.runs(Stage::ScanPreparation) {
+        let mut r = StageReport::ran(
+            Stage::ScanPreparation,
+            t.mesh_load_s + t.bvh_s + t.normals_s + t.convexity_s,
+        )
+        .with_figures(scan_figures);
+        // Every repair, with counts and examples (a repair beyond the mesh crate's limit is an
+        // error before this).
+        if let Some(m) = run.mesh_report.as_ref().filter(|m| !m.is_clean()) {
+            r.notes.push(format!("scan repaired: {}", m.summary()));
+        }
+        r
+    } else {
+        let mut r = skipped(plan, Stage::ScanPreparation).with_figures(scan_figures);
+        r.notes.push(format!(
+            "the ideal shape was tessellated instead ({} triangles, {:.3} s)",
+            run.triangles,
+            t.mesh_load_s + t.bvh_s + t.normals_s
+        ));
+        r
+    };
+    let shadow = if !plan.runs(Stage::ShadowRays) {
+        let mut r = skipped(plan, Stage::ShadowRays);
+        if d.region_can_self_shadow {
+            r.notes.push(
+                "the tessellated shape failed the convexity test within its tolerance; the plan's geometric fact wins".into(),
+            );
+        }
+        r
+    } else if d.shadow_rays {
+        let mut r = StageReport::ran(Stage::ShadowRays, 0.0).with_figures(StageMetrics::Shadow(
+            ShadowMetrics {
+                shadow_rays_cast: d.shadow_rays_cast,
+            },
+        ));
+        r.notes.push(if d.region_can_self_shadow {
+            "the convexity test found the region can shadow itself".into()
+        } else {
+            "forced although the region is convex".into()
+        });
+        r.notes.push("timed within derender".into());
+        r
+    } else if d.region_can_self_shadow {
+        StageReport::skipped(Stage::ShadowRays, "disabled by the derender settings")
+    } else {
+        let mut r = StageReport::skipped(
+            Stage::ShadowRays,
+            "the region is convex: it cannot shadow itself",
+        );
+        r.notes
+            .push("found by scan preparation's convexity test".into());
+        r
+    };
+    let k = &d.counts;
+    let secs = t.derender_s.max(1e-9);
+    let mut der = StageReport::ran(
+        Stage::Derender,
+        t.image_load_s + t.calibration_s + t.derender_s,
+    )
+    .with_figures(StageMetrics::Derender(DerenderMetrics {
+        samples_kept,
+        dropped: DropCounts {
+            off_mask: k.off_mask,
+            on_target: k.on_target,
+            no_surface: k.no_surface,
+            back_facing: k.back_facing,
+            off_region: k.off_region,
+            grazing: k.grazing,
+            shadowed: k.shadowed,
+            saturated: k.saturated,
+            below_noise_floor: k.below_noise_floor,
+            non_finite: k.non_finite,
+            no_ray: k.no_ray,
+        },
+        c_green: d.c[1],
+        c_relative_spread_green_pct: d.calibration.as_ref().map(|c| c.rel_spread[1] * 100.0),
+        c_standard_pixels: d.calibration.as_ref().map(|c| c.pixels as u64),
+        primary_rays_per_s_m: d.primary_rays as f64 / secs / 1e6,
+        sample_median_rel_error_pct: d.truth_error.as_ref().map(|e| e.median_rel_error * 100.0),
+        sample_p90_rel_error_pct: d.truth_error.as_ref().map(|e| e.p90_rel_error * 100.0),
+    }));
+    der.notes.push(format!(
+        "camera from {}, light from {}, C from {}",
+        run.camera_source, run.light_source, run.c_source
+    ));
+    [scan, shadow, der]
+}
+
+// --- smoothing and fitting -------------------------------------------------------------------
+
+/// Smoothing and the model fit (see the module docs).
+#[derive(Debug)]
+pub struct FitUnit;
+
+impl StageUnit for FitUnit {
+    fn unit(&self) -> Unit {
+        Unit::Fit
+    }
+    fn first_stage(&self) -> Stage {
+        Stage::Fit
+    }
+    fn planned(&self, _ctx: &Ctx<'_>) -> bool {
+        true
+    }
+    fn skipped(&self, _ctx: &Ctx<'_>) -> Vec<StageReport> {
+        Vec::new()
+    }
+    fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
+        let mut fp = FingerprintBuilder::new()
+            .file(&ctx.out_dir.join(SAMPLES_FILE))?
+            .value("model", &format!("{:?}", ctx.cfg.fit.model))
+            .value("fit", &ctx.cfg.fit.fit)
+            .value("figures", &ctx.cfg.fit.figures)
+            .value("merl", &ctx.cfg.fit.merl)
+            .value("plan", &ctx.cfg.plan);
+        let truth = ctx.session.truth_path();
+        if truth.is_file() {
+            fp = fp.file(&truth)?;
+        }
+        Ok(fp.finish())
+    }
+    fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
+        let samples = ctx.samples.take().unwrap_or_default();
+        if samples.is_empty() {
+            return Err(ProcessError::NoSamples);
+        }
+        let dir = &ctx.session.dir;
+        let input = Input {
+            path: dir.clone(),
+            label: dir
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            samples,
+            cornell: None,
+            truth: ctx.truth.map(|t| t.brdf.clone()),
+        };
+        let fit_dir = ctx.out_dir.join("fit");
+        let fr = fit_and_report(&input, &fit_dir, &ctx.cfg.fit)?;
+        ctx.samples = Some(input.samples);
+        let outputs = fr
+            .files
+            .iter()
+            .filter_map(|f| {
+                Path::new(f)
+                    .strip_prefix(&ctx.out_dir)
+                    .ok()
+                    .map(|p| p.to_string_lossy().into_owned())
+            })
+            .collect();
+        let reports = fit_reports(&ctx.plan, &fr).to_vec();
+        ctx.fit = Some(fr);
+        Ok((reports, outputs))
+    }
+    fn load(&self, _ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
+        Ok(())
+    }
+}
+
+/// The reports of smoothing (plane, hemisphere) and the fit.
+pub fn fit_reports(plan: &Plan, fr: &FitReport) -> [StageReport; 3] {
+    let smooth_s: f64 = fr
+        .timings_s
+        .iter()
+        .filter(|(n, _)| n == "smooth")
+        .map(|(_, t)| *t)
+        .sum();
+    let plane = StageReport::ran(Stage::SmoothIncidencePlane, smooth_s).with_figures(
+        StageMetrics::Smooth(SmoothMetrics {
+            loess_span: fr.smooth_span,
+            loess_residual_sigma_pct: fr.smooth_sigma * 100.0,
+        }),
+    );
+    let hemi = if plan.runs(Stage::SmoothHemisphere) {
+        let mut r = StageReport::ran(Stage::SmoothHemisphere, 0.0);
+        r.notes.push("the same local quadratic fit spans (theta_i, theta_e, phi_d); timed with the incidence plane".into());
+        r
+    } else {
+        skipped(plan, Stage::SmoothHemisphere)
+    };
+    let mut fit = StageReport::ran(Stage::Fit, fr.fit.fit_time_s).with_figures(StageMetrics::Fit(
+        FitMetrics {
+            samples_fitted: fr.n_samples as u64,
+            log_rmse_vs_samples_green: fr.fit.channels.get(1).map(|c| c.error.log_rmse),
+            model_log_rmse_vs_truth: fr.truth.as_ref().map(|t| {
+                let c = &t.channels;
+                (c.iter().map(|m| m.log_rmse * m.log_rmse).sum::<f64>() / c.len().max(1) as f64)
+                    .sqrt()
+            }),
+            model_median_rel_error_vs_truth_pct: fr.truth.as_ref().map(|t| {
+                median(
+                    &t.channels
+                        .iter()
+                        .map(|m| m.median_rel_err * 100.0)
+                        .collect::<Vec<_>>(),
+                )
+            }),
+        },
+    ));
+    for w in &fr.fit.warnings {
+        fit.notes.push(w.clone());
+    }
+    [plane, hemi, fit]
+}
+
+// --- the head rendering ---------------------------------------------------------------------
+
+/// The head rendering of the report (see the module docs).
+#[derive(Debug)]
+pub struct RenderUnit;
+
+impl StageUnit for RenderUnit {
+    fn unit(&self) -> Unit {
+        Unit::Render
+    }
+    fn first_stage(&self) -> Stage {
+        Stage::Report
+    }
+    fn planned(&self, ctx: &Ctx<'_>) -> bool {
+        matches!(ctx.session.file.geometry, GeometrySpec::Scan { .. })
+    }
+    fn skipped(&self, _ctx: &Ctx<'_>) -> Vec<StageReport> {
+        let mut r = StageReport::ran(Stage::Report, 0.0);
+        r.notes
+            .push("no head rendering: the sample is an ideal shape, not a scan".into());
+        vec![r]
+    }
+    fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
+        let mut fp = FingerprintBuilder::new().file(&ctx.out_dir.join(PARAMS_FILE))?;
+        if let GeometrySpec::Scan { file, units } = &ctx.session.file.geometry {
+            fp = fp.file(&ctx.session.path(file))?.value("units", units);
+        }
+        Ok(fp.finish())
+    }
+    fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
+        let t = Instant::now();
+        let result = render_head(ctx.session, &ctx.out_dir);
+        let render_time_s = t.elapsed().as_secs_f64();
+        let mut r = StageReport::ran(Stage::Report, render_time_s);
+        let outputs = match result {
+            Ok((stats, files)) => {
+                r = r.with_figures(StageMetrics::Report(ReportMetrics {
+                    render_rays: Some(stats.rays as u64),
+                    render_time_s: Some(render_time_s),
+                }));
+                r.notes.push(format!(
+                    "{RENDER_FIGURE}: the scan rendered with a Lambertian BRDF and with the fitted model"
+                ));
+                files
+                    .iter()
+                    .filter_map(|f| f.strip_prefix(&ctx.out_dir).ok())
+                    .map(|p| p.to_string_lossy().into_owned())
+                    .collect()
+            }
+            Err(note) => {
+                r.notes.push(note);
+                Vec::new()
+            }
+        };
+        Ok((vec![r], outputs))
+    }
+    fn load(&self, _ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
+        Ok(())
+    }
+}
+
+/// Renders the scan with a Lambertian BRDF and with the fitted model side by side (the method's
+/// Figures 7 and 10) into `out/render/`. `Err`: why it could not be drawn (reported as a note,
+/// never fatal).
+fn render_head(
+    session: &Session,
+    out_dir: &Path,
+) -> Result<(skinbrdf_render::RenderStats, Vec<PathBuf>), String> {
+    let GeometrySpec::Scan { file, units } = &session.file.geometry else {
+        return Err("no scan to render".into());
+    };
+    let model = skinbrdf_render::load_model(&out_dir.join(PARAMS_FILE))
+        .map_err(|e| format!("head rendering skipped: {e}"))?;
+    let mesh = skinbrdf_mesh::load_mesh(
+        &session.path(file),
+        &skinbrdf_mesh::LoadOptions {
+            unit: skinbrdf_mesh::LengthUnit::Custom(units.to_m()),
+            ..Default::default()
+        },
+    )
+    .map_err(|e| format!("head rendering skipped: {e}"))?;
+    let cfg = skinbrdf_render::RenderConfig::default();
+    let img = skinbrdf_render::render_comparison(&mesh.mesh, &model, &cfg)
+        .map_err(|e| format!("head rendering failed: {e}"))?;
+    let dir = out_dir.join("render");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let files = img
+        .write(&dir.join("head_comparison"), &cfg.labels)
+        .map_err(|e| format!("head rendering not written: {e}"))?;
+    Ok((img.stats, files))
+}
+
+/// Marks recorded reports as reused (their figures and run times are the recorded run's).
+pub fn as_reused(recorded: &[StageReport]) -> Vec<StageReport> {
+    recorded
+        .iter()
+        .cloned()
+        .map(|mut r| {
+            if r.status == StageStatus::Ran {
+                r.status = StageStatus::Reused;
+            }
+            r
+        })
+        .collect()
+}

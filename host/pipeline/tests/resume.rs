@@ -1,0 +1,160 @@
+//! Resume never lies: `process` reuses a unit only when every input it reads and every output
+//! it wrote are what the ledger recorded; otherwise it runs the unit again, and the report's
+//! figures always describe the files on disk.
+//!
+//! One small synthetic session (the sphere scene: 4 measurement images at a quarter of the
+//! pixels per axis) is processed once; each case then damages or changes one thing and checks
+//! what the next run did. In a debug build the test is ignored (rendering takes minutes there).
+
+use std::path::Path;
+
+use skinbrdf_pipeline::ledger::{Ledger, RunLock, Unit};
+use skinbrdf_pipeline::process::{process, ProcessConfig, ProcessOutput};
+use skinbrdf_pipeline::report::StageStatus;
+use skinbrdf_pipeline::Stage;
+use skinbrdf_synth::{generate, Scene, SynthOptions};
+
+fn run(session: &Path) -> ProcessOutput {
+    process(session, &ProcessConfig::new(), &mut |_| {}).expect("process")
+}
+
+fn status(out: &ProcessOutput, stage: Stage) -> StageStatus {
+    out.report
+        .stages
+        .iter()
+        .find(|s| s.stage == stage)
+        .map(|s| s.status.clone())
+        .unwrap_or_else(|| panic!("{stage:?} not reported"))
+}
+
+fn samples_in_file(out: &ProcessOutput) -> u64 {
+    let (_, s) = skinbrdf_samples::read_samples(out.out_dir.join("samples.skbs")).expect("read");
+    s.len() as u64
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn resume_reuses_only_what_is_intact() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let session = dir.path().join("session");
+    let mut scene = Scene::load("sphere").expect("built-in scene");
+    scene.session.measurement_images = 4;
+    let quarter = (scene.camera.width_px / 4, scene.camera.height_px / 4);
+    generate(
+        &scene,
+        &SynthOptions {
+            resolution: Some(quarter),
+            capture: None,
+            noise_free: false,
+            samples_per_pixel: None,
+        },
+        &session,
+    )
+    .expect("synthesis");
+
+    let first = run(&session);
+    let out = first.out_dir.clone();
+    let kept = first.report.derender().expect("derender").samples_kept;
+    assert_eq!(kept, samples_in_file(&first));
+
+    // Unchanged: everything reused, with the first run's figures.
+    let again = run(&session);
+    for s in [Stage::CameraPoses, Stage::Derender, Stage::Fit] {
+        assert_eq!(status(&again, s), StageStatus::Reused, "{s:?}");
+    }
+    assert_eq!(again.report.derender(), first.report.derender());
+    assert_eq!(again.report.fit(), first.report.fit());
+    let md = |o: &ProcessOutput| {
+        std::fs::read_to_string(o.out_dir.join("report.md")).expect("report.md")
+    };
+    let strip = |s: String| {
+        // The run's own total time differs; everything else is the same report.
+        s.lines()
+            .filter(|l| !l.contains("total"))
+            .map(|l| l.replace("reused", "ran"))
+            .collect::<Vec<_>>()
+            .join("\n")
+    };
+    assert_eq!(strip(md(&again)), strip(md(&first)));
+
+    // Samples replaced behind the ledger's back (a hand-run derender with another stride, or a
+    // run interrupted after writing them): derender and fit run again, and the report counts
+    // what the file holds.
+    let (h, s) = skinbrdf_samples::read_samples(out.join("samples.skbs")).expect("read");
+    let half: Vec<_> = s.iter().step_by(2).copied().collect();
+    skinbrdf_samples::write_samples(out.join("samples.skbs"), &h, &half).expect("write");
+    let after = run(&session);
+    assert_eq!(status(&after, Stage::CameraPoses), StageStatus::Reused);
+    assert_eq!(status(&after, Stage::Derender), StageStatus::Ran);
+    assert_eq!(status(&after, Stage::Fit), StageStatus::Ran);
+    assert_eq!(
+        after.report.derender().expect("derender").samples_kept,
+        samples_in_file(&after)
+    );
+    assert_eq!(samples_in_file(&after), kept);
+
+    // A deleted fit product is written again; so is a figure; a garbage params.json is not
+    // reused.
+    for victim in ["fit/model.brdf", "fit/params.json"] {
+        let p = out.join(victim);
+        if victim.ends_with(".json") {
+            std::fs::write(&p, b"{garbage").expect("write");
+        } else {
+            std::fs::remove_file(&p).expect("remove");
+        }
+        let r = run(&session);
+        assert_eq!(status(&r, Stage::Fit), StageStatus::Ran, "{victim}");
+        assert_eq!(status(&r, Stage::Derender), StageStatus::Reused, "{victim}");
+        assert!(p.is_file(), "{victim} written again");
+        assert!(
+            !std::fs::read(&p).expect("read").starts_with(b"{garbage"),
+            "{victim}"
+        );
+    }
+    let figure = std::fs::read_dir(out.join("fit"))
+        .expect("fit dir")
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|x| x == "png"))
+        .expect("a figure");
+    std::fs::remove_file(&figure).expect("remove");
+    let r = run(&session);
+    assert_eq!(status(&r, Stage::Fit), StageStatus::Ran);
+    assert!(figure.is_file(), "{} written again", figure.display());
+
+    // A changed input (session.toml) reruns everything downstream of it.
+    let toml = session.join("session.toml");
+    let mut text = std::fs::read_to_string(&toml).expect("session.toml");
+    text.push_str("\n# edited\n");
+    std::fs::write(&toml, text).expect("write");
+    let r = run(&session);
+    assert_eq!(status(&r, Stage::CameraPoses), StageStatus::Ran);
+    assert_eq!(status(&r, Stage::Derender), StageStatus::Ran);
+
+    // The ledger is written after each unit: a run that died after derendering resumes at the
+    // fit.
+    let mut ledger = Ledger::load(&out).expect("ledger");
+    ledger.forget(Unit::Fit);
+    ledger.save(&out).expect("save");
+    std::fs::remove_dir_all(out.join("fit")).expect("remove fit");
+    let r = run(&session);
+    assert_eq!(status(&r, Stage::CameraPoses), StageStatus::Reused);
+    assert_eq!(status(&r, Stage::Derender), StageStatus::Reused);
+    assert_eq!(status(&r, Stage::Fit), StageStatus::Ran);
+
+    // Temporary files of a dead run are removed.
+    let stray = out.join(".poses.json.4294967295.tmp");
+    std::fs::write(&stray, b"partial").expect("write");
+    let r = run(&session);
+    assert!(!stray.exists(), "stray temp file removed");
+    assert_eq!(status(&r, Stage::Derender), StageStatus::Reused);
+
+    // A second run on the same output directory is refused while the first holds it.
+    let lock = RunLock::acquire(&out).expect("lock");
+    let err = process(&session, &ProcessConfig::new(), &mut |_| {})
+        .expect_err("a second run must be refused")
+        .to_string();
+    assert!(err.contains("another run"), "{err}");
+    drop(lock);
+    run(&session);
+}
