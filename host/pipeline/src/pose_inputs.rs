@@ -464,6 +464,8 @@ mod tests {
                 known,
             },
             capture: None,
+            linearization_source: skinbrdf_session::LinearizationSource::Stated,
+            skipped_images: Vec::new(),
         }
     }
 

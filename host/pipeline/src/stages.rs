@@ -687,7 +687,7 @@ impl StageUnit for RenderUnit {
         let outputs = match result {
             Ok((stats, files)) => {
                 r = r.with_figures(StageMetrics::Report(ReportMetrics {
-                    render_rays: Some(stats.rays as u64),
+                    render_rays: Some(stats.rays),
                     render_time_s: Some(render_time_s),
                 }));
                 r.notes.push(format!(
