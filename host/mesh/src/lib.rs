@@ -62,17 +62,13 @@ pub enum MeshError {
         report: Box<crate::validate::MeshReport>,
     },
     /// Repairing the mesh would drop more triangles than the policy accepts.
-    #[error("{source_name}: repairing the mesh drops {dropped} of its {triangles} triangles, more than the {:.1} % accepted ({})", max_fraction * 100.0, report.summary())]
+    #[error("{source_name}: repairing the mesh loses {} of its {} triangles, more than the {:.1} % accepted ({})", report.lost_triangles(), report.triangles_in, max_fraction * 100.0, report.summary())]
     TooManyDropped {
         /// File or mesh name.
         source_name: String,
-        /// Triangles the repair would drop.
-        dropped: usize,
-        /// Triangles in the input.
-        triangles: usize,
         /// The policy's limit (fraction of the triangles).
         max_fraction: f64,
-        /// What was found.
+        /// What was found (`lost_triangles()` of `triangles_in`).
         report: Box<crate::validate::MeshReport>,
     },
     /// A parameter is out of range.

@@ -50,7 +50,7 @@ pub enum ProcessError {
         source: skinbrdf_session::FileError,
     },
     /// An image is unreadable or implausible.
-    #[error("{dir}: {source}\n(--skip-bad-images leaves unusable images out and lists them in the report)")]
+    #[error("{dir}: unusable images (--skip-bad-images leaves them out and lists them in the report):\n{source}")]
     Images {
         /// Session directory.
         dir: PathBuf,

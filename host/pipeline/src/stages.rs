@@ -465,7 +465,7 @@ pub fn derender_reports(plan: &Plan, run: &SessionRun, samples_kept: u64) -> [St
         r
     };
     if let Some(m) = &run.mesh_report {
-        if m.summary() != "no problems" {
+        if !m.is_clean() {
             scan.notes.push(format!("scan repaired: {}", m.summary()));
         }
     }

@@ -186,10 +186,12 @@ impl Session {
     /// measurement image, and a reference-standard image unless C is known).
     pub fn check_images(&mut self, policy: BadImagePolicy) -> Result<(), SessionErrors> {
         let mut errs = SessionErrors::default();
+        use rayon::prelude::*;
+        // Decoding dominates: one image per core.
         let bad: Vec<SkippedImage> = self
             .file
             .images
-            .iter()
+            .par_iter()
             .enumerate()
             .filter_map(|(index, im)| {
                 image_problem(&self.path(&im.file), self.linearization(index)).map(|cause| {
