@@ -24,11 +24,11 @@ use skinbrdf_core::Pose;
 use skinbrdf_mesh::{load_mesh, CameraRays, LengthUnit, LoadOptions, MeshReport};
 use skinbrdf_session::{GeometrySpec, Session, Target};
 
-use crate::geometry::{Geometry, Roi};
-use crate::poses::ResolvedPoses;
 use crate::from_inputs::{
     derender_with_loader, CalibrationSource, DerenderInputs, DerenderReport, OwnedImage, PoseSource,
 };
+use crate::geometry::{Geometry, Roi};
+use crate::poses::ResolvedPoses;
 use crate::{truth_error, DerenderConfig, DerenderError};
 
 /// Edge length of tessellated ideal shapes (1 mm: the sagitta error on an 8 cm sphere is

@@ -28,14 +28,18 @@
 
 pub mod calibrate;
 pub mod figures;
+pub mod from_inputs;
 pub mod from_session;
 pub mod geometry;
 pub mod image;
 pub mod poses;
-pub mod from_inputs;
 pub mod stats;
 
 pub use calibrate::{calibrate_c, CEstimator, Calibration, StandardImage};
+pub use from_inputs::{
+    derender_with_loader, CalibrationInput, CalibrationSource, DerenderInputs, DerenderReport,
+    ImagePoses, OwnedImage, PoseSource, StageTimes,
+};
 pub use from_session::{derender_session, SessionRun, TargetMask};
 pub use geometry::{Geometry, Roi};
 pub use image::{
@@ -43,10 +47,6 @@ pub use image::{
     Measurement, RegionPixels,
 };
 pub use poses::{ResolvedImage, ResolvedPoses, ResolvedStandard, Sourced};
-pub use from_inputs::{
-    derender_with_loader, CalibrationInput, CalibrationSource, DerenderInputs, DerenderReport,
-    ImagePoses, OwnedImage, PoseSource, StageTimes,
-};
 pub use stats::RobustStats;
 
 use serde::Serialize;

@@ -17,11 +17,7 @@ pub const USABLE_VIEW_MAX_DEG: f64 = 70.0;
 /// The targets of a shot a detector can use: facing the camera within
 /// [`USABLE_VIEW_MAX_DEG`], all four corners inside the image, not hidden by anything, and lit.
 /// Returns `(layout, id, centre in the world)`.
-pub fn usable_targets(
-    renderer: &Renderer,
-    rig: &Rig,
-    shot: &Shot,
-) -> Vec<(Layout, u32, DVec3)> {
+pub fn usable_targets(renderer: &Renderer, rig: &Rig, shot: &Shot) -> Vec<(Layout, u32, DVec3)> {
     let cam = &rig.camera;
     let camera_from_world = shot.world_from_camera.inverse();
     let eye = shot.world_from_camera.translation_m;

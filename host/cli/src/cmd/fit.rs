@@ -24,8 +24,8 @@ pub struct Args {
     #[arg(long)]
     pub json: bool,
     /// Residual: log (relative error, default) or cosine (cos(theta_i)-weighted absolute error).
-    #[arg(long, default_value = "log")]
-    pub residual: String,
+    #[arg(long, value_enum, default_value_t = Residual::Log)]
+    pub residual: Residual,
     /// Log-residual floor as a fraction of the median grey level.
     #[arg(long, default_value_t = skinbrdf_fit::fit::LOG_FLOOR_REL_MEDIAN)]
     pub log_floor: f64,
@@ -44,12 +44,20 @@ pub struct Args {
     pub no_render: bool,
 }
 
+/// `--residual`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Residual {
+    /// Log residuals.
+    Log,
+    /// Cosine-weighted residuals.
+    Cosine,
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let model: ModelSpec = args.model.parse().context("--model")?;
-    let residual = match args.residual.as_str() {
-        "log" => None,
-        "cosine" => Some(ResidualKind::CosineWeighted),
-        o => anyhow::bail!("--residual: `{o}` is not one of log, cosine"),
+    let residual = match args.residual {
+        Residual::Log => None,
+        Residual::Cosine => Some(ResidualKind::CosineWeighted),
     };
     if !(args.log_floor > 0.0 && args.log_floor.is_finite()) {
         anyhow::bail!("--log-floor must be positive, got {}", args.log_floor);

@@ -43,8 +43,8 @@ pub struct Args {
     pub exposure: Option<f64>,
     /// Shading normals: auto (the file's, else vertex), vertex, planar (fit over the scan's
     /// noise radius).
-    #[arg(long, default_value = "auto")]
-    pub normals: String,
+    #[arg(long, value_enum, default_value_t = Normals::Auto)]
+    pub normals: Normals,
     /// Print the statistics as JSON.
     #[arg(long)]
     pub json: bool,
@@ -57,6 +57,17 @@ fn parse_vec(s: &str, flag: &str) -> anyhow::Result<[f64; 3]> {
         .collect::<Result<_, _>>()
         .with_context(|| format!("{flag}: `{s}` is not x,y,z"))?;
     <[f64; 3]>::try_from(v).map_err(|_| anyhow::anyhow!("{flag}: `{s}` needs three numbers"))
+}
+
+/// `--normals`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Normals {
+    /// The file's, else vertex normals.
+    Auto,
+    /// Vertex normals.
+    Vertex,
+    /// A planar fit over the scan.
+    Planar,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -82,11 +93,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (args.input.clone(), model, dir)
     };
     let (w, h) = super::parse_size(&args.size).context("--size")?;
-    let normals = match args.normals.as_str() {
-        "auto" => NormalSource::Auto,
-        "vertex" => NormalSource::Vertex,
-        "planar" => NormalSource::PlanarFit,
-        o => anyhow::bail!("--normals: `{o}` is not one of auto, vertex, planar"),
+    let normals = match args.normals {
+        Normals::Auto => NormalSource::Auto,
+        Normals::Vertex => NormalSource::Vertex,
+        Normals::Planar => NormalSource::PlanarFit,
     };
     let cfg = RenderConfig {
         width_px: w,
