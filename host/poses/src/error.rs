@@ -43,9 +43,6 @@ pub enum PoseError {
         /// What went wrong.
         problem: String,
     },
-    /// The session lacks something the estimate needs.
-    #[error("session: {0}")]
-    Session(String),
 }
 
 /// A warning attached to an estimate (the estimate is still returned).

@@ -67,7 +67,8 @@ pub fn usable_targets(renderer: &Renderer, rig: &Rig, shot: &Shot) -> Vec<(Layou
 mod framing_tests {
     use super::*;
     use crate::layout::*;
-    use crate::scene::BUILTIN_SCENES;
+    use crate::scene::{Scene, BUILTIN_SCENES};
+    use skinbrdf_session::ImageRole;
 
     /// Minimum usable reference targets per image (well over the 1-2 PnP needs, for accuracy).
     const MIN_REFERENCE: usize = 5;

@@ -247,9 +247,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if choice == Poses::Truth {
         header.description = format!("{} (poses from truth.json)", header.description);
     }
-    skinbrdf_samples::write_samples(&out.join(stages::SAMPLES_FILE), &header, &samples)?;
+    skinbrdf_samples::write_samples(out.join(stages::SAMPLES_FILE), &header, &samples)?;
     if args.csv {
-        skinbrdf_samples::write_csv(&out.join("samples.csv"), &samples)?;
+        skinbrdf_samples::write_csv(out.join("samples.csv"), &samples)?;
     }
     let mut run = run;
     run.report.samples = std::mem::take(&mut samples);
