@@ -64,6 +64,15 @@ pub struct SessionRun {
     pub unposed: Vec<usize>,
 }
 
+/// The repair policy for a session's scan: the mesh crate's default limit on dropped triangles,
+/// or the larger fraction the session accepts (`geometry.accept_repair_loss`).
+pub fn scan_repair_policy(accept_repair_loss: Option<f64>) -> skinbrdf_mesh::RepairPolicy {
+    match accept_repair_loss {
+        Some(f) => skinbrdf_mesh::RepairPolicy::accepting(f),
+        None => skinbrdf_mesh::RepairPolicy::repair(),
+    }
+}
+
 /// Loads the session's geometry as a mesh in metres (head frame).
 pub fn session_geometry(
     session: &Session,
@@ -71,12 +80,16 @@ pub fn session_geometry(
 ) -> Result<(Geometry, Option<MeshReport>, f64), DerenderError> {
     let t = Instant::now();
     let (mesh, report) = match &session.file.geometry {
-        GeometrySpec::Scan { file, units } => {
+        GeometrySpec::Scan {
+            file,
+            units,
+            accept_repair_loss,
+        } => {
             let l = load_mesh(
                 &session.path(file),
                 &LoadOptions {
                     unit: LengthUnit::Custom(units.to_m()),
-                    ..Default::default()
+                    policy: scan_repair_policy(*accept_repair_loss),
                 },
             )?;
             (l.mesh, Some(l.report))

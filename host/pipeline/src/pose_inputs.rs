@@ -521,6 +521,60 @@ mod tests {
         }
     }
 
+    /// A scan whose repair loses more than the default 1 % of its triangles fails to load;
+    /// stating `geometry.accept_repair_loss` above the loss is the user's acceptance.
+    #[test]
+    fn a_damaged_scan_loads_only_when_its_loss_is_accepted() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        // A 20 x 20 vertex grid (722 triangles) with every tenth vertex NaN.
+        let n = 20u32;
+        let mut positions = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let k = j * n + i;
+                positions.push(if k % 10 == 3 {
+                    glam::Vec3::splat(f32::NAN)
+                } else {
+                    glam::Vec3::new(i as f32, j as f32, 0.0)
+                });
+            }
+        }
+        let mut indices = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let a = j * n + i;
+                indices.push([a, a + 1, a + n + 1]);
+                indices.push([a, a + n + 1, a + n]);
+            }
+        }
+        let mesh = skinbrdf_core::TriMesh {
+            positions,
+            indices,
+            normals: None,
+        };
+        skinbrdf_mesh::write_ply_binary_in(&dir.path().join("scan.ply"), &mesh, "mm")
+            .expect("write scan");
+        let mut s = session(KnownQuantities::default());
+        s.dir = dir.path().to_path_buf();
+        let with = |accept: Option<f64>| {
+            let mut s = s.clone();
+            s.file.geometry = GeometrySpec::Scan {
+                file: "scan.ply".into(),
+                units: skinbrdf_session::LengthUnit::Mm,
+                accept_repair_loss: accept,
+            };
+            skinbrdf_derender::from_session::session_geometry(&s, &DerenderConfig::DEFAULT)
+        };
+        let err = with(None)
+            .expect_err("a 30 % loss is refused by default")
+            .to_string();
+        assert!(err.contains("more than the 1.0 % accepted"), "{err}");
+        assert!(with(Some(0.02)).is_err(), "2 % does not cover the loss");
+        let (_, report, _) = with(Some(0.5)).expect("accepted");
+        let report = report.expect("a scan's repair report");
+        assert!(report.lost_triangles() > report.triangles_in / 10);
+    }
+
     #[test]
     fn a_stationary_sample_derenders_from_estimated_camera_poses() {
         let s = session(stationary());

@@ -678,8 +678,16 @@ impl StageUnit for RenderUnit {
     }
     fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
         let mut fp = FingerprintBuilder::new().file(&ctx.out_dir.join(PARAMS_FILE))?;
-        if let GeometrySpec::Scan { file, units } = &ctx.session.file.geometry {
-            fp = fp.file(&ctx.session.path(file))?.value("units", units);
+        if let GeometrySpec::Scan {
+            file,
+            units,
+            accept_repair_loss,
+        } = &ctx.session.file.geometry
+        {
+            fp = fp
+                .file(&ctx.session.path(file))?
+                .value("units", units)
+                .value("accept_repair_loss", accept_repair_loss);
         }
         Ok(fp.finish())
     }
@@ -722,7 +730,12 @@ fn render_head(
     session: &Session,
     out_dir: &Path,
 ) -> Result<(skinbrdf_render::RenderStats, Vec<PathBuf>), String> {
-    let GeometrySpec::Scan { file, units } = &session.file.geometry else {
+    let GeometrySpec::Scan {
+        file,
+        units,
+        accept_repair_loss,
+    } = &session.file.geometry
+    else {
         return Err("no scan to render".into());
     };
     let model = skinbrdf_render::load_model(&out_dir.join(PARAMS_FILE))
@@ -731,7 +744,7 @@ fn render_head(
         &session.path(file),
         &skinbrdf_mesh::LoadOptions {
             unit: skinbrdf_mesh::LengthUnit::Custom(units.to_m()),
-            ..Default::default()
+            policy: skinbrdf_derender::from_session::scan_repair_policy(*accept_repair_loss),
         },
     )
     .map_err(|e| format!("head rendering skipped: {e}"))?;

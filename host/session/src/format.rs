@@ -313,6 +313,11 @@ pub enum GeometrySpec {
         file: String,
         /// The scan's length unit.
         units: LengthUnit,
+        /// Largest fraction of the scan's triangles its repair may drop (triangles on
+        /// non-finite vertices or with bad indices) before loading fails; default 1 %. Stating
+        /// a larger one is the user's acceptance of a damaged scan.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        accept_repair_loss: Option<f64>,
     },
     /// An ideal sphere.
     Sphere {

@@ -244,7 +244,7 @@ impl Session {
     /// The scan file and the factor to metres, when the geometry is a scan.
     pub fn scan(&self) -> Option<(PathBuf, f64)> {
         match &self.file.geometry {
-            GeometrySpec::Scan { file, units } => Some((self.path(file), units.to_m())),
+            GeometrySpec::Scan { file, units, .. } => Some((self.path(file), units.to_m())),
             _ => None,
         }
     }
@@ -628,7 +628,20 @@ fn validate(
 
     // Geometry and region of interest.
     match &s.geometry {
-        GeometrySpec::Scan { file: scan, .. } => {
+        GeometrySpec::Scan {
+            file: scan,
+            accept_repair_loss,
+            ..
+        } => {
+            if let Some(f) = accept_repair_loss {
+                if !(0.0..=1.0).contains(f) {
+                    errs.push(
+                        file,
+                        "geometry.accept_repair_loss",
+                        format!("{f}: a fraction of the triangles, in [0, 1]"),
+                    );
+                }
+            }
             if check_relative_file(dir, scan, file, "geometry.file", errs) {
                 let ext = Path::new(scan)
                     .extension()

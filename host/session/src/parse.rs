@@ -308,6 +308,8 @@ fn parse_brdf(
 struct Scan {
     file: String,
     units: LengthUnit,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    accept_repair_loss: Option<f64>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -336,6 +338,7 @@ fn parse_geometry(v: toml::Value, file: &Path, errs: &mut SessionErrors) -> Opti
         "scan" => item::<Scan>(rest, file, field, errs).map(|s| GeometrySpec::Scan {
             file: s.file,
             units: s.units,
+            accept_repair_loss: s.accept_repair_loss,
         }),
         "sphere" => item::<Sphere>(rest, file, field, errs).map(|s| GeometrySpec::Sphere {
             centre_m: s.centre_m,

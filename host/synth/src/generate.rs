@@ -362,6 +362,7 @@ fn generate_into(
                 GeometrySpec::Scan {
                     file: "scan.ply".into(),
                     units: scene.geometry.scan_units,
+                    accept_repair_loss: None,
                 },
                 scan.positions.len(),
                 scene.geometry.scan_spacing_m,
