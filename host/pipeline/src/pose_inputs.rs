@@ -521,6 +521,53 @@ mod tests {
         }
     }
 
+    /// Resume never reuses derendering over a changed scan or mask: both are inputs of the
+    /// derender unit's fingerprint.
+    #[test]
+    fn the_derender_fingerprint_covers_the_scan_and_the_masks() {
+        use crate::stages::{Ctx, DerenderUnit, StageUnit};
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mut s = session(KnownQuantities::default());
+        s.dir = dir.path().to_path_buf();
+        s.file.images[0].mask = Some("masks/m0.png".into());
+        s.file.geometry = GeometrySpec::Scan {
+            file: "scan.ply".into(),
+            units: skinbrdf_session::LengthUnit::Mm,
+            accept_repair_loss: None,
+        };
+        let files = crate::stages::session_input_files(&s);
+        for f in &files {
+            std::fs::create_dir_all(f.parent().expect("parent")).expect("dir");
+            std::fs::write(f, b"v1").expect("write");
+        }
+        assert!(files.contains(&dir.path().join("scan.ply")));
+        assert!(files.contains(&dir.path().join("masks/m0.png")));
+        let cfg = crate::process::ProcessConfig::new();
+        let facts = crate::process::scene_facts(&s);
+        let fp = |s: &Session| {
+            let ctx = Ctx {
+                session: s,
+                truth: None,
+                cfg: &cfg,
+                out_dir: dir.path().join("out"),
+                facts,
+                plan: crate::plan::Plan::derive(&facts, &cfg.plan),
+                poses: None,
+                samples: None,
+                fit: None,
+            };
+            DerenderUnit.fingerprint(&ctx).expect("fingerprint")
+        };
+        let a = fp(&s);
+        std::fs::write(dir.path().join("scan.ply"), b"v2").expect("write");
+        let b = fp(&s);
+        assert_ne!(a, b, "a replaced scan changes the fingerprint");
+        std::fs::write(dir.path().join("masks/m0.png"), b"v2").expect("write");
+        let c = fp(&s);
+        assert_ne!(b, c, "a changed mask changes the fingerprint");
+        assert_eq!(c, fp(&s), "unchanged inputs give the same fingerprint");
+    }
+
     /// A scan whose repair loses more than the default 1 % of its triangles fails to load;
     /// stating `geometry.accept_repair_loss` above the loss is the user's acceptance.
     #[test]
