@@ -208,8 +208,8 @@ fn temp_file_pid(name: &str) -> Option<u32> {
 }
 
 /// Whether a process with this id exists (Linux: `/proc/PID`; elsewhere assumed alive, so
-/// nothing is removed that might be in use).
-fn process_alive(pid: u32) -> bool {
+/// nothing is removed or taken over that might be in use).
+pub fn process_alive(pid: u32) -> bool {
     if cfg!(target_os = "linux") {
         Path::new(&format!("/proc/{pid}")).exists()
     } else {

@@ -26,13 +26,7 @@ pub const TRIM_FRACTION: f64 = 0.1;
 
 /// Percentile of sorted values by linear interpolation (`q` in `[0, 1]`).
 pub fn percentile_sorted(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let x = q.clamp(0.0, 1.0) * (sorted.len() - 1) as f64;
-    let i = x.floor() as usize;
-    let j = (i + 1).min(sorted.len() - 1);
-    sorted[i] + (sorted[j] - sorted[i]) * (x - i as f64)
+    skinbrdf_core::stats::quantile_sorted(sorted, q)
 }
 
 impl RobustStats {

@@ -77,24 +77,12 @@ impl FingerprintBuilder {
 
     /// Adds a file's contents, streamed.
     pub fn file(mut self, path: &Path) -> Result<Self, LedgerError> {
-        let io = |source| LedgerError::Io {
-            path: path.to_path_buf(),
-            source,
-        };
-        let mut f = std::fs::File::open(path).map_err(io)?;
         let label = path
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
         self.hasher.update(label.as_bytes());
-        let mut buf = vec![0u8; 1 << 20];
-        loop {
-            let n = f.read(&mut buf).map_err(io)?;
-            if n == 0 {
-                break;
-            }
-            self.hasher.update(&buf[..n]);
-        }
+        hash_file_into(&mut self.hasher, path)?;
         Ok(self)
     }
 
@@ -166,22 +154,27 @@ impl Default for Ledger {
     }
 }
 
-/// BLAKE3 (hex) of a file's contents.
-pub fn digest_file(path: &Path) -> Result<String, LedgerError> {
+/// Streams a file's contents into a hasher.
+fn hash_file_into(hasher: &mut blake3::Hasher, path: &Path) -> Result<(), LedgerError> {
     let io = |source| LedgerError::Io {
         path: path.to_path_buf(),
         source,
     };
     let mut f = std::fs::File::open(path).map_err(io)?;
-    let mut hasher = blake3::Hasher::new();
     let mut buf = vec![0u8; 1 << 20];
     loop {
         let n = f.read(&mut buf).map_err(io)?;
         if n == 0 {
-            break;
+            return Ok(());
         }
         hasher.update(&buf[..n]);
     }
+}
+
+/// BLAKE3 (hex) of a file's contents.
+pub fn digest_file(path: &Path) -> Result<String, LedgerError> {
+    let mut hasher = blake3::Hasher::new();
+    hash_file_into(&mut hasher, path)?;
     Ok(hasher.finalize().to_hex().to_string())
 }
 
@@ -306,7 +299,10 @@ impl RunLock {
                         .ok()
                         .and_then(|s| s.trim().parse::<u32>().ok());
                     match holder {
-                        Some(pid) if pid_alive(pid) => {
+                        Some(pid)
+                            if pid == std::process::id()
+                                || skinbrdf_core::fsio::process_alive(pid) =>
+                        {
                             return Err(LedgerError::Locked { path, pid });
                         }
                         // The holder is gone (or wrote nothing): take the lock over.
@@ -325,18 +321,6 @@ impl RunLock {
 impl Drop for RunLock {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.path);
-    }
-}
-
-/// Whether a process exists (Linux: `/proc/PID`; elsewhere assumed alive).
-fn pid_alive(pid: u32) -> bool {
-    if pid == std::process::id() {
-        return true;
-    }
-    if cfg!(target_os = "linux") {
-        Path::new(&format!("/proc/{pid}")).exists()
-    } else {
-        true
     }
 }
 

@@ -16,6 +16,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use skinbrdf_core::stats::median;
 use skinbrdf_derender::{DerenderConfig, SessionRun};
 
 use crate::pose_inputs::{PoseChoice, SessionOptions};
@@ -132,10 +133,6 @@ fn json_bytes<T: serde::Serialize>(path: &Path, v: &T) -> Result<Vec<u8>, Proces
         path: path.to_path_buf(),
         source,
     })
-}
-
-fn median(v: &[f64]) -> f64 {
-    skinbrdf_core::stats::median(v)
 }
 
 // --- photogrammetry --------------------------------------------------------------------------

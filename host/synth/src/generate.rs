@@ -20,7 +20,7 @@ use skinbrdf_session::{
 };
 
 use crate::layout::{build_rig, plan_shots, shots_from_capture, Rig, Shot};
-use crate::render::{Layout, Rendered, Renderer};
+use crate::render::{Rendered, Renderer};
 use crate::scene::{CurveScene, Encoding, GeometryKind, Scene};
 use crate::shape::Shape;
 
@@ -243,22 +243,7 @@ fn target_truths(
 ) -> Vec<TargetTruth> {
     let camera_from_world = shot.world_from_camera.inverse();
     let eye = shot.world_from_camera.translation_m;
-    let mut groups: Vec<(Layout, &Vec<skinbrdf_session::Target>, skinbrdf_core::Pose)> = vec![
-        (
-            Layout::Reference,
-            &rig.reference,
-            skinbrdf_core::Pose::IDENTITY,
-        ),
-        (Layout::Headdress, &rig.headdress, shot.world_from_head),
-        (Layout::Flash, &rig.flash_targets, rig.world_from_flash),
-    ];
-    if shot.standard_present {
-        groups.push((
-            Layout::Standard,
-            &rig.standard_targets,
-            rig.world_from_standard,
-        ));
-    }
+    let groups = rig.target_groups(shot);
     let mut out = Vec::new();
     for (layout, list, frame) in groups {
         for t in list {

@@ -62,6 +62,25 @@ pub struct Rig {
 }
 
 impl Rig {
+    /// Every target group a shot sees, with the frame that places it in the world: the
+    /// reference structure, the headdress (the shot's head pose), the flash and, when the shot
+    /// has it, the standard.
+    pub fn target_groups(&self, shot: &Shot) -> Vec<(Layout, &Vec<Target>, Pose)> {
+        let mut groups = vec![
+            (Layout::Reference, &self.reference, Pose::IDENTITY),
+            (Layout::Headdress, &self.headdress, shot.world_from_head),
+            (Layout::Flash, &self.flash_targets, self.world_from_flash),
+        ];
+        if shot.standard_present {
+            groups.push((
+                Layout::Standard,
+                &self.standard_targets,
+                self.world_from_standard,
+            ));
+        }
+        groups
+    }
+
     /// The flash's emitting point, world frame.
     pub fn light_position_m(&self) -> DVec3 {
         self.world_from_flash.translation_m

@@ -4,8 +4,6 @@
 //! ([`crate::render`]), which is why it lives apart from either.
 
 use glam::DVec3;
-use skinbrdf_core::Pose;
-use skinbrdf_session::Target;
 
 use crate::layout::{Layout, Rig, Shot};
 use crate::render::Renderer;
@@ -21,18 +19,7 @@ pub fn usable_targets(renderer: &Renderer, rig: &Rig, shot: &Shot) -> Vec<(Layou
     let cam = &rig.camera;
     let camera_from_world = shot.world_from_camera.inverse();
     let eye = shot.world_from_camera.translation_m;
-    let mut groups: Vec<(Layout, &Vec<Target>, Pose)> = vec![
-        (Layout::Reference, &rig.reference, Pose::IDENTITY),
-        (Layout::Headdress, &rig.headdress, shot.world_from_head),
-        (Layout::Flash, &rig.flash_targets, rig.world_from_flash),
-    ];
-    if shot.standard_present {
-        groups.push((
-            Layout::Standard,
-            &rig.standard_targets,
-            rig.world_from_standard,
-        ));
-    }
+    let groups = rig.target_groups(shot);
     let cos_max = USABLE_VIEW_MAX_DEG.to_radians().cos();
     let mut out = Vec::new();
     for (layout, list, frame) in groups {
