@@ -396,7 +396,7 @@ mod tests {
     use skinbrdf_poses::session::{ImagePoses, PoseWithCov};
     use skinbrdf_session::{
         CameraSpec, FlashSpec, GeometrySpec, ImageEntry, KnownQuantities, Linearization,
-        SessionFile, StandardSpec, TargetLayouts, SESSION_FORMAT_VERSION, TAG_FAMILY,
+        SessionFile, StandardSpec, TargetLayouts, SESSION_FORMAT_VERSION,
     };
 
     use super::*;
@@ -441,11 +441,7 @@ mod tests {
                 },
                 linearization: Linearization::LINEAR,
                 images,
-                targets: TargetLayouts {
-                    family: TAG_FAMILY.into(),
-                    reference: Vec::new(),
-                    headdress: Vec::new(),
-                },
+                targets: TargetLayouts::default(),
                 flash: FlashSpec {
                     diameter_m: 0.08,
                     light_centre_m: DVec3::ZERO,
@@ -466,6 +462,7 @@ mod tests {
             capture: None,
             linearization_source: skinbrdf_session::LinearizationSource::Stated,
             skipped_images: Vec::new(),
+            truth_file: None,
         }
     }
 

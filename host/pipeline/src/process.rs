@@ -121,6 +121,9 @@ pub struct ProcessConfig {
     pub out_dir: Option<PathBuf>,
     /// Leave unreadable or implausible images out (listed in the report) instead of failing.
     pub skip_bad_images: bool,
+    /// Score against this ground truth instead of the session's own `truth.json` (keyed to the
+    /// session's images by exposure index; see [`skinbrdf_session::Truth::keyed_to`]).
+    pub truth_file: Option<PathBuf>,
 }
 
 impl ProcessConfig {
@@ -139,6 +142,7 @@ impl ProcessConfig {
             force: false,
             out_dir: None,
             skip_bad_images: false,
+            truth_file: None,
         }
     }
 }
@@ -210,6 +214,7 @@ pub fn process(
         dir: dir.to_path_buf(),
         source,
     })?;
+    session.truth_file = cfg.truth_file.clone();
     let policy = if cfg.skip_bad_images {
         BadImagePolicy::Skip
     } else {

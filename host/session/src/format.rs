@@ -201,6 +201,72 @@ pub struct TargetLayouts {
     /// Targets on the headdress, head (scan) frame.
     #[serde(default)]
     pub headdress: Vec<Target>,
+    /// Targets of any group whose placement nobody has measured yet (a rig without
+    /// placements, as `skinbrdf ingest` writes it from `rig.toml`): the placement survey fills
+    /// them in. A stage that needs a group's placements refuses to run while any of that
+    /// group's targets is here.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unplaced: Vec<UnplacedTarget>,
+}
+
+/// The frame a target is placed in: which part of the rig it is on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TargetGroup {
+    /// The fixed reference structure (world frame).
+    Reference,
+    /// The headdress (head frame).
+    Headdress,
+    /// Around the flash (flash frame).
+    Flash,
+    /// Framing the reflectance standard (standard frame).
+    Standard,
+}
+
+impl TargetGroup {
+    /// Every group, in the order the rig lists them.
+    pub const ALL: [Self; 4] = [
+        Self::Reference,
+        Self::Headdress,
+        Self::Flash,
+        Self::Standard,
+    ];
+
+    /// The group's name in files (`reference`, `headdress`, `flash`, `standard`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Reference => "reference",
+            Self::Headdress => "headdress",
+            Self::Flash => "flash",
+            Self::Standard => "standard",
+        }
+    }
+
+    /// The frame the group's placements are given in.
+    pub const fn frame(self) -> &'static str {
+        match self {
+            Self::Reference => "world",
+            Self::Headdress => "head",
+            Self::Flash => "flash",
+            Self::Standard => "standard",
+        }
+    }
+}
+
+/// A target whose printed size is known but whose placement is not.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UnplacedTarget {
+    /// tag36h11 code index (0..587).
+    pub id: u32,
+    /// Edge length of the black square, metres.
+    pub size_m: f64,
+    /// The part of the rig it is on.
+    pub group: TargetGroup,
+    /// The printed sheet it belongs to, if it shares one with other targets (its targets are
+    /// rigid and coplanar relative to each other).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sheet: Option<String>,
 }
 
 impl Default for TargetLayouts {
@@ -210,6 +276,7 @@ impl Default for TargetLayouts {
             family: default_family(),
             reference: Vec::new(),
             headdress: Vec::new(),
+            unplaced: Vec::new(),
         }
     }
 }
@@ -217,7 +284,19 @@ impl Default for TargetLayouts {
 impl TargetLayouts {
     /// True when neither layout has a target.
     pub fn is_empty(&self) -> bool {
-        self.reference.is_empty() && self.headdress.is_empty() && self.family == TAG_FAMILY
+        self.reference.is_empty()
+            && self.headdress.is_empty()
+            && self.unplaced.is_empty()
+            && self.family == TAG_FAMILY
+    }
+
+    /// The ids of the unplaced targets of one group.
+    pub fn unplaced_ids(&self, group: TargetGroup) -> Vec<u32> {
+        self.unplaced
+            .iter()
+            .filter(|t| t.group == group)
+            .map(|t| t.id)
+            .collect()
     }
 }
 

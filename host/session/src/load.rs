@@ -41,6 +41,10 @@ pub struct Session {
     /// Images left out by [`Session::check_images`] with [`BadImagePolicy::Skip`] (their
     /// entries are removed from `file.images`).
     pub skipped_images: Vec<SkippedImage>,
+    /// Where the ground truth is read from when it is not the session's own `truth.json`
+    /// (`skinbrdf process --truth FILE`: a session written by `ingest` scored against the
+    /// synthetic session it came from).
+    pub truth_file: Option<PathBuf>,
 }
 
 /// Where the session's default linearization (`[linearization]`) came from.
@@ -123,6 +127,7 @@ impl Session {
             capture,
             linearization_source,
             skipped_images: Vec::new(),
+            truth_file: None,
         })
     }
 
@@ -249,15 +254,23 @@ impl Session {
         }
     }
 
-    /// The path of `truth.json` (it may not exist).
+    /// The path of the ground truth (it may not exist): [`Session::truth_file`] when set, else
+    /// the session's `truth.json`.
     pub fn truth_path(&self) -> PathBuf {
-        self.dir.join(TRUTH_FILE)
+        self.truth_file
+            .clone()
+            .unwrap_or_else(|| self.dir.join(TRUTH_FILE))
     }
 
-    /// Loads `truth.json` if present.
+    /// Loads the ground truth if present. A truth read from elsewhere
+    /// ([`Session::truth_file`]) is keyed to this session's images by exposure index
+    /// ([`Truth::keyed_to`]); it must then exist.
     pub fn load_truth(&self) -> Option<Result<Truth, FileError>> {
         let p = self.truth_path();
-        p.exists().then(|| Truth::load(&p))
+        match &self.truth_file {
+            Some(_) => Some(Truth::load(&p).and_then(|t| t.keyed_to(&self.file.images, &p))),
+            None => p.exists().then(|| Truth::load(&p)),
+        }
     }
 }
 
@@ -603,6 +616,30 @@ fn validate(
             );
         }
     }
+    for (i, t) in s.targets.unplaced.iter().enumerate() {
+        let field = format!("targets.unplaced[{i}]");
+        if t.id >= TAG36H11_CODES {
+            errs.push(
+                file,
+                format!("{field}.id"),
+                format!("{} is not a tag36h11 id (0..{TAG36H11_CODES})", t.id),
+            );
+        }
+        if !positive(t.size_m) {
+            errs.push(
+                file,
+                format!("{field}.size_m"),
+                format!("must be positive, got {}", t.size_m),
+            );
+        }
+        if let Some(prev) = ids.insert(t.id, field.clone()) {
+            errs.push(
+                file,
+                format!("{field}.id"),
+                format!("id {} is also used by {prev}", t.id),
+            );
+        }
+    }
 
     // Flash and standard.
     if stated.flash && !positive(s.flash.diameter_m) {
@@ -734,18 +771,42 @@ fn validate(
 
     // What the stages need when nothing known lets them skip.
     let needs = SectionNeeds::of(&s.images, k, Some(&s.camera));
+    let mut unplaced_needed = |group: TargetGroup, why: &Option<String>| -> bool {
+        let ids = s.targets.unplaced_ids(group);
+        match (why, ids.is_empty()) {
+            (Some(why), false) => {
+                errs.push(file, "targets.unplaced", unplaced_problem(group, &ids, why));
+                true
+            }
+            _ => false,
+        }
+    };
+    let reference_unplaced = unplaced_needed(TargetGroup::Reference, &needs.reference_targets);
+    let headdress_unplaced = unplaced_needed(TargetGroup::Headdress, &needs.headdress_targets);
+    let flash_unplaced = unplaced_needed(TargetGroup::Flash, &needs.flash_targets);
+    let standard_unplaced = unplaced_needed(TargetGroup::Standard, &needs.standard);
+    let _ = standard_unplaced;
     if stated.targets {
-        if let (Some(why), true) = (&needs.reference_targets, s.targets.reference.is_empty()) {
+        if let (Some(why), true, false) = (
+            &needs.reference_targets,
+            s.targets.reference.is_empty(),
+            reference_unplaced,
+        ) {
             errs.push(file, "targets.reference", format!("empty, but {why}"));
         }
-        if let (Some(why), true) = (&needs.headdress_targets, s.targets.headdress.is_empty()) {
+        if let (Some(why), true, false) = (
+            &needs.headdress_targets,
+            s.targets.headdress.is_empty(),
+            headdress_unplaced,
+        ) {
             errs.push(file, "targets.headdress", format!("empty, but {why}"));
         }
     }
-    if let (Some(why), true, true) = (
+    if let (Some(why), true, true, false) = (
         &needs.flash_targets,
         stated.flash,
         s.flash.targets.is_empty(),
+        flash_unplaced,
     ) {
         errs.push(file, "flash.targets", format!("empty, and {why}"));
     }
@@ -762,6 +823,21 @@ fn validate(
         }
     }
     capture
+}
+
+/// The error of a group whose placements a planned stage needs but nobody measured.
+fn unplaced_problem(group: TargetGroup, ids: &[u32], why: &str) -> String {
+    let shown: Vec<String> = ids.iter().take(8).map(u32::to_string).collect();
+    let more = if ids.len() > 8 { ", ..." } else { "" };
+    format!(
+        "{} {} target(s) have no placement in the {} frame (ids {}{more}), but {why}: the rig's \
+         placements must be surveyed first; a session ingested with a surveyed rig file (one \
+         that gives every target's corners, like a synthetic studio's `rig-measured.toml`) has them",
+        ids.len(),
+        group.name(),
+        group.frame(),
+        shown.join(", "),
+    )
 }
 
 /// Reports images whose files have identical contents (the same photograph listed twice under

@@ -379,6 +379,7 @@ fn parse_targets(v: toml::Value, file: &Path, errs: &mut SessionErrors) -> Optio
     let mut t = as_table(v, file, "targets", errs)?;
     let (reference, ok1) = take_list::<Target>(&mut t, "reference", "targets", file, errs);
     let (headdress, ok2) = take_list::<Target>(&mut t, "headdress", "targets", file, errs);
+    let (unplaced, ok3) = take_list::<UnplacedTarget>(&mut t, "unplaced", "targets", file, errs);
     let family = t
         .remove("family")
         .and_then(|v| item::<String>(v, file, "targets.family", errs))
@@ -387,13 +388,14 @@ fn parse_targets(v: toml::Value, file: &Path, errs: &mut SessionErrors) -> Optio
         errs.push(
             file,
             format!("targets.{k}"),
-            "unknown field (expected family, reference, headdress)",
+            "unknown field (expected family, reference, headdress, unplaced)",
         );
     }
-    (ok1 && ok2 && t.is_empty()).then_some(TargetLayouts {
+    (ok1 && ok2 && ok3 && t.is_empty()).then_some(TargetLayouts {
         family,
         reference,
         headdress,
+        unplaced,
     })
 }
 

@@ -83,6 +83,9 @@ pub struct ImageTruth {
     pub role: ImageRole,
     /// Exposure time, device microseconds (from the capture record, or synthetic).
     pub exposure_us: u64,
+    /// The exposure in the capture record this image was rendered for, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_index: Option<u32>,
     /// World from camera.
     pub world_from_camera: Pose,
     /// World from head.
@@ -147,5 +150,41 @@ impl Truth {
     /// The truth of the image with this file name.
     pub fn image(&self, file: &str) -> Option<&ImageTruth> {
         self.images.iter().find(|i| i.file == file)
+    }
+
+    /// This truth with its images renamed to another session's files of the same exposure:
+    /// each of `images` with an `exposure_index` takes the truth of the image rendered for that
+    /// exposure, and the result holds only those, in `images`' order. The other session
+    /// (written by `skinbrdf ingest` from a synthetic studio) names its files as the camera
+    /// did, so the file names cannot pair them. Errors (naming `path`) when no image pairs.
+    pub fn keyed_to(
+        mut self,
+        images: &[crate::format::ImageEntry],
+        path: &Path,
+    ) -> Result<Self, FileError> {
+        if images.iter().all(|e| self.image(&e.file).is_some()) {
+            return Ok(self);
+        }
+        let mut keyed = Vec::new();
+        for e in images {
+            let Some(k) = e.exposure_index else { continue };
+            if let Some(t) = self.images.iter().find(|t| t.exposure_index == Some(k)) {
+                keyed.push(ImageTruth {
+                    file: e.file.clone(),
+                    ..t.clone()
+                });
+            }
+        }
+        if keyed.is_empty() {
+            return Err(FileError::Invalid {
+                path: path.to_path_buf(),
+                field: "images".into(),
+                problem: "no image of the session pairs with this truth (neither by file name \
+                          nor by exposure index)"
+                    .into(),
+            });
+        }
+        self.images = keyed;
+        Ok(self)
     }
 }

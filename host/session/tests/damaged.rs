@@ -47,6 +47,7 @@ fn valid_file() -> SessionFile {
             family: TAG_FAMILY.into(),
             reference: vec![target(0, DVec3::new(0.0, 0.0, 2.0))],
             headdress: vec![target(10, DVec3::new(0.0, 0.1, 0.0))],
+            unplaced: Vec::new(),
         },
         flash: FlashSpec {
             diameter_m: 0.082,

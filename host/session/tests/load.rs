@@ -49,6 +49,7 @@ fn valid_file() -> SessionFile {
                 target(1, DVec3::new(0.1, 0.0, 2.0)),
             ],
             headdress: vec![target(10, DVec3::new(0.0, 0.1, 0.0))],
+            unplaced: Vec::new(),
         },
         flash: FlashSpec {
             diameter_m: 0.082,

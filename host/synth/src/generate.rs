@@ -405,6 +405,7 @@ fn generate_into(
             file: shot.file.clone(),
             role: shot.role,
             exposure_us: shot.exposure_us,
+            exposure_index: shot.exposure_index,
             world_from_camera: shot.world_from_camera,
             world_from_head: shot.world_from_head,
             forehead_mask: mask("forehead", &r.forehead)?,
@@ -482,6 +483,7 @@ fn generate_into(
             family: TAG_FAMILY.into(),
             reference: rig.reference.clone(),
             headdress: rig.headdress.clone(),
+            unplaced: Vec::new(),
         },
         flash: FlashSpec {
             diameter_m: scene.session.flash_diameter_m,

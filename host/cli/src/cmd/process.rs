@@ -44,6 +44,11 @@ pub struct Args {
     /// and the report) instead of failing.
     #[arg(long)]
     pub skip_bad_images: bool,
+    /// Score against this ground truth (a synthetic session's `truth.json`) instead of the
+    /// session's own: a session written by `skinbrdf ingest` from a synthetic studio pairs its
+    /// images with the truth's by exposure index.
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
 }
 
 /// Validates the flags into a pipeline configuration.
@@ -63,6 +68,12 @@ pub fn config(args: &Args) -> anyhow::Result<ProcessConfig> {
     cfg.force = args.force;
     cfg.out_dir = args.out.clone();
     cfg.skip_bad_images = args.skip_bad_images;
+    if let Some(t) = &args.truth {
+        if !t.is_file() {
+            anyhow::bail!("--truth {}: no such file", t.display());
+        }
+    }
+    cfg.truth_file = args.truth.clone();
     Ok(cfg)
 }
 
