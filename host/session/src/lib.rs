@@ -22,6 +22,7 @@
 //!   with 1.0 at the white level; see [`linear`] for the exact formula). The value `V` is the
 //!   `L_pixel` of the method's equation 2.
 //! * [`SessionFile`] and its parts are the `session.toml` types; [`Session::write_file`] writes one.
+//! * [`Rig`] (`rig.toml`): a studio's targets, flash and standard, with or without placements.
 //! * [`Truth`] (`truth.json`): every pose, the light position, C, the BRDF and per-image masks.
 //! * [`write`]: atomic writers (JSON, TOML, 16-bit PNG, EXR, masks) and [`load_mask`].
 //!
@@ -38,6 +39,7 @@ pub mod format;
 pub mod linear;
 pub mod load;
 mod parse;
+pub mod rig;
 pub mod truth;
 pub mod write;
 
@@ -53,5 +55,6 @@ pub use load::{
     TARGET_SIZE_REL_TOL,
 };
 pub use parse::toml_unknown_keys;
+pub use rig::{LayoutFile, Rig, RigFile, SessionParts, RIG_FORMAT_VERSION};
 pub use truth::{ImageTruth, RenderTruth, SurfaceTruth, TargetTruth, Truth, TRUTH_FORMAT_VERSION};
 pub use write::{load_mask, write_atomic, write_json_atomic, write_mask_png, Mask};

@@ -293,6 +293,28 @@ fn check_pose(p: &Pose, file: &Path, field: &str, errs: &mut SessionErrors) {
     }
 }
 
+/// Checks that a photograph named in `session.toml` exists. Unlike the session's other files,
+/// a photograph may live outside the session directory (`skinbrdf ingest` references the
+/// camera card's files in place unless asked to copy them): a relative path is taken from the
+/// session directory, an absolute one as it is.
+fn check_image_file(
+    dir: &Path,
+    rel: &str,
+    file: &Path,
+    field: &str,
+    errs: &mut SessionErrors,
+) -> bool {
+    if rel.is_empty() {
+        errs.push(file, field, "empty file name");
+        return false;
+    }
+    if !dir.join(rel).is_file() {
+        errs.push(file, field, format!("file `{rel}` does not exist"));
+        return false;
+    }
+    true
+}
+
 fn check_relative_file(
     dir: &Path,
     rel: &str,
@@ -489,7 +511,7 @@ fn validate(
                 format!("{field}.file"),
                 format!("`{}` is also images[{prev}]", im.file),
             );
-        } else if check_relative_file(dir, &im.file, file, &format!("{field}.file"), errs) {
+        } else if check_image_file(dir, &im.file, file, &format!("{field}.file"), errs) {
             existing.push(i);
             let path = dir.join(&im.file);
             let same_file = std::fs::canonicalize(&path)

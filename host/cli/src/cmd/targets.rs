@@ -19,8 +19,7 @@
 
 use anyhow::Context;
 use glam::DVec3;
-use serde::Serialize;
-use skinbrdf_session::{write_atomic, Target};
+use skinbrdf_session::{write_atomic, LayoutFile, Target};
 use skinbrdf_targets::sheet::{Sheet, SheetKind};
 use skinbrdf_targets::{detect::detect_with_stats, CornerModel, DetectorConfig, GrayF32};
 use std::path::PathBuf;
@@ -70,13 +69,6 @@ pub enum Layout {
     Flash,
     /// Calibration board.
     Board,
-}
-
-#[derive(Serialize)]
-struct LayoutFile {
-    /// Which table of session.toml the targets belong in.
-    section: String,
-    targets: Vec<Target>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -256,19 +248,13 @@ fn scene_cutouts(scene_name: &str, kind: SheetKind, out: &std::path::Path) -> an
 mod tests {
     use super::*;
 
-    #[derive(serde::Deserialize)]
-    struct LayoutIn {
-        section: String,
-        targets: Vec<Target>,
-    }
-
     #[test]
     fn scene_cutouts_carry_the_scene_rigs_layout() {
         let dir = tempfile::tempdir().expect("tempdir");
         let out = dir.path().join("headdress.svg");
         scene_cutouts("default", SheetKind::Headdress, &out).expect("cutouts");
         let text = std::fs::read_to_string(out.with_extension("layout.toml")).expect("layout");
-        let layout: LayoutIn = toml::from_str(&text).expect("parse");
+        let layout: LayoutFile = toml::from_str(&text).expect("parse");
         assert_eq!(layout.section, "targets.headdress");
         let scene = skinbrdf_synth::Scene::load("default").expect("scene");
         let rig = skinbrdf_synth::layout::build_rig(&scene);

@@ -1,0 +1,649 @@
+//! `rig.toml`: what a studio knows about its rig before anything is measured.
+//!
+//! A rig is the set of printed targets (family, ids, printed sizes, which printed sheet each
+//! belongs to), the flash (its diffuser's diameter) and the reflectance standard (its BRDF and
+//! size). Targets belong to a **group**, the frame their placement is given in
+//! ([`TargetGroup`]): the reference structure (world), the headdress (head), the flash ring
+//! (flash), the frame around the standard (standard).
+//!
+//! Placements are optional. A *surveyed* rig (`rig-measured.toml`) gives every target's corners
+//! in its group's frame (or a sheet's placement, `group_from_sheet`, and its layout file); a
+//! rig nobody measured (`rig.toml`) gives only ids and sizes, and a session written from it
+//! lists those targets under `targets.unplaced` for the placement survey to fill in.
+//!
+//! ```toml
+//! format_version = 1
+//! description = "studio A, reference cage and headdress band"
+//! family = "tag36h11"
+//!
+//! [[sheets]]                      # a printed sheet: its targets are rigid and coplanar
+//! name = "cage-left"
+//! group = "reference"
+//! layout = "cage-left.layout.toml"   # from `skinbrdf targets` (sheet frame), relative to this file
+//! # group_from_sheet = { rotation = [x, y, z, w], translation_m = [x, y, z] }   (surveyed)
+//! # print_scale = 1.0             (the printed size over the nominal one; default 1)
+//!
+//! [[targets]]                     # a single target (a cut-out), or one of a sheet without layout
+//! id = 40
+//! size_m = 0.025
+//! group = "headdress"
+//! # sheet = "band"                (a sheet listed above without a layout)
+//! # corners_m = [[..], [..], [..], [..]]   (surveyed; the session's corner order)
+//!
+//! [flash]
+//! diameter_m = 0.082
+//! light_centre_m = [0.0, 0.0, 0.0]   # the emitting point in the flash frame (default: origin)
+//!
+//! [standard]
+//! brdf = { model = "lambertian", albedo = [0.99, 0.99, 0.99] }
+//! size_m = [0.12, 0.12]
+//! ```
+//!
+//! [`Rig::load`] checks every field and reports every problem at once ([`SessionErrors`],
+//! each naming the file and the field); [`Rig::session_parts`] turns a rig into the
+//! `session.toml` sections (placed targets in their group's list, the rest unplaced).
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use skinbrdf_brdf::BrdfModel;
+use skinbrdf_core::Pose;
+
+use crate::error::SessionErrors;
+use crate::format::{
+    FlashSpec, StandardSpec, Target, TargetGroup, TargetLayouts, UnplacedTarget, TAG_FAMILY,
+};
+use crate::load::{TAG36H11_CODES, TARGET_SIZE_REL_TOL};
+
+/// Current `rig.toml` format version.
+pub const RIG_FORMAT_VERSION: u32 = 1;
+
+/// A layout file written by `skinbrdf targets` (`FILE.layout.toml`): the targets of one sheet
+/// in the sheet's frame (origin at its centre, x right, y up on the page, z out of the paper,
+/// metres), and the `session.toml` table they belong in.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LayoutFile {
+    /// The `session.toml` table the targets belong in (`targets.reference`, ...).
+    pub section: String,
+    /// The targets, sheet frame.
+    pub targets: Vec<Target>,
+}
+
+/// One printed sheet of several targets.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigSheet {
+    /// The sheet's name (unique in the rig; targets refer to it).
+    pub name: String,
+    /// The part of the rig it is on.
+    pub group: TargetGroup,
+    /// Its layout file (from `skinbrdf targets`), relative to the rig file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub layout: Option<String>,
+    /// Where the sheet is, in its group's frame (a surveyed rig).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group_from_sheet: Option<Pose>,
+    /// The printed size over the layout's nominal size (a printer's scale error).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub print_scale: Option<f64>,
+}
+
+/// One target listed on its own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigTarget {
+    /// tag36h11 code index (0..587).
+    pub id: u32,
+    /// Edge length of the black square, metres.
+    pub size_m: f64,
+    /// The part of the rig it is on.
+    pub group: TargetGroup,
+    /// The sheet it is printed on, if any (a sheet without a layout file).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sheet: Option<String>,
+    /// Its corners in the group's frame (a surveyed rig), in the session's corner order.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub corners_m: Option<[DVec3; 4]>,
+}
+
+/// The flash as the studio knows it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigFlash {
+    /// Diameter of the diffuser disc, metres.
+    pub diameter_m: f64,
+    /// The emitting point in the flash frame.
+    #[serde(default)]
+    pub light_centre_m: DVec3,
+}
+
+/// The reflectance standard as its certificate gives it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigStandard {
+    /// Its calibrated BRDF.
+    pub brdf: BrdfModel,
+    /// Width and height of the reflecting area, metres.
+    pub size_m: [f64; 2],
+}
+
+/// A studio's rig file (see the module docs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RigFile {
+    /// [`RIG_FORMAT_VERSION`].
+    pub format_version: u32,
+    /// Free text.
+    #[serde(default)]
+    pub description: String,
+    /// Target family; must be `tag36h11`.
+    #[serde(default = "default_family")]
+    pub family: String,
+    /// Printed sheets.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sheets: Vec<RigSheet>,
+    /// Targets listed one by one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub targets: Vec<RigTarget>,
+    /// The flash.
+    pub flash: RigFlash,
+    /// The reflectance standard.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub standard: Option<RigStandard>,
+}
+
+fn default_family() -> String {
+    TAG_FAMILY.to_string()
+}
+
+/// A loaded, validated rig: the file and its sheets' layouts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Rig {
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// The parsed file.
+    pub file: RigFile,
+    /// Each sheet's layout targets (sheet frame), by sheet name, for sheets with a layout.
+    pub layouts: HashMap<String, Vec<Target>>,
+}
+
+/// What a rig gives a session: the placed targets in their sections, the unplaced ones, the
+/// flash and the standard.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SessionParts {
+    /// Reference and headdress targets, and every unplaced target.
+    pub targets: TargetLayouts,
+    /// The flash with its placed targets.
+    pub flash: FlashSpec,
+    /// The standard with its placed targets.
+    pub standard: Option<StandardSpec>,
+}
+
+impl SessionParts {
+    /// True when every target has a placement.
+    pub fn fully_placed(&self) -> bool {
+        self.targets.unplaced.is_empty()
+    }
+}
+
+impl Rig {
+    /// Reads and validates a rig file and its layout files, reporting every problem.
+    pub fn load(path: &Path) -> Result<Self, SessionErrors> {
+        let mut errs = SessionErrors::default();
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) => {
+                errs.push(path, "", format!("cannot read: {e}"));
+                return Err(errs);
+            }
+        };
+        let file: RigFile = match toml::from_str(&text) {
+            Ok(f) => f,
+            Err(e) => {
+                errs.push(path, "", format!("not a rig file: {}", e.message()));
+                return Err(errs);
+            }
+        };
+        let base = path.parent().unwrap_or(Path::new("."));
+        let layouts = validate(&file, path, base, &mut errs);
+        errs.into_result(Rig {
+            path: path.to_path_buf(),
+            file,
+            layouts,
+        })
+    }
+
+    /// Writes a rig file atomically.
+    pub fn write_file(path: &Path, file: &RigFile) -> Result<(), crate::FileError> {
+        let text = toml::to_string(file).map_err(|e| crate::FileError::Invalid {
+            path: path.to_path_buf(),
+            field: String::new(),
+            problem: format!("cannot serialise the rig: {e}"),
+        })?;
+        crate::write::write_atomic(path, text.as_bytes())
+    }
+
+    /// The `session.toml` sections this rig gives (see [`SessionParts`]).
+    pub fn session_parts(&self) -> SessionParts {
+        let mut targets = TargetLayouts {
+            family: self.file.family.clone(),
+            ..TargetLayouts::default()
+        };
+        let mut flash = FlashSpec {
+            diameter_m: self.file.flash.diameter_m,
+            light_centre_m: self.file.flash.light_centre_m,
+            targets: Vec::new(),
+        };
+        let mut standard = self.file.standard.as_ref().map(|s| StandardSpec {
+            brdf: s.brdf.clone(),
+            size_m: s.size_m,
+            targets: Vec::new(),
+        });
+        let mut place = |group: TargetGroup, t: Target| match group {
+            TargetGroup::Reference => targets.reference.push(t),
+            TargetGroup::Headdress => targets.headdress.push(t),
+            TargetGroup::Flash => flash.targets.push(t),
+            TargetGroup::Standard => {
+                if let Some(s) = standard.as_mut() {
+                    s.targets.push(t);
+                }
+            }
+        };
+        let mut unplaced = Vec::new();
+        for sheet in &self.file.sheets {
+            let Some(layout) = self.layouts.get(&sheet.name) else {
+                continue;
+            };
+            let scale = sheet.print_scale.unwrap_or(1.0);
+            for t in layout {
+                match &sheet.group_from_sheet {
+                    Some(p) => {
+                        let corners_m = t.corners_m.map(|c| p.transform_point(c * scale));
+                        place(
+                            sheet.group,
+                            Target {
+                                id: t.id,
+                                size_m: t.size_m * scale,
+                                corners_m,
+                                centre_m: t.centre_m.map(|c| p.transform_point(c * scale)),
+                            },
+                        );
+                    }
+                    None => unplaced.push(UnplacedTarget {
+                        id: t.id,
+                        size_m: t.size_m * scale,
+                        group: sheet.group,
+                        sheet: Some(sheet.name.clone()),
+                    }),
+                }
+            }
+        }
+        for t in &self.file.targets {
+            match t.corners_m {
+                Some(corners_m) => place(
+                    t.group,
+                    Target {
+                        id: t.id,
+                        size_m: t.size_m,
+                        corners_m,
+                        centre_m: None,
+                    },
+                ),
+                None => unplaced.push(UnplacedTarget {
+                    id: t.id,
+                    size_m: t.size_m,
+                    group: t.group,
+                    sheet: t.sheet.clone(),
+                }),
+            }
+        }
+        targets.unplaced = unplaced;
+        SessionParts {
+            targets,
+            flash,
+            standard,
+        }
+    }
+
+    /// The same rig without any placement (what a studio knows before the survey).
+    pub fn without_placements(file: &RigFile) -> RigFile {
+        let mut f = file.clone();
+        for s in &mut f.sheets {
+            s.group_from_sheet = None;
+        }
+        for t in &mut f.targets {
+            t.corners_m = None;
+        }
+        f
+    }
+}
+
+fn validate(
+    f: &RigFile,
+    path: &Path,
+    base: &Path,
+    errs: &mut SessionErrors,
+) -> HashMap<String, Vec<Target>> {
+    if f.format_version != RIG_FORMAT_VERSION {
+        errs.push(
+            path,
+            "format_version",
+            format!(
+                "version {} is not supported (this build reads {RIG_FORMAT_VERSION})",
+                f.format_version
+            ),
+        );
+    }
+    if f.family != TAG_FAMILY {
+        errs.push(
+            path,
+            "family",
+            format!("`{}` is not supported (only {TAG_FAMILY})", f.family),
+        );
+    }
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    if !positive(f.flash.diameter_m) {
+        errs.push(
+            path,
+            "flash.diameter_m",
+            format!("must be positive, got {}", f.flash.diameter_m),
+        );
+    }
+    if !f.flash.light_centre_m.is_finite() {
+        errs.push(path, "flash.light_centre_m", "non-finite coordinate");
+    }
+    if let Some(s) = &f.standard {
+        if let Err(e) = s.brdf.validate() {
+            errs.push(path, "standard.brdf", e.to_string());
+        }
+        if !s.size_m.iter().all(|&v| positive(v)) {
+            errs.push(
+                path,
+                "standard.size_m",
+                format!("must be positive, got {:?}", s.size_m),
+            );
+        }
+    }
+    let mut ids: HashMap<u32, String> = HashMap::new();
+    let mut claim = |id: u32, field: String, errs: &mut SessionErrors| {
+        if id >= TAG36H11_CODES {
+            errs.push(
+                path,
+                format!("{field}.id"),
+                format!("{id} is not a tag36h11 id (0..{TAG36H11_CODES})"),
+            );
+        }
+        if let Some(prev) = ids.insert(id, field.clone()) {
+            errs.push(
+                path,
+                format!("{field}.id"),
+                format!("id {id} is also used by {prev}"),
+            );
+        }
+    };
+    let mut layouts = HashMap::new();
+    let mut sheet_names: HashMap<&str, usize> = HashMap::new();
+    for (i, s) in f.sheets.iter().enumerate() {
+        let field = format!("sheets[{i}]");
+        if s.name.is_empty() {
+            errs.push(path, format!("{field}.name"), "empty name");
+        }
+        if let Some(prev) = sheet_names.insert(s.name.as_str(), i) {
+            errs.push(
+                path,
+                format!("{field}.name"),
+                format!("`{}` is also the name of sheets[{prev}]", s.name),
+            );
+        }
+        if let Some(p) = &s.group_from_sheet {
+            if !p.is_finite() || (p.rotation.length() - 1.0).abs() > 1e-6 {
+                errs.push(
+                    path,
+                    format!("{field}.group_from_sheet"),
+                    "must be finite with a unit quaternion",
+                );
+            }
+            if s.layout.is_none() {
+                errs.push(
+                    path,
+                    format!("{field}.group_from_sheet"),
+                    "a sheet's placement needs its layout file (`layout`)",
+                );
+            }
+        }
+        if let Some(k) = s.print_scale {
+            if !(k.is_finite() && (0.5..=2.0).contains(&k)) {
+                errs.push(
+                    path,
+                    format!("{field}.print_scale"),
+                    format!("must be in [0.5, 2], got {k}"),
+                );
+            }
+        }
+        let Some(rel) = &s.layout else { continue };
+        let lp = base.join(rel);
+        let layout = std::fs::read_to_string(&lp)
+            .map_err(|e| format!("cannot read `{}`: {e}", lp.display()))
+            .and_then(|t| {
+                toml::from_str::<LayoutFile>(&t).map_err(|e| {
+                    format!("`{}` is not a layout file: {}", lp.display(), e.message())
+                })
+            });
+        match layout {
+            Ok(l) => {
+                for (k, t) in l.targets.iter().enumerate() {
+                    claim(t.id, format!("{field}.layout.targets[{k}]"), errs);
+                    check_square(t, path, &format!("{field}.layout.targets[{k}]"), errs);
+                }
+                layouts.insert(s.name.clone(), l.targets);
+            }
+            Err(problem) => errs.push(path, format!("{field}.layout"), problem),
+        }
+    }
+    for (i, t) in f.targets.iter().enumerate() {
+        let field = format!("targets[{i}]");
+        claim(t.id, field.clone(), errs);
+        if !positive(t.size_m) {
+            errs.push(
+                path,
+                format!("{field}.size_m"),
+                format!("must be positive, got {}", t.size_m),
+            );
+        }
+        if let Some(name) = &t.sheet {
+            match sheet_names.get(name.as_str()).map(|&k| &f.sheets[k]) {
+                None => errs.push(
+                    path,
+                    format!("{field}.sheet"),
+                    format!("no sheet is named `{name}`"),
+                ),
+                Some(s) if s.layout.is_some() => errs.push(
+                    path,
+                    format!("{field}.sheet"),
+                    format!(
+                        "sheet `{name}` has a layout file, which lists its targets; list the target there"
+                    ),
+                ),
+                Some(s) if s.group != t.group => errs.push(
+                    path,
+                    format!("{field}.group"),
+                    format!(
+                        "`{}`, but its sheet `{name}` is in group `{}`",
+                        t.group.name(),
+                        s.group.name()
+                    ),
+                ),
+                Some(_) => {}
+            }
+        }
+        if let Some(corners_m) = t.corners_m {
+            check_square(
+                &Target {
+                    id: t.id,
+                    size_m: t.size_m,
+                    corners_m,
+                    centre_m: None,
+                },
+                path,
+                &field,
+                errs,
+            );
+        }
+    }
+    layouts
+}
+
+/// A placed target's corners: finite, and its four edges within [`TARGET_SIZE_REL_TOL`] of
+/// its size.
+fn check_square(t: &Target, path: &Path, field: &str, errs: &mut SessionErrors) {
+    if !t.corners_m.iter().all(|c| c.is_finite()) {
+        errs.push(path, format!("{field}.corners_m"), "non-finite coordinate");
+        return;
+    }
+    for k in 0..4 {
+        let edge = t.corners_m[k].distance(t.corners_m[(k + 1) % 4]);
+        if (edge - t.size_m).abs() > TARGET_SIZE_REL_TOL * t.size_m {
+            errs.push(
+                path,
+                format!("{field}.corners_m"),
+                format!(
+                    "edge {k} is {edge:.5} m, but size_m is {} m (tolerance {:.0} %)",
+                    t.size_m,
+                    TARGET_SIZE_REL_TOL * 100.0
+                ),
+            );
+            return;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(id: u32, size: f64, centre: DVec3) -> [DVec3; 4] {
+        Target::square(id, size, centre, DVec3::Z, DVec3::Y)
+            .map(|t| t.corners_m)
+            .unwrap_or([DVec3::ZERO; 4])
+    }
+
+    fn rig_text() -> String {
+        let c = square(3, 0.03, DVec3::new(0.1, 0.0, 0.0));
+        format!(
+            r#"format_version = 1
+description = "test"
+
+[[targets]]
+id = 3
+size_m = 0.03
+group = "reference"
+corners_m = [[{}, {}, {}], [{}, {}, {}], [{}, {}, {}], [{}, {}, {}]]
+
+[[targets]]
+id = 40
+size_m = 0.025
+group = "headdress"
+
+[flash]
+diameter_m = 0.082
+
+[standard]
+brdf = {{ model = "lambertian", albedo = [0.99, 0.99, 0.99] }}
+size_m = [0.12, 0.12]
+"#,
+            c[0].x,
+            c[0].y,
+            c[0].z,
+            c[1].x,
+            c[1].y,
+            c[1].z,
+            c[2].x,
+            c[2].y,
+            c[2].z,
+            c[3].x,
+            c[3].y,
+            c[3].z
+        )
+    }
+
+    #[test]
+    fn a_rig_gives_placed_and_unplaced_targets() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("rig.toml");
+        std::fs::write(&p, rig_text()).expect("write");
+        let rig = Rig::load(&p).expect("rig");
+        let parts = rig.session_parts();
+        assert_eq!(parts.targets.reference.len(), 1);
+        assert_eq!(parts.targets.unplaced.len(), 1);
+        assert_eq!(parts.targets.unplaced[0].group, TargetGroup::Headdress);
+        assert!(!parts.fully_placed());
+        let bare = Rig::without_placements(&rig.file);
+        Rig::write_file(&p, &bare).expect("write");
+        let parts = Rig::load(&p).expect("rig").session_parts();
+        assert_eq!(parts.targets.unplaced.len(), 2);
+    }
+
+    #[test]
+    fn a_sheet_layout_is_placed_by_its_pose_and_print_scale() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let layout = LayoutFile {
+            section: "targets.reference".into(),
+            targets: vec![Target {
+                id: 7,
+                size_m: 0.04,
+                corners_m: square(7, 0.04, DVec3::new(0.05, 0.0, 0.0)),
+                centre_m: None,
+            }],
+        };
+        std::fs::write(
+            dir.path().join("sheet.layout.toml"),
+            toml::to_string(&layout).expect("toml"),
+        )
+        .expect("write");
+        let pose = Pose::new(glam::DQuat::IDENTITY, DVec3::new(0.0, 0.0, 1.0));
+        let file = RigFile {
+            format_version: RIG_FORMAT_VERSION,
+            description: String::new(),
+            family: TAG_FAMILY.into(),
+            sheets: vec![RigSheet {
+                name: "s".into(),
+                group: TargetGroup::Reference,
+                layout: Some("sheet.layout.toml".into()),
+                group_from_sheet: Some(pose),
+                print_scale: Some(1.015),
+            }],
+            targets: Vec::new(),
+            flash: RigFlash {
+                diameter_m: 0.08,
+                light_centre_m: DVec3::ZERO,
+            },
+            standard: None,
+        };
+        let p = dir.path().join("rig.toml");
+        Rig::write_file(&p, &file).expect("write");
+        let parts = Rig::load(&p).expect("rig").session_parts();
+        let t = &parts.targets.reference[0];
+        assert!((t.size_m - 0.0406).abs() < 1e-12);
+        let centre = t.centre();
+        assert!((centre - DVec3::new(0.05 * 1.015, 0.0, 1.0)).length() < 1e-12);
+    }
+
+    #[test]
+    fn every_problem_is_named() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("rig.toml");
+        let text = rig_text()
+            .replace("id = 40", "id = 3")
+            .replace("diameter_m = 0.082", "diameter_m = -1.0")
+            + "\n[[sheets]]\nname = \"band\"\ngroup = \"headdress\"\nlayout = \"missing.layout.toml\"\n";
+        std::fs::write(&p, text).expect("write");
+        let errs = Rig::load(&p).expect_err("invalid");
+        assert!(errs.has_field("targets[1].id"), "{errs}");
+        assert!(errs.has_field("flash.diameter_m"), "{errs}");
+        assert!(errs.has_field("sheets[0].layout"), "{errs}");
+        assert!(errs.to_string().contains("rig.toml"), "{errs}");
+    }
+}
