@@ -459,6 +459,7 @@ pub fn run_bench(cfg: &BenchConfig, log: &mut dyn FnMut(&str)) -> Result<BenchOu
                     capture: None,
                     noise_free: false,
                     samples_per_pixel: None,
+                    studio: false,
                 },
                 &d,
             )?;

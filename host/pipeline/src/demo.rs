@@ -156,6 +156,7 @@ pub fn run_demo(
             capture: Some(capture.clone()),
             noise_free: false,
             samples_per_pixel: None,
+            studio: false,
         },
         &session_dir,
     )?;

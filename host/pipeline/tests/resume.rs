@@ -47,6 +47,7 @@ fn resume_reuses_only_what_is_intact() {
             capture: None,
             noise_free: false,
             samples_per_pixel: None,
+            studio: false,
         },
         &session,
     )

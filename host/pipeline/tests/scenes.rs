@@ -62,6 +62,7 @@ fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
             capture: None,
             noise_free: false,
             samples_per_pixel: None,
+            studio: false,
         },
         &session,
     )

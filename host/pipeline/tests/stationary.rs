@@ -34,6 +34,7 @@ fn a_stationary_sample_derenders_with_estimated_poses() {
             capture: None,
             noise_free: false,
             samples_per_pixel: None,
+            studio: false,
         },
         dir.path(),
     )

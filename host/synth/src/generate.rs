@@ -43,6 +43,12 @@ pub enum SynthError {
         /// Every problem, each naming its field and range.
         problems: Vec<String>,
     },
+    /// Writing a raw image of the synthetic studio failed.
+    #[error("studio raw image: {source}")]
+    Raw {
+        /// The writer's error (it names the file).
+        source: skinbrdf_raw::RawError,
+    },
     /// An option is out of range.
     #[error("{field}: {problem}")]
     Invalid {
@@ -64,6 +70,10 @@ pub struct SynthOptions {
     pub noise_free: bool,
     /// Overrides the scene's rays per pixel.
     pub samples_per_pixel: Option<u32>,
+    /// Also write `studio/`: the camera's raw files, the controller's record, the rig files
+    /// and the scan, as a studio holds them after the capture ([`crate::studio`]). Without a
+    /// `capture` record the generator writes the one a controller would for the shot list.
+    pub studio: bool,
 }
 
 /// What was generated and what it cost.
@@ -318,7 +328,22 @@ fn generate_into(
     let t_start = Instant::now();
     let scene = apply_options(scene, opts)?;
     let rig = build_rig(&scene);
-    let shots = match &opts.capture {
+    let planned;
+    let capture = match (&opts.capture, opts.studio) {
+        (Some(rec), _) => Some(rec),
+        (None, true) => {
+            planned = crate::studio::planned_capture(&scene);
+            Some(&planned)
+        }
+        (None, false) => None,
+    };
+    if opts.studio && scene.geometry.kind != GeometryKind::Head {
+        return Err(SynthError::Invalid {
+            field: "studio",
+            problem: "a studio holds a head scan: the scene's geometry must be `head`".into(),
+        });
+    }
+    let shots = match capture {
         Some(rec) => shots_from_capture(&scene, &rig, rec),
         None => plan_shots(&scene, &rig),
     };
@@ -372,6 +397,13 @@ fn generate_into(
             0.0,
         ),
     };
+    let studio = match (capture, opts.studio) {
+        (Some(rec), true) => Some((
+            crate::studio::write_studio_files(dir, &scene, &rig, rec)?,
+            crate::studio::card_files(&scene, rec, &shots),
+        )),
+        _ => None,
+    };
     let setup_s = t_start.elapsed().as_secs_f64();
 
     let mut render_s = 0.0;
@@ -389,6 +421,12 @@ fn generate_into(
             scene.seed ^ (i as u64).wrapping_mul(0x1234_5678_9abc),
         );
         write_image(&dir.join(&shot.file), &r, &stored, &scene)?;
+        if let Some((studio_dir, card)) = &studio {
+            for c in card.iter().filter(|c| c.shot == i) {
+                let seed = scene.seed ^ u64::from(c.shutter_count).wrapping_mul(0x9e37_79b9);
+                crate::studio::write_card_file(studio_dir, &r, &scene, c, opts.noise_free, seed)?;
+            }
+        }
         let stem = Path::new(&shot.file)
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -455,7 +493,7 @@ fn generate_into(
     }
 
     let t2 = Instant::now();
-    let capture_file = match &opts.capture {
+    let capture_file = match capture {
         Some(rec) => {
             let mut rec = rec.clone();
             for e in &mut rec.exposures {

@@ -10,6 +10,8 @@
 //! * [`render`]: ray casting (obvhs through `skinbrdf-mesh`, rayon over rows) and shading.
 //! * [`generate`]: writes a session directory that `skinbrdf_session::Session::load` accepts,
 //!   with `truth.json` and truth masks. Entry point: [`generate::generate`].
+//! * [`studio`]: with `--studio`, what a studio holds after the capture: the camera's raw
+//!   files (DNG), the controller's record, the rig files and the scan.
 //!
 //! The radiometric convention (what `C` means) is in `docs/session-format.md`: a skin point
 //! renders to `V = rho cos(theta_i) / (C D²)`, so the method's equation 2 inverts the renderer
@@ -20,6 +22,7 @@ pub mod layout;
 pub mod render;
 pub mod scene;
 pub mod shape;
+pub mod studio;
 pub mod visibility;
 
 pub use generate::{generate, SynthError, SynthOptions, SynthSummary};

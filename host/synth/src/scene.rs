@@ -275,6 +275,8 @@ pub struct Scene {
     pub targets: TargetsScene,
     /// Reflectance standard.
     pub standard: StandardScene,
+    /// The synthetic studio (`synth --studio`).
+    pub studio: crate::studio::StudioScene,
 }
 
 /// Keys whose tables are replaced, not merged.
@@ -502,6 +504,7 @@ impl Scene {
         if self.camera.distortion.k1.abs() > 1.0 {
             out.push("`camera.distortion.k1` beyond +-1 is not a lens".into());
         }
+        out.extend(self.studio.problems());
         out
     }
 }

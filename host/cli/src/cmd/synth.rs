@@ -3,7 +3,8 @@
 //! `skinbrdf synth --scene default --out DIR` renders the built-in default scene (~36 images at
 //! 1524 x 1012); `--scene` also takes a path to a scene TOML (merged over the default scene).
 //! With `--capture capture.json` it renders one image per recorded exposure (roles and times
-//! from the record) and copies the record into the session.
+//! from the record) and copies the record into the session. With `--studio` it also writes
+//! `DIR/studio/` (see `skinbrdf_synth::studio`): the input of `skinbrdf ingest`.
 
 use std::path::PathBuf;
 
@@ -31,6 +32,11 @@ pub struct Args {
     /// Rays per pixel (anti-aliasing); default from the scene.
     #[arg(long)]
     samples_per_pixel: Option<u32>,
+    /// Also write SESSION/studio/: the camera's raw files (DNG) on a card, the controller's
+    /// record, the rig with and without placements, and the scan, as a studio holds them
+    /// after a capture (the input of `skinbrdf ingest`).
+    #[arg(long)]
+    studio: bool,
     /// List the built-in scenes and exit.
     #[arg(long)]
     list: bool,
@@ -82,6 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         capture,
         noise_free: args.noise_free,
         samples_per_pixel: args.samples_per_pixel,
+        studio: args.studio,
     };
     let s = generate(&scene, &opts, &out)
         .with_context(|| format!("generating scene `{}`", scene.name))?;
