@@ -426,6 +426,7 @@ mod tests {
                 mask: None,
                 world_from_camera: None,
                 world_from_head: None,
+                exposure_scale: None,
             })
             .collect();
         Session {

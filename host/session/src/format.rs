@@ -106,7 +106,7 @@ impl CameraSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ImageEntry {
-    /// Image file, relative to the session directory (PNG, TIFF, EXR or JPEG).
+    /// Image file, relative to the session directory (PNG, TIFF, EXR, JPEG or a camera raw file).
     pub file: String,
     /// What the image is for.
     pub role: ImageRole,
@@ -125,6 +125,11 @@ pub struct ImageEntry {
     /// Known head pose (world from head); skips head tracking for this image.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub world_from_head: Option<Pose>,
+    /// A positive finite factor that multiplies the image's linear values `V` (written by
+    /// `skinbrdf ingest` when it normalises a different exposure to the reference-standard
+    /// image's); absent = 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_scale: Option<f64>,
 }
 
 /// One AprilTag tag36h11 target with its 3D geometry in its layout's frame.

@@ -27,6 +27,7 @@ fn entry(file: &str, role: ImageRole) -> ImageEntry {
         mask: None,
         world_from_camera: None,
         world_from_head: None,
+        exposure_scale: None,
     }
 }
 

@@ -33,6 +33,7 @@ fn valid_file() -> SessionFile {
         mask: None,
         world_from_camera: None,
         world_from_head: None,
+        exposure_scale: None,
     })
     .collect();
     SessionFile {

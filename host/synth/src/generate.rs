@@ -489,6 +489,7 @@ fn generate_into(
             mask: None,
             world_from_camera: None,
             world_from_head: None,
+            exposure_scale: None,
         });
     }
 

@@ -1,0 +1,387 @@
+//! Superpixel decoding of Bayer raw files to linear RGB (see the crate docs for the formula
+//! and the coordinate convention).
+//!
+//! # Levels
+//!
+//! The black level of each CFA position comes, in this order of precedence, from
+//! [`RawOptions::black_levels`], else from the level `rawler` reports for the file: its camera
+//! table's level where it has one for that camera, else the file's own black-level tags (DNG
+//! `BlackLevel` with `BlackLevelRepeatDim`, the maker's tags for other formats), else the mean of
+//! the sensor's masked (optically black) area where the format describes one, else zero. The
+//! white level comes from [`RawOptions::white_level`], else from the file (DNG `WhiteLevel`,
+//! else `2^BitsPerSample - 1`). DNG's black pattern is anchored at the active area's top-left
+//! photosite (the DNG specification); other formats' patterns at the sensor's top-left.
+//!
+//! # Guarantees
+//!
+//! * `value = (raw - black_c) / (white - black_c)` exactly (computed in `f64`, stored as `f32`),
+//!   with no clamping: noise below black stays negative, highlights above white exceed 1.
+//! * A truncated file is refused ([`RawError::Truncated`]) rather than decoded with missing
+//!   data: every strip or tile of a TIFF-based raw image must lie inside the file.
+//! * Non-Bayer data is refused ([`RawError::UnsupportedLayout`]).
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use rawler::decoders::{RawDecodeParams, RawLoader};
+use rawler::formats::tiff::reader::TiffReader;
+use rawler::formats::tiff::{GenericTiffReader, IFD};
+use rawler::rawimage::{RawImage, RawImageData, RawPhotometricInterpretation};
+use rawler::rawsource::RawSource;
+use rawler::tags::TiffCommonTag;
+use skinbrdf_core::CameraModel;
+
+use crate::bayer::{BayerPhase, CfaColour};
+use crate::error::RawError;
+use crate::kind::{sniff, FileKind};
+
+/// Overrides of the file's levels (the session's per-image `linearization`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RawOptions {
+    /// Black level per CFA position of the active area's quad, in reading order (top-left,
+    /// top-right, bottom-left, bottom-right), in raw units.
+    pub black_levels: Option<[f64; 4]>,
+    /// White level in raw units.
+    pub white_level: Option<f64>,
+}
+
+/// A decoded raw image at superpixel (half) resolution.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawFrame {
+    /// What the file is.
+    pub kind: FileKind,
+    /// Width of the image as loaded (half the active area's width, rounded down).
+    pub width_px: u32,
+    /// Height of the image as loaded.
+    pub height_px: u32,
+    /// Normalised linear values per superpixel, row-major: R, mean(G1, G2), B.
+    pub rgb: Vec<[f32; 3]>,
+    /// True where any photosite of the quad is at or above the white level.
+    pub saturated: Vec<bool>,
+    /// The Bayer phase at the active area's top-left photosite.
+    pub cfa: BayerPhase,
+    /// Black level per CFA position of the active quad, reading order (as used).
+    pub black_levels: [f64; 4],
+    /// White level (as used).
+    pub white_level: f64,
+    /// Bits per stored sample the file declares.
+    pub bits_per_sample: u32,
+    /// Full sensor width in photosites (masked areas included).
+    pub sensor_width_px: u32,
+    /// Full sensor height in photosites.
+    pub sensor_height_px: u32,
+    /// Left edge of the active area in sensor photosites.
+    pub active_left_px: u32,
+    /// Top edge of the active area in sensor photosites.
+    pub active_top_px: u32,
+}
+
+impl RawFrame {
+    /// The superpixel at column `u`, row `v`.
+    pub fn get(&self, u: u32, v: u32) -> Option<[f32; 3]> {
+        (u < self.width_px && v < self.height_px)
+            .then(|| self.rgb[(v * self.width_px + u) as usize])
+    }
+}
+
+/// A focal length in active-area photosites as a focal length in superpixels: `f / 2`.
+pub const fn sensor_to_superpixel_focal(f_px: f64) -> f64 {
+    f_px / 2.0
+}
+
+/// A coordinate (principal point, detection) in active-area photosites as a coordinate in
+/// superpixels, both with pixel centres at integers: `(c - 0.5) / 2`.
+pub const fn sensor_to_superpixel_centre(c_px: f64) -> f64 {
+    (c_px - 0.5) / 2.0
+}
+
+/// A calibration made on the full-resolution active area, converted to the superpixel image
+/// (size halved, rounded down; focal lengths and principal point as above; distortion
+/// coefficients unchanged, as they act on normalised coordinates).
+pub fn sensor_camera_to_superpixel(cam: &CameraModel) -> CameraModel {
+    CameraModel {
+        width_px: cam.width_px / 2,
+        height_px: cam.height_px / 2,
+        fx_px: sensor_to_superpixel_focal(cam.fx_px),
+        fy_px: sensor_to_superpixel_focal(cam.fy_px),
+        cx_px: sensor_to_superpixel_centre(cam.cx_px),
+        cy_px: sensor_to_superpixel_centre(cam.cy_px),
+        distortion: cam.distortion,
+    }
+}
+
+/// The shared camera table (parsed once).
+pub(crate) fn loader() -> &'static RawLoader {
+    static LOADER: OnceLock<RawLoader> = OnceLock::new();
+    LOADER.get_or_init(RawLoader::new)
+}
+
+/// Photometric interpretation of a colour filter array (TIFF/EP).
+const PHOTOMETRIC_CFA: u16 = 32803;
+/// Photometric interpretation of DNG linear raw data.
+const PHOTOMETRIC_LINEAR_RAW: u16 = 34892;
+
+/// Checks that every strip and tile of a TIFF-based file's raw images lies inside the file.
+fn check_tiff_extents(path: &Path, file_len: u64) -> Result<(), RawError> {
+    let Ok(file) = std::fs::File::open(path) else {
+        return Ok(());
+    };
+    let mut reader = std::io::BufReader::new(file);
+    let Ok(tiff) = GenericTiffReader::new(&mut reader, 0, 0, None, &[]) else {
+        // Not a plain TIFF container (ORF, RW2 variants...): the decoder checks.
+        return Ok(());
+    };
+    let is_raw = |ifd: &IFD| {
+        ifd.get_entry(TiffCommonTag::PhotometricInt)
+            .map(|e| e.force_u16(0))
+            .is_some_and(|p| p == PHOTOMETRIC_CFA || p == PHOTOMETRIC_LINEAR_RAW)
+    };
+    let mut ifds: Vec<&IFD> = Vec::new();
+    for ifd in tiff.chains() {
+        ifds.push(ifd);
+        ifds.extend(ifd.sub_ifds().values().flatten());
+    }
+    for ifd in ifds.into_iter().filter(|i| is_raw(i)) {
+        for (offsets, counts, what) in [
+            (
+                TiffCommonTag::StripOffsets,
+                TiffCommonTag::StripByteCounts,
+                "strip",
+            ),
+            (
+                TiffCommonTag::TileOffsets,
+                TiffCommonTag::TileByteCounts,
+                "tile",
+            ),
+        ] {
+            let (Some(off), Some(cnt)) = (ifd.get_entry(offsets), ifd.get_entry(counts)) else {
+                continue;
+            };
+            for i in 0..off.count().min(cnt.count()) as usize {
+                let end = u64::from(off.force_u32(i)) + u64::from(cnt.force_u32(i));
+                if end > file_len {
+                    return Err(RawError::Truncated {
+                        path: path.to_path_buf(),
+                        what: format!(
+                            "raw image {what} {i} ends at byte {end} but the file has {file_len} bytes"
+                        ),
+                    });
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Decodes a Bayer raw file to superpixels (see the module and crate docs).
+pub fn decode_superpixel(path: &Path, opts: &RawOptions) -> Result<RawFrame, RawError> {
+    let kind = sniff(path)?;
+    if !kind.is_raw() {
+        return Err(RawError::NotRaw {
+            path: path.to_path_buf(),
+            actual: kind,
+        });
+    }
+    let io = |source| RawError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file_len = std::fs::metadata(path).map_err(io)?.len();
+    check_tiff_extents(path, file_len)?;
+    let src = RawSource::new(path).map_err(io)?;
+    let image = loader()
+        .decode(&src, &RawDecodeParams::default(), false)
+        .map_err(|e| RawError::Decode {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+    superpixel(path, kind, &image, opts)
+}
+
+/// The layout check and the superpixel computation on a decoded image.
+fn superpixel(
+    path: &Path,
+    kind: FileKind,
+    image: &RawImage,
+    opts: &RawOptions,
+) -> Result<RawFrame, RawError> {
+    let layout_err = |layout: String| RawError::UnsupportedLayout {
+        path: path.to_path_buf(),
+        layout,
+    };
+    if image.cpp != 1 {
+        return Err(layout_err(format!(
+            "linear (demosaiced or Foveon) data, {} samples per pixel",
+            image.cpp
+        )));
+    }
+    match &image.photometric {
+        RawPhotometricInterpretation::Cfa(_) => {}
+        RawPhotometricInterpretation::LinearRaw => {
+            return Err(layout_err("linear raw, 1 sample per pixel (no CFA)".into()))
+        }
+        RawPhotometricInterpretation::BlackIsZero => {
+            return Err(layout_err("monochrome (no CFA)".into()))
+        }
+    }
+    let cfa = &image.camera.cfa;
+    let (sw, sh) = (image.width, image.height);
+    let (left, top, aw, ah) = match &image.active_area {
+        Some(r) => (r.p.x, r.p.y, r.d.w, r.d.h),
+        None => (0, 0, sw, sh),
+    };
+    if left + aw > sw || top + ah > sh || aw < 2 || ah < 2 {
+        return Err(RawError::Decode {
+            path: path.to_path_buf(),
+            reason: format!(
+                "active area {aw}x{ah} at ({left}, {top}) does not fit the {sw}x{sh} sensor"
+            ),
+        });
+    }
+    let describe_cfa = || {
+        let name = if cfa.width == 6 && cfa.height == 6 {
+            "X-Trans "
+        } else {
+            ""
+        };
+        format!("{name}{}x{} CFA {}", cfa.width, cfa.height, cfa.name)
+    };
+    if cfa.width == 0 || !cfa.width.is_multiple_of(2) || !cfa.height.is_multiple_of(2) {
+        return Err(layout_err(describe_cfa()));
+    }
+    let colour = |c: usize| match c {
+        0 => Some(CfaColour::Red),
+        1 => Some(CfaColour::Green),
+        2 => Some(CfaColour::Blue),
+        _ => None,
+    };
+    // Colours of the active area's first quad, and a check that the pattern repeats every 2.
+    let mut quad = [CfaColour::Green; 4];
+    for (k, q) in quad.iter_mut().enumerate() {
+        let (x, y) = (left + k % 2, top + k / 2);
+        *q = colour(cfa.color_at(y, x)).ok_or_else(|| layout_err(describe_cfa()))?;
+    }
+    let periodic = (0..cfa.height)
+        .all(|r| (0..cfa.width).all(|c| cfa.color_at(r, c) == cfa.color_at(r % 2, c % 2)));
+    let phase = BayerPhase::from_quad(quad)
+        .filter(|_| periodic)
+        .ok_or_else(|| layout_err(describe_cfa()))?;
+
+    let black_levels = match opts.black_levels {
+        Some(b) => b,
+        None => file_black_levels(path, kind, image, left, top)?,
+    };
+    let white_level = match opts.white_level {
+        Some(w) => w,
+        None => match image.whitelevel.0.first() {
+            Some(&w) => f64::from(w),
+            None => {
+                return Err(RawError::BadLevels {
+                    path: path.to_path_buf(),
+                    problem: "the file states no white level".into(),
+                })
+            }
+        },
+    };
+    for (k, &b) in black_levels.iter().enumerate() {
+        if !b.is_finite() || !white_level.is_finite() || white_level <= b {
+            return Err(RawError::BadLevels {
+                path: path.to_path_buf(),
+                problem: format!(
+                    "white level {white_level} is not above the black level {b} of CFA position {k}"
+                ),
+            });
+        }
+    }
+    let (w, h) = (aw / 2, ah / 2);
+    let mut rgb = Vec::with_capacity(w * h);
+    let mut saturated = Vec::with_capacity(w * h);
+    let [pr, pg1, pg2, pb] = phase.positions();
+    let scale = black_levels.map(|b| 1.0 / (white_level - b));
+    let mut run = |get: &dyn Fn(usize) -> f64| {
+        for v in 0..h {
+            let y = top + 2 * v;
+            for u in 0..w {
+                let x = left + 2 * u;
+                let q = [
+                    get(y * sw + x),
+                    get(y * sw + x + 1),
+                    get((y + 1) * sw + x),
+                    get((y + 1) * sw + x + 1),
+                ];
+                let n = |k: usize| (q[k] - black_levels[k]) * scale[k];
+                rgb.push([n(pr) as f32, (0.5 * (n(pg1) + n(pg2))) as f32, n(pb) as f32]);
+                saturated.push(q.iter().any(|&r| r >= white_level));
+            }
+        }
+    };
+    let expected = sw * sh;
+    match &image.data {
+        RawImageData::Integer(d) if d.len() >= expected => run(&|i| f64::from(d[i])),
+        RawImageData::Float(d) if d.len() >= expected => run(&|i| f64::from(d[i])),
+        RawImageData::Integer(d) => return Err(short_data(path, d.len(), expected)),
+        RawImageData::Float(d) => return Err(short_data(path, d.len(), expected)),
+    }
+    let to_u32 = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+    Ok(RawFrame {
+        kind,
+        width_px: to_u32(w),
+        height_px: to_u32(h),
+        rgb,
+        saturated,
+        cfa: phase,
+        black_levels,
+        white_level,
+        bits_per_sample: to_u32(image.bps),
+        sensor_width_px: to_u32(sw),
+        sensor_height_px: to_u32(sh),
+        active_left_px: to_u32(left),
+        active_top_px: to_u32(top),
+    })
+}
+
+fn short_data(path: &Path, got: usize, expected: usize) -> RawError {
+    RawError::Truncated {
+        path: path.to_path_buf(),
+        what: format!("the decoder gave {got} samples, the sensor has {expected}"),
+    }
+}
+
+/// The file's black level per CFA position of the active quad (see the module docs).
+fn file_black_levels(
+    path: &Path,
+    kind: FileKind,
+    image: &RawImage,
+    left: usize,
+    top: usize,
+) -> Result<[f64; 4], RawError> {
+    let bl = &image.blacklevel;
+    let levels = bl.as_vec();
+    let (bw, bh) = (bl.width.max(1), bl.height.max(1));
+    if levels.len() < bw * bh {
+        return Err(RawError::BadLevels {
+            path: path.to_path_buf(),
+            problem: format!(
+                "black level pattern {bw}x{bh} has only {} values",
+                levels.len()
+            ),
+        });
+    }
+    // The pattern's origin relative to the active area's top-left photosite.
+    let (ox, oy) = if kind == FileKind::Dng {
+        (0, 0)
+    } else {
+        (left, top)
+    };
+    let at = |x: usize, y: usize| f64::from(levels[((y + oy) % bh) * bw + (x + ox) % bw]);
+    let out = [at(0, 0), at(1, 0), at(0, 1), at(1, 1)];
+    let periodic =
+        (0..bh.max(2)).all(|y| (0..bw.max(2)).all(|x| at(x, y) == out[(y % 2) * 2 + x % 2]));
+    if !periodic {
+        return Err(RawError::BadLevels {
+            path: path.to_path_buf(),
+            problem: format!("black level pattern {bw}x{bh} does not repeat every 2 photosites"),
+        });
+    }
+    Ok(out)
+}

@@ -1,0 +1,366 @@
+//! What a file is, from its content ([`sniff`]), and whether its name agrees
+//! ([`check_extension`]).
+//!
+//! Magic numbers decide PNG, JPEG, OpenEXR and the raw formats with a container of their own
+//! (RAF, CR3, CRW, MRW, X3F, ORF, RW2). A TIFF container is a raw file when it holds a
+//! `DNGVersion` tag (DNG), the CR2 signature, or an image directory with a colour-filter-array
+//! photometric interpretation (32803) or DNG's linear raw (34892); its format then follows the
+//! `Make` tag. Any other TIFF is a plain TIFF image.
+
+use std::fmt;
+use std::fs::File;
+use std::io::{BufReader, Read};
+use std::path::Path;
+
+use rawler::formats::tiff::reader::TiffReader;
+use rawler::formats::tiff::{GenericTiffReader, IFD};
+use rawler::tags::{DngTag, TiffCommonTag};
+
+use crate::error::RawError;
+
+/// A file's kind, from its content.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum FileKind {
+    /// PNG.
+    Png,
+    /// JPEG (JFIF or EXIF).
+    Jpeg,
+    /// A TIFF image that is not a camera raw file.
+    Tiff,
+    /// OpenEXR.
+    OpenExr,
+    /// Adobe DNG.
+    Dng,
+    /// Canon CR2.
+    Cr2,
+    /// Canon CR3.
+    Cr3,
+    /// Canon CRW.
+    Crw,
+    /// Nikon NEF.
+    Nef,
+    /// Nikon NRW.
+    Nrw,
+    /// Sony ARW (also SRF, SR2).
+    Arw,
+    /// Fujifilm RAF.
+    Raf,
+    /// Panasonic / Leica RW2 (also RWL, RAW).
+    Rw2,
+    /// Olympus / OM System ORF.
+    Orf,
+    /// Pentax / Ricoh PEF.
+    Pef,
+    /// Samsung SRW.
+    Srw,
+    /// Minolta MRW.
+    Mrw,
+    /// Sigma X3F (Foveon).
+    X3f,
+    /// Phase One / Leaf IIQ, MOS.
+    Iiq,
+    /// Another TIFF-based raw format (Kodak, Epson, Mamiya, Hasselblad...).
+    OtherRaw,
+}
+
+impl FileKind {
+    /// True for camera raw files (decoded by [`crate::decode_superpixel`]).
+    pub const fn is_raw(self) -> bool {
+        !matches!(self, Self::Png | Self::Jpeg | Self::Tiff | Self::OpenExr)
+    }
+
+    /// A short upper-case name (`"DNG"`, `"PNG"`, `"OpenEXR"`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Png => "PNG",
+            Self::Jpeg => "JPEG",
+            Self::Tiff => "TIFF",
+            Self::OpenExr => "OpenEXR",
+            Self::Dng => "DNG",
+            Self::Cr2 => "CR2",
+            Self::Cr3 => "CR3",
+            Self::Crw => "CRW",
+            Self::Nef => "NEF",
+            Self::Nrw => "NRW",
+            Self::Arw => "ARW",
+            Self::Raf => "RAF",
+            Self::Rw2 => "RW2",
+            Self::Orf => "ORF",
+            Self::Pef => "PEF",
+            Self::Srw => "SRW",
+            Self::Mrw => "MRW",
+            Self::X3f => "X3F",
+            Self::Iiq => "IIQ",
+            Self::OtherRaw => "camera raw",
+        }
+    }
+
+    /// The extensions (lower case, without the dot) a file of this kind may carry; empty for
+    /// [`FileKind::OtherRaw`], whose extensions vary by maker.
+    pub const fn extensions(self) -> &'static [&'static str] {
+        match self {
+            Self::Png => &["png"],
+            Self::Jpeg => &["jpg", "jpeg", "jpe"],
+            Self::Tiff => &["tif", "tiff"],
+            Self::OpenExr => &["exr"],
+            Self::Dng => &["dng"],
+            Self::Cr2 => &["cr2"],
+            Self::Cr3 => &["cr3"],
+            Self::Crw => &["crw"],
+            Self::Nef => &["nef"],
+            Self::Nrw => &["nrw"],
+            Self::Arw => &["arw", "srf", "sr2"],
+            Self::Raf => &["raf"],
+            Self::Rw2 => &["rw2", "rwl", "raw"],
+            Self::Orf => &["orf"],
+            Self::Pef => &["pef"],
+            Self::Srw => &["srw"],
+            Self::Mrw => &["mrw"],
+            Self::X3f => &["x3f"],
+            Self::Iiq => &["iiq", "mos"],
+            Self::OtherRaw => &[],
+        }
+    }
+
+    /// The kind an extension names (case-insensitive), if any.
+    pub fn from_extension(ext: &str) -> Option<Self> {
+        let ext = ext.to_ascii_lowercase();
+        Self::ALL
+            .into_iter()
+            .find(|k| k.extensions().contains(&ext.as_str()))
+    }
+
+    /// Every kind.
+    pub const ALL: [Self; 20] = [
+        Self::Png,
+        Self::Jpeg,
+        Self::Tiff,
+        Self::OpenExr,
+        Self::Dng,
+        Self::Cr2,
+        Self::Cr3,
+        Self::Crw,
+        Self::Nef,
+        Self::Nrw,
+        Self::Arw,
+        Self::Raf,
+        Self::Rw2,
+        Self::Orf,
+        Self::Pef,
+        Self::Srw,
+        Self::Mrw,
+        Self::X3f,
+        Self::Iiq,
+        Self::OtherRaw,
+    ];
+}
+
+impl fmt::Display for FileKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How many leading bytes the magic-number checks look at.
+const HEAD_LEN: usize = 64;
+
+/// The file's kind from its content (see the module docs).
+pub fn sniff(path: &Path) -> Result<FileKind, RawError> {
+    let io = |source| RawError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut file = File::open(path).map_err(io)?;
+    let mut head = Vec::with_capacity(HEAD_LEN);
+    file.by_ref()
+        .take(HEAD_LEN as u64)
+        .read_to_end(&mut head)
+        .map_err(io)?;
+    if let Some(kind) = sniff_magic(&head) {
+        return Ok(kind);
+    }
+    let is_tiff = head.len() >= 8 && (head.starts_with(b"II*\0") || head.starts_with(b"MM\0*"));
+    if !is_tiff {
+        return Err(RawError::UnrecognisedContent {
+            path: path.to_path_buf(),
+        });
+    }
+    if head.len() >= 10 && &head[8..10] == b"CR" {
+        return Ok(FileKind::Cr2);
+    }
+    let file = File::open(path).map_err(io)?;
+    let mut reader = BufReader::new(file);
+    let tiff =
+        GenericTiffReader::new(&mut reader, 0, 0, None, &[]).map_err(|e| RawError::Truncated {
+            path: path.to_path_buf(),
+            what: format!("TIFF structure unreadable ({e})"),
+        })?;
+    Ok(classify_tiff(&tiff))
+}
+
+/// Kinds recognised by their leading bytes alone.
+fn sniff_magic(head: &[u8]) -> Option<FileKind> {
+    let at = |offset: usize, magic: &[u8]| {
+        head.len() >= offset + magic.len() && &head[offset..offset + magic.len()] == magic
+    };
+    if at(0, b"\x89PNG\r\n\x1a\n") {
+        Some(FileKind::Png)
+    } else if at(0, &[0xFF, 0xD8, 0xFF]) {
+        Some(FileKind::Jpeg)
+    } else if at(0, &[0x76, 0x2F, 0x31, 0x01]) {
+        Some(FileKind::OpenExr)
+    } else if at(0, b"FUJIFILMCCD-RAW") {
+        Some(FileKind::Raf)
+    } else if at(4, b"ftypcrx ") {
+        Some(FileKind::Cr3)
+    } else if at(6, b"HEAPCCDR") {
+        Some(FileKind::Crw)
+    } else if at(0, b"\0MRM") {
+        Some(FileKind::Mrw)
+    } else if at(0, b"FOVb") {
+        Some(FileKind::X3f)
+    } else if at(0, b"IIRO") || at(0, b"IIRS") || at(0, b"MMOR") {
+        Some(FileKind::Orf)
+    } else if at(0, b"IIU\0") {
+        Some(FileKind::Rw2)
+    } else {
+        None
+    }
+}
+
+/// Photometric interpretation of a colour filter array (TIFF/EP).
+const PHOTOMETRIC_CFA: u16 = 32803;
+/// Photometric interpretation of DNG linear raw data.
+const PHOTOMETRIC_LINEAR_RAW: u16 = 34892;
+
+/// Raw or plain TIFF, and which raw format (see the module docs).
+fn classify_tiff(tiff: &GenericTiffReader) -> FileKind {
+    if tiff.has_entry(DngTag::DNGVersion) {
+        return FileKind::Dng;
+    }
+    let raw_ifd = |ifd: &IFD| {
+        ifd.get_entry(TiffCommonTag::PhotometricInt)
+            .map(|e| e.force_u16(0))
+            .is_some_and(|p| p == PHOTOMETRIC_CFA || p == PHOTOMETRIC_LINEAR_RAW)
+    };
+    let has_raw = tiff
+        .chains()
+        .iter()
+        .any(|ifd| raw_ifd(ifd) || ifd.sub_ifds().values().flatten().any(raw_ifd));
+    if !has_raw {
+        return FileKind::Tiff;
+    }
+    let make = tiff
+        .get_entry(TiffCommonTag::Make)
+        .and_then(|e| e.value.as_string().map(|s| s.trim().to_ascii_uppercase()))
+        .unwrap_or_default();
+    let model = tiff
+        .get_entry(TiffCommonTag::Model)
+        .and_then(|e| e.value.as_string().map(|s| s.trim().to_ascii_uppercase()))
+        .unwrap_or_default();
+    if make.starts_with("NIKON") {
+        // Nikon's compact cameras write NRW, whose Make is upper-case "NIKON" and whose model
+        // is a Coolpix.
+        if model.contains("COOLPIX") {
+            FileKind::Nrw
+        } else {
+            FileKind::Nef
+        }
+    } else if make.starts_with("SONY") {
+        FileKind::Arw
+    } else if make.starts_with("CANON") {
+        FileKind::Cr2
+    } else if make.starts_with("PENTAX") || make.starts_with("RICOH") {
+        FileKind::Pef
+    } else if make.starts_with("SAMSUNG") {
+        FileKind::Srw
+    } else if make.starts_with("OLYMPUS") || make.starts_with("OM DIGITAL") {
+        FileKind::Orf
+    } else if make.starts_with("PANASONIC") || make.starts_with("LEICA") {
+        FileKind::Rw2
+    } else if make.starts_with("PHASE ONE") || make.starts_with("LEAF") {
+        FileKind::Iiq
+    } else {
+        FileKind::OtherRaw
+    }
+}
+
+/// Checks that a file's name agrees with its content `kind` (from [`sniff`]).
+///
+/// A raw file must carry one of its format's extensions (any raw extension for
+/// [`FileKind::OtherRaw`]); a non-raw file must not carry a raw extension. Non-raw kinds among
+/// themselves are not checked here (the image decoders read by content).
+pub fn check_extension(path: &Path, kind: FileKind) -> Result<(), RawError> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let named = FileKind::from_extension(&ext);
+    let ok = match (kind.is_raw(), named) {
+        (true, Some(n)) if n == kind => true,
+        (true, Some(n)) => kind == FileKind::OtherRaw && n.is_raw(),
+        (true, None) => false,
+        (false, Some(n)) => !n.is_raw(),
+        (false, None) => true,
+    };
+    if ok {
+        return Ok(());
+    }
+    let named = match named {
+        Some(n) => format!("{n} (extension .{ext})"),
+        None if ext.is_empty() => "nothing (no extension)".to_string(),
+        None => format!("an unknown kind (extension .{ext})"),
+    };
+    Err(RawError::WrongExtension {
+        path: path.to_path_buf(),
+        actual: kind,
+        named,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn magic_numbers() {
+        assert_eq!(sniff_magic(b"\x89PNG\r\n\x1a\n...."), Some(FileKind::Png));
+        assert_eq!(sniff_magic(&[0xFF, 0xD8, 0xFF, 0xE1]), Some(FileKind::Jpeg));
+        assert_eq!(
+            sniff_magic(&[0x76, 0x2F, 0x31, 0x01, 2]),
+            Some(FileKind::OpenExr)
+        );
+        assert_eq!(sniff_magic(b"FUJIFILMCCD-RAW 0201"), Some(FileKind::Raf));
+        assert_eq!(
+            sniff_magic(b"\0\0\0\x18ftypcrx \0\0\0\x01"),
+            Some(FileKind::Cr3)
+        );
+        assert_eq!(sniff_magic(b"IIRO\x08\0\0\0"), Some(FileKind::Orf));
+        assert_eq!(sniff_magic(b"IIU\0\x08\0\0\0"), Some(FileKind::Rw2));
+        assert_eq!(sniff_magic(b"II*\0\x08\0\0\0"), None);
+        assert_eq!(sniff_magic(b""), None);
+    }
+
+    #[test]
+    fn extensions_checked_both_ways() {
+        let ok = |p: &str, k| check_extension(Path::new(p), k).is_ok();
+        assert!(ok("a/IMG_0001.DNG", FileKind::Dng));
+        assert!(ok("a/x.dng", FileKind::Dng));
+        assert!(ok("x.NEF", FileKind::Nef));
+        assert!(ok("x.png", FileKind::Png));
+        assert!(ok("x.tif", FileKind::Png));
+        assert!(ok("x.weird", FileKind::Tiff));
+        assert!(!ok("x.kdc", FileKind::OtherRaw));
+        assert!(ok("x.dng", FileKind::OtherRaw));
+        assert!(!ok("x.PNG", FileKind::Dng));
+        assert!(!ok("x.DNG", FileKind::Png));
+        assert!(!ok("x.cr2", FileKind::Nef));
+        assert!(!ok("x", FileKind::Dng));
+        let err = check_extension(Path::new("card/SKB_0001.PNG"), FileKind::Dng)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("card/SKB_0001.PNG"), "{err}");
+        assert!(err.contains("is DNG"), "{err}");
+        assert!(err.contains("says PNG"), "{err}");
+    }
+}

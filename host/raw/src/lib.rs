@@ -1,0 +1,54 @@
+//! Camera raw files for skinbrdf: what a file is ([`sniff`]), its radiometrically linear pixels
+//! ([`decode_superpixel`]), its exposure metadata ([`read_metadata`]) and a DNG writer
+//! ([`dng::write_dng`]) for the synthetic studio.
+//!
+//! # Radiometry
+//!
+//! Decoding is deliberately minimal, so the values stay proportional to the photosites' charge:
+//! for each photosite of CFA position `c` (its place in the active area's 2x2 quad),
+//!
+//! ```text
+//! n = (raw - black_c) / (white - black_c)
+//! ```
+//!
+//! with no white balance, no colour matrix and no tone curve (the method's calibration constant
+//! `C`, one per channel, absorbs the channel gains). `black_c` is the file's black level for
+//! that CFA position; `white` is the file's white level. [`RawOptions`] may override either.
+//!
+//! # Superpixels and coordinates
+//!
+//! Pixel centres are at integer coordinates (the OpenCV convention) in both the sensor's active
+//! area and the image as loaded. Output pixel `(u, v)` is the Bayer quad whose top-left photosite
+//! is `(2u, 2v)` *in the active area*: its red photosite, the mean of its two green photosites and
+//! its blue photosite. It covers photosites `2u..=2u+1` by `2v..=2v+1`, so its centre is at
+//! sensor (active-area) coordinates `(2u + 0.5, 2v + 0.5)`. An active area of odd width or
+//! height drops its last column or row. Every image-space quantity of the pipeline (intrinsics,
+//! detections, derendering) refers to the image *as loaded*; a calibration made on the full
+//! sensor converts with [`sensor_to_superpixel_focal`] (`f' = f / 2`) and
+//! [`sensor_to_superpixel_centre`] (`c' = (c - 0.5) / 2`).
+//!
+//! A superpixel is *saturated* when any of its four photosites' raw value is at or above the
+//! white level.
+//!
+//! # Layouts
+//!
+//! All four Bayer phases ([`BayerPhase`]) are supported, whatever the parity of the active
+//! area's origin. X-Trans, other CFA patterns and linear (non-mosaic, e.g. Foveon or linear DNG)
+//! data are refused with [`RawError::UnsupportedLayout`], naming the file and the layout.
+
+mod bayer;
+mod decode;
+pub mod dng;
+mod error;
+mod kind;
+mod meta;
+pub mod tiff;
+
+pub use bayer::{BayerPhase, CfaColour};
+pub use decode::{
+    decode_superpixel, sensor_camera_to_superpixel, sensor_to_superpixel_centre,
+    sensor_to_superpixel_focal, RawFrame, RawOptions,
+};
+pub use error::RawError;
+pub use kind::{check_extension, sniff, FileKind};
+pub use meta::{read_metadata, CaptureTime, ExposureMeta, LocalDateTime};
