@@ -640,8 +640,7 @@ impl Problem {
             }
         }
         if self.use_file_numbers {
-            if let (Some(a), Some(b)) = (self.shots[p.1].file_number, self.shots[q.1].file_number)
-            {
+            if let (Some(a), Some(b)) = (self.shots[p.1].file_number, self.shots[q.1].file_number) {
                 let step = (i64::from(b) - i64::from(a)).rem_euclid(FILE_NUMBER_MODULUS);
                 if step != need.rem_euclid(FILE_NUMBER_MODULUS) {
                     cost += self.penalty;
@@ -991,10 +990,7 @@ pub fn match_shots(
                 continue;
             }
             let score = chains.forced_score(k);
-            if alternative
-                .as_ref()
-                .is_none_or(|a| score > a.0 + SCORE_EPS)
-            {
+            if alternative.as_ref().is_none_or(|a| score > a.0 + SCORE_EPS) {
                 alternative = Some((score, chains.chain_through(k)));
             }
         }
@@ -1175,7 +1171,11 @@ fn remove_duplicates(
 }
 
 /// Step 3: alternate the Chebyshev fit and the assignment under the fitted clock.
-fn refine(problem: &Problem, relaxed_chain: Vec<Pair>, min_pairs_for_drift: usize) -> (Vec<Pair>, Clock) {
+fn refine(
+    problem: &Problem,
+    relaxed_chain: Vec<Pair>,
+    min_pairs_for_drift: usize,
+) -> (Vec<Pair>, Clock) {
     let fallback = {
         let (clock, _) = problem.fit(&relaxed_chain, false);
         (relaxed_chain.clone(), clock)

@@ -37,6 +37,10 @@
 //! [standard]
 //! brdf = { model = "lambertian", albedo = [0.99, 0.99, 0.99] }
 //! size_m = [0.12, 0.12]
+//!
+//! [roi]                           # optional: the forehead region, head frame
+//! centre_m = [0.0, 0.09, 0.04]
+//! radius_m = 0.03
 //! ```
 //!
 //! [`Rig::load`] checks every field and reports every problem at once ([`SessionErrors`],
@@ -53,7 +57,8 @@ use skinbrdf_core::Pose;
 
 use crate::error::SessionErrors;
 use crate::format::{
-    FlashSpec, StandardSpec, Target, TargetGroup, TargetLayouts, UnplacedTarget, TAG_FAMILY,
+    FlashSpec, RegionOfInterest, StandardSpec, Target, TargetGroup, TargetLayouts, UnplacedTarget,
+    TAG_FAMILY,
 };
 use crate::load::{TAG36H11_CODES, TARGET_SIZE_REL_TOL};
 
@@ -153,6 +158,10 @@ pub struct RigFile {
     /// The reflectance standard.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub standard: Option<RigStandard>,
+    /// The region of the subject to measure, head frame (where the headdress sits on the
+    /// forehead fixes it); `None`: the whole scan.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roi: Option<RegionOfInterest>,
 }
 
 fn default_family() -> String {
@@ -364,6 +373,18 @@ fn validate(
                 path,
                 "standard.size_m",
                 format!("must be positive, got {:?}", s.size_m),
+            );
+        }
+    }
+    if let Some(r) = &f.roi {
+        if !r.centre_m.is_finite() {
+            errs.push(path, "roi.centre_m", "non-finite coordinate");
+        }
+        if !positive(r.radius_m) {
+            errs.push(
+                path,
+                "roi.radius_m",
+                format!("must be positive, got {}", r.radius_m),
             );
         }
     }
@@ -621,6 +642,7 @@ size_m = [0.12, 0.12]
                 light_centre_m: DVec3::ZERO,
             },
             standard: None,
+            roi: None,
         };
         let p = dir.path().join("rig.toml");
         Rig::write_file(&p, &file).expect("write");

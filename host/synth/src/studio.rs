@@ -526,6 +526,10 @@ pub fn rig_file(scene: &Scene, rig: &Rig) -> RigFile {
             brdf: scene.standard.brdf.clone(),
             size_m: [scene.standard.size_m; 2],
         }),
+        roi: Some(skinbrdf_session::RegionOfInterest {
+            centre_m: rig.roi_centre_head,
+            radius_m: scene.geometry.roi_radius_m,
+        }),
     }
 }
 

@@ -11,6 +11,7 @@ fn small(samples: u32) -> SynthOptions {
         capture: None,
         noise_free: false,
         samples_per_pixel: Some(samples),
+        studio: false,
     }
 }
 
