@@ -27,6 +27,8 @@ enum Command {
     Demo(cmd::demo::Args),
     /// Write a synthetic measurement session with ground truth.
     Synth(cmd::synth::Args),
+    /// Turn a camera card, the controller's record, a rig file and a scan into a session.
+    Ingest(cmd::ingest::Args),
     /// Start the firmware simulator on a pseudo-terminal and print its port.
     Sim(cmd::sim::Args),
     /// List serial ports, marking skinbrdf trigger controllers.
@@ -100,6 +102,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Demo(a) => cmd::demo::run(a),
         Command::Synth(a) => cmd::synth::run(a),
+        Command::Ingest(a) => cmd::ingest::run(a),
         Command::Sim(a) => cmd::sim::run(a),
         Command::Ports(a) => cmd::ports::run(a),
         Command::Capture(a) => cmd::capture::run(a),

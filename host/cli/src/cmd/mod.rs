@@ -6,6 +6,7 @@ pub mod compare;
 pub mod demo;
 pub mod derender;
 pub mod fit;
+pub mod ingest;
 pub mod ports;
 pub mod poses;
 pub mod process;

@@ -1,0 +1,184 @@
+//! `skinbrdf ingest CARD_DIR --capture capture.json --rig RIG.toml --scan SCAN [--camera
+//! CAMERA.toml] --out SESSION`: the camera's card to a session (see `skinbrdf_ingest::ingest`
+//! and docs/ingest.md). Prints the camera clock fit with every pair's residual, the files left
+//! out and why, the exposures without a file, and what the session still needs.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use skinbrdf_ingest::matching::MatchOptions;
+use skinbrdf_ingest::{ingest, ExposurePolicy, IngestConfig};
+use skinbrdf_session::LengthUnit;
+
+/// Flags of `skinbrdf ingest`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The camera's card (or a copy of it); searched recursively.
+    pub card: PathBuf,
+    /// The controller's record of the capture.
+    #[arg(long)]
+    pub capture: PathBuf,
+    /// The rig file: targets, flash, standard (with placements when surveyed).
+    #[arg(long)]
+    pub rig: PathBuf,
+    /// The head scan (PLY or OBJ).
+    #[arg(long)]
+    pub scan: PathBuf,
+    /// The scan's length unit (default: from the file's header comment).
+    #[arg(long, value_enum)]
+    pub scan_units: Option<Units>,
+    /// A camera calibration: a TOML file with a `[camera]` table as in session.toml.
+    #[arg(long)]
+    pub camera: Option<PathBuf>,
+    /// The session directory to write.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Copy the photographs into SESSION/images/ (default: reference them where they are).
+    #[arg(long)]
+    pub copy: bool,
+    /// Replace an existing session in --out.
+    #[arg(long)]
+    pub overwrite: bool,
+    /// Scale images exposed unlike the reference-standard image by t·ISO/N² instead of
+    /// refusing them.
+    #[arg(long)]
+    pub normalise_exposure: bool,
+    /// The session's camera body serial (default: the one most files carry).
+    #[arg(long)]
+    pub body_serial: Option<String>,
+    /// Print the report as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Length units of `--scan-units`.
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+pub enum Units {
+    /// Metres.
+    M,
+    /// Centimetres.
+    Cm,
+    /// Millimetres.
+    Mm,
+    /// Inches.
+    In,
+}
+
+impl From<Units> for LengthUnit {
+    fn from(u: Units) -> Self {
+        match u {
+            Units::M => Self::M,
+            Units::Cm => Self::Cm,
+            Units::Mm => Self::Mm,
+            Units::In => Self::In,
+        }
+    }
+}
+
+/// Validates the flags into an ingest configuration.
+pub fn config(args: &Args) -> IngestConfig {
+    let mut cfg = IngestConfig::new(
+        args.card.clone(),
+        args.capture.clone(),
+        args.rig.clone(),
+        args.scan.clone(),
+        args.out.clone(),
+    );
+    cfg.scan_units = args.scan_units.map(Into::into);
+    cfg.camera = args.camera.clone();
+    cfg.copy = args.copy;
+    cfg.overwrite = args.overwrite;
+    cfg.exposure = if args.normalise_exposure {
+        ExposurePolicy::Normalise
+    } else {
+        ExposurePolicy::Refuse
+    };
+    cfg.matching = MatchOptions {
+        expected_body_serial: args.body_serial.clone(),
+        ..MatchOptions::default()
+    };
+    cfg
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let cfg = config(&args);
+    let r = ingest(&cfg).with_context(|| format!("skinbrdf ingest {}", args.card.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&r)?);
+        return Ok(());
+    }
+    let c = &r.matching.clock;
+    println!("camera: {}, {}", r.camera_body, r.lens);
+    println!(
+        "camera clock: offset {:+.3} s, drift {:+.1} ppm{}, residual rms {:.1} ms, max {:.1} ms over {} pairs (time resolution {} ms)",
+        c.offset_s,
+        c.drift_ppm,
+        if c.drift_fitted { "" } else { " (not fitted: too few pairs)" },
+        c.residual_rms_s * 1e3,
+        c.residual_max_s * 1e3,
+        c.pairs_used,
+        c.time_resolution_s * 1e3
+    );
+    println!(
+        "{:<42} {:>8} {:<20} {:>10} {:>8}",
+        "image", "exposure", "role", "resid ms", "scale"
+    );
+    for i in &r.images {
+        println!(
+            "{:<42} {:>8} {:<20} {:>10.2} {:>8.4}",
+            i.card_file
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            i.exposure_index,
+            format!("{:?}", i.role),
+            i.time_residual_s * 1e3,
+            i.exposure_scale
+        );
+    }
+    for (f, why) in &r.matching.extra_files {
+        println!("left out: {f}: {why}");
+    }
+    for e in &r.matching.missing {
+        println!("missing: exposure {e} fired the camera but has no file on the card");
+    }
+    if !r.matching.no_file_expected.is_empty() {
+        println!(
+            "no file expected (the camera did not fire): exposures {:?}",
+            r.matching.no_file_expected
+        );
+    }
+    for (f, what) in &r.skipped_files {
+        println!("skipped: {f}: {what}");
+    }
+    match &r.camera {
+        skinbrdf_ingest::ingest::CameraSource::File { path } => {
+            println!("intrinsics: {}", path.display())
+        }
+        skinbrdf_ingest::ingest::CameraSource::ToBeCalibrated => println!(
+            "intrinsics: to be calibrated from the reference targets ({}x{} images as loaded)",
+            r.image_size_px.0, r.image_size_px.1
+        ),
+    }
+    if r.unplaced_targets > 0 {
+        println!(
+            "placements: {} targets placed, {} without a placement (listed as targets.unplaced: the placement survey fills them in)",
+            r.placed_targets, r.unplaced_targets
+        );
+    } else {
+        println!(
+            "placements: all {} targets placed by the rig file",
+            r.placed_targets
+        );
+    }
+    println!(
+        "session written to {} ({} images {}) in {:.2} s (metadata and matching {:.2} s, decoding {:.2} s)",
+        r.session_dir.display(),
+        r.images.len(),
+        if r.copied { "copied" } else { "referenced in place" },
+        r.total_s,
+        r.metadata_s,
+        r.decode_s
+    );
+    Ok(())
+}

@@ -1,0 +1,1083 @@
+//! `skinbrdf ingest`: from the camera's card, the controller's record, the rig file and the
+//! head scan to a session directory that `Session::load` accepts and `skinbrdf process` runs.
+//!
+//! # Steps
+//!
+//! 1. **Read the inputs**: `capture.json`, the rig file ([`skinbrdf_session::Rig`]), the scan
+//!    (PLY or OBJ, loaded once to check it; an OBJ's material and texture files come along),
+//!    the camera calibration when one is given.
+//! 2. **List the card**: every file under the card directory, by content
+//!    ([`skinbrdf_raw::sniff`]): camera raw files, JPEG and TIFF are photographs; anything else
+//!    (sidecars, thumbnails) is listed as skipped. A photograph whose name says another format
+//!    than its content is an error naming the file ([`skinbrdf_raw::check_extension`]).
+//! 3. **Read each photograph's metadata** ([`skinbrdf_raw::read_metadata`], in parallel).
+//! 4. **Match files to exposures** by time ([`crate::matching`]): the camera clock's offset and
+//!    drift, the residual per pair, test shots, missing files, other bodies, duplicates.
+//! 5. **Check one camera**: a body, lens or focal-length change among the session's files is
+//!    refused (the intrinsics would differ), as is a file from another body taken during the
+//!    session (the body was swapped).
+//! 6. **Check the exposure**: the method's `C` bundles exposure and gain, so every image must
+//!    be exposed like the reference-standard image (exposure time, f-number, ISO). A
+//!    difference is refused with the list of files and settings, or, with
+//!    [`ExposurePolicy::Normalise`], the image's `V` is scaled by
+//!    `(t ISO / N²)_standard / (t ISO / N²)_image` (`exposure_scale` in `session.toml`).
+//! 7. **Decode every matched photograph once** (a truncated file is refused here, not half-way
+//!    through `process`); the loaded size sets the camera's image size.
+//! 8. **Write** the session into a temporary directory beside the output, load it with
+//!    `Session::load`, and only then move it into place (an existing session is replaced only
+//!    with `overwrite`, and kept until the new one is in place). On any error nothing is
+//!    written.
+//!
+//! Images are referenced where they are (a path relative to the session directory) unless
+//! `copy` is set; they are never converted.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Component, Path, PathBuf};
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use skinbrdf_raw::{ExposureMeta, FileKind, RawError};
+use skinbrdf_session::capture::CaptureRecord;
+use skinbrdf_session::{
+    CameraSpec, GeometrySpec, ImageEntry, ImageRole, LengthUnit, Linearization, Rig, Session,
+    SessionErrors, SessionFile, SESSION_FORMAT_VERSION,
+};
+
+use crate::matching::{
+    self, CameraShot, CameraTime, ExposureInput, ExtraReason, MatchError, MatchOptions, Matching,
+};
+
+/// What to do with images exposed unlike the reference-standard image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExposurePolicy {
+    /// Refuse the session, listing every file and its settings.
+    #[default]
+    Refuse,
+    /// Scale each image's values to the reference-standard image's exposure.
+    Normalise,
+}
+
+/// The ingest's inputs and choices.
+#[derive(Debug, Clone)]
+pub struct IngestConfig {
+    /// The card (or a copy of it): searched recursively.
+    pub card_dir: PathBuf,
+    /// The controller's `capture.json`.
+    pub capture: PathBuf,
+    /// The rig file.
+    pub rig: PathBuf,
+    /// The head scan (PLY or OBJ).
+    pub scan: PathBuf,
+    /// The scan's length unit; `None`: from the PLY header's comment, else an error.
+    pub scan_units: Option<LengthUnit>,
+    /// A camera calibration (a TOML file with a `[camera]` table as in `session.toml`).
+    pub camera: Option<PathBuf>,
+    /// The session directory to write.
+    pub out_dir: PathBuf,
+    /// Copy the photographs into `OUT/images/` instead of referencing them in place.
+    pub copy: bool,
+    /// Replace an existing session in `out_dir`.
+    pub overwrite: bool,
+    /// Exposure differences: refuse or normalise.
+    pub exposure: ExposurePolicy,
+    /// Matching tolerances.
+    pub matching: MatchOptions,
+}
+
+impl IngestConfig {
+    /// A configuration with the defaults: reference in place, refuse exposure differences.
+    pub fn new(
+        card_dir: PathBuf,
+        capture: PathBuf,
+        rig: PathBuf,
+        scan: PathBuf,
+        out_dir: PathBuf,
+    ) -> Self {
+        Self {
+            card_dir,
+            capture,
+            rig,
+            scan,
+            scan_units: None,
+            camera: None,
+            out_dir,
+            copy: false,
+            overwrite: false,
+            exposure: ExposurePolicy::Refuse,
+            matching: MatchOptions::default(),
+        }
+    }
+}
+
+/// One photograph's exposure settings.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ExposureSettings {
+    /// Exposure time, seconds.
+    pub exposure_time_s: f64,
+    /// Aperture f-number.
+    pub f_number: f64,
+    /// ISO.
+    pub iso: u32,
+}
+
+impl ExposureSettings {
+    /// `t ISO / N²`: the factor by which the settings scale a pixel's value.
+    pub fn factor(&self) -> f64 {
+        self.exposure_time_s * f64::from(self.iso) / (self.f_number * self.f_number)
+    }
+
+    fn same_as(&self, other: &Self) -> bool {
+        let close = |a: f64, b: f64| (a - b).abs() <= EXIF_RATIONAL_REL_TOL * a.abs().max(b.abs());
+        close(self.exposure_time_s, other.exposure_time_s)
+            && close(self.f_number, other.f_number)
+            && self.iso == other.iso
+    }
+}
+
+impl std::fmt::Display for ExposureSettings {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let t = if self.exposure_time_s < 1.0 {
+            format!("1/{:.0} s", 1.0 / self.exposure_time_s)
+        } else {
+            format!("{} s", self.exposure_time_s)
+        };
+        write!(f, "{t}, f/{}, ISO {}", self.f_number, self.iso)
+    }
+}
+
+/// Relative tolerance between two EXIF rationals meant to be the same setting (cameras write
+/// 1/125 as 1/125 or 8/1000; f-numbers as 110/10 or 11/1).
+pub const EXIF_RATIONAL_REL_TOL: f64 = 1e-3;
+
+/// One image of the written session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IngestedImage {
+    /// The file as `session.toml` names it.
+    pub file: String,
+    /// The file on the card.
+    pub card_file: PathBuf,
+    /// The exposure in the capture record.
+    pub exposure_index: u32,
+    /// Its role.
+    pub role: ImageRole,
+    /// Its exposure settings, when the metadata has them.
+    pub settings: Option<ExposureSettings>,
+    /// The factor applied to its values (1 unless normalised).
+    pub exposure_scale: f64,
+    /// Its camera time minus the fitted clock's prediction, seconds.
+    pub time_residual_s: f64,
+}
+
+/// Where the camera's intrinsics come from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "source")]
+pub enum CameraSource {
+    /// A calibration file.
+    File {
+        /// The file.
+        path: PathBuf,
+    },
+    /// None given: the session calibrates the camera from its reference targets.
+    ToBeCalibrated,
+}
+
+/// What the ingest did (also written as `OUT/ingest.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IngestReport {
+    /// The session directory.
+    pub session_dir: PathBuf,
+    /// The session's images, in exposure order.
+    pub images: Vec<IngestedImage>,
+    /// The matching: the camera clock fit, extra files, missing exposures.
+    pub matching: Matching,
+    /// Files on the card that are not photographs, with what they are.
+    pub skipped_files: Vec<(String, String)>,
+    /// Camera make and model, body serial, lens, focal length.
+    pub camera_body: String,
+    /// The lens and focal length.
+    pub lens: String,
+    /// Where the intrinsics come from.
+    pub camera: CameraSource,
+    /// The loaded image size (superpixels for raw files).
+    pub image_size_px: (u32, u32),
+    /// Targets with a placement / without one (the survey fills those in).
+    pub placed_targets: usize,
+    /// Targets without a placement.
+    pub unplaced_targets: usize,
+    /// The reference settings every image was compared with, and the file they come from.
+    pub reference_settings: Option<(String, ExposureSettings)>,
+    /// The photographs were copied into the session.
+    pub copied: bool,
+    /// Seconds reading metadata, matching, decoding and writing.
+    pub metadata_s: f64,
+    /// Seconds decoding every matched photograph once.
+    pub decode_s: f64,
+    /// Total seconds.
+    pub total_s: f64,
+}
+
+/// Why an ingest failed (nothing was written).
+#[derive(Debug, thiserror::Error)]
+pub enum IngestError {
+    /// A file could not be read or written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The capture record is not valid JSON of the format.
+    #[error("{path}: not a capture record: {source}")]
+    Capture {
+        /// The file.
+        path: PathBuf,
+        /// The parser's error.
+        source: serde_json::Error,
+    },
+    /// The rig file has problems.
+    #[error("the rig file is not valid:\n{source}")]
+    Rig {
+        /// Every problem.
+        source: SessionErrors,
+    },
+    /// An input is unusable.
+    #[error("{path}: {problem}")]
+    Input {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A photograph is unreadable, or misnamed, or of an unsupported layout.
+    #[error(transparent)]
+    Raw(#[from] RawError),
+    /// The scan does not load.
+    #[error("{path}: the scan does not load: {source}")]
+    Scan {
+        /// The scan.
+        path: PathBuf,
+        /// The mesh reader's error.
+        source: skinbrdf_mesh::MeshError,
+    },
+    /// The files could not be matched to the exposures.
+    #[error("matching the card's files to {capture}: {source}")]
+    Match {
+        /// The capture record.
+        capture: PathBuf,
+        /// Why.
+        source: MatchError,
+    },
+    /// The camera changed within the session.
+    #[error("the camera changed within the session ({what}); the intrinsics would differ:\n{}", .files.join("\n"))]
+    CameraChanged {
+        /// Body, lens or focal length.
+        what: &'static str,
+        /// Each file with its value.
+        files: Vec<String>,
+    },
+    /// Images were exposed unlike the reference-standard image.
+    #[error("{} image(s) are exposed unlike the reference image {reference} ({settings}); C bundles the exposure, so every image must match it (or ingest with exposure normalisation):\n{}", .files.len(), .files.join("\n"))]
+    ExposureMismatch {
+        /// The reference image.
+        reference: String,
+        /// Its settings.
+        settings: ExposureSettings,
+        /// Each differing file with its settings.
+        files: Vec<String>,
+    },
+    /// The output directory holds a session.
+    #[error(
+        "{dir}: already holds a session (session.toml); choose another --out or pass --overwrite"
+    )]
+    OutputExists {
+        /// The directory.
+        dir: PathBuf,
+    },
+    /// The written session does not load (a bug: the ingest's own output must load).
+    #[error("the written session does not load:\n{source}")]
+    Session {
+        /// Every problem.
+        source: SessionErrors,
+    },
+}
+
+/// A photograph on the card with its metadata.
+struct CardPhoto {
+    path: PathBuf,
+    name: String,
+    meta: ExposureMeta,
+}
+
+/// Runs the ingest (see the module docs).
+pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
+    let t0 = std::time::Instant::now();
+    // 1. Inputs.
+    let record = read_capture(&cfg.capture)?;
+    let rig = Rig::load(&cfg.rig).map_err(|source| IngestError::Rig { source })?;
+    let parts = rig.session_parts();
+    let (scan_units, scan_files) = check_scan(&cfg.scan, cfg.scan_units)?;
+    let camera_file = cfg.camera.as_deref().map(read_camera).transpose()?;
+    if cfg.out_dir.join("session.toml").exists() && !cfg.overwrite {
+        return Err(IngestError::OutputExists {
+            dir: cfg.out_dir.clone(),
+        });
+    }
+
+    // 2-3. The card.
+    let (photos, skipped_files) = list_card(&cfg.card_dir)?;
+    let shots: Vec<CameraShot> = photos
+        .iter()
+        .map(|p| camera_shot(&p.name, &p.meta))
+        .collect::<Result<_, _>>()?;
+
+    // 4. Matching.
+    let exposures = ExposureInput::from_exposures(&record.exposures);
+    let m = matching::match_shots(&shots, &exposures, &cfg.matching).map_err(|source| {
+        IngestError::Match {
+            capture: cfg.capture.clone(),
+            source,
+        }
+    })?;
+    let by_name: HashMap<&str, &CardPhoto> = photos.iter().map(|p| (p.name.as_str(), p)).collect();
+    let matched: Vec<(&matching::MatchedPair, &CardPhoto)> = m
+        .pairs
+        .iter()
+        .filter_map(|pair| by_name.get(pair.file.as_str()).map(|p| (pair, *p)))
+        .collect();
+
+    // 5. One camera.
+    check_one_camera(&m, &matched, &shots)?;
+
+    // 6. Exposure.
+    let reference = matched
+        .iter()
+        .find(|(pair, _)| pair.role == ImageRole::ReferenceStandard)
+        .or_else(|| matched.first())
+        .and_then(|(_, p)| settings_of(&p.meta).map(|s| (p.name.clone(), s)));
+    let mut scales = vec![1.0; matched.len()];
+    if let Some((ref_name, ref_settings)) = &reference {
+        let differing: Vec<(usize, ExposureSettings)> = matched
+            .iter()
+            .enumerate()
+            .filter_map(|(i, (_, p))| settings_of(&p.meta).map(|s| (i, s)))
+            .filter(|(_, s)| !s.same_as(ref_settings))
+            .collect();
+        if !differing.is_empty() {
+            match cfg.exposure {
+                ExposurePolicy::Refuse => {
+                    return Err(IngestError::ExposureMismatch {
+                        reference: ref_name.clone(),
+                        settings: *ref_settings,
+                        files: differing
+                            .iter()
+                            .map(|(i, s)| format!("  {}: {s}", matched[*i].1.path.display()))
+                            .collect(),
+                    })
+                }
+                ExposurePolicy::Normalise => {
+                    for (i, s) in differing {
+                        scales[i] = ref_settings.factor() / s.factor();
+                    }
+                }
+            }
+        }
+    }
+    let metadata_s = t0.elapsed().as_secs_f64();
+
+    // 7. Decode every matched photograph once.
+    let t_decode = std::time::Instant::now();
+    let sizes: Vec<(u32, u32)> = matched
+        .par_iter()
+        .map(|(_, p)| decoded_size(&p.path))
+        .collect::<Result<_, _>>()?;
+    let decode_s = t_decode.elapsed().as_secs_f64();
+    let image_size_px = sizes.first().copied().unwrap_or((0, 0));
+    if let Some((k, s)) = sizes.iter().enumerate().find(|(_, s)| **s != image_size_px) {
+        return Err(IngestError::CameraChanged {
+            what: "image size",
+            files: vec![
+                format!(
+                    "  {}: {}x{}",
+                    matched[0].1.path.display(),
+                    image_size_px.0,
+                    image_size_px.1
+                ),
+                format!("  {}: {}x{}", matched[k].1.path.display(), s.0, s.1),
+            ],
+        });
+    }
+
+    // 8. The session, written beside the output and moved into place.
+    let (camera, camera_source) = match camera_file {
+        Some((path, spec)) => {
+            if spec.size_px() != image_size_px {
+                return Err(IngestError::Input {
+                    path: path.clone(),
+                    problem: format!(
+                        "the calibration is for {}x{} images, the photographs load as {}x{}{}",
+                        spec.size_px().0,
+                        spec.size_px().1,
+                        image_size_px.0,
+                        image_size_px.1,
+                        if matches!(photos.first().map(|p| sniff_raw(&p.path)), Some(true)) {
+                            " (raw files load as 2x2 superpixels: half the sensor's size; see docs/ingest.md)"
+                        } else {
+                            ""
+                        }
+                    ),
+                });
+            }
+            (spec, CameraSource::File { path })
+        }
+        None => (
+            CameraSpec::ToBeCalibrated {
+                width_px: image_size_px.0,
+                height_px: image_size_px.1,
+                focal_guess_px: None,
+            },
+            CameraSource::ToBeCalibrated,
+        ),
+    };
+    let staging = staging_dir(&cfg.out_dir)?;
+    let result = write_session(
+        cfg,
+        &staging,
+        &record,
+        &rig,
+        parts,
+        &matched,
+        &scales,
+        camera,
+        scan_units,
+        &scan_files,
+    );
+    let images = match result {
+        Ok(images) => images,
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&staging);
+            return Err(e);
+        }
+    };
+    let body = matched.first().map(|(_, p)| &p.meta);
+    let mut report = IngestReport {
+        session_dir: cfg.out_dir.clone(),
+        images,
+        matching: m,
+        skipped_files,
+        camera_body: body
+            .map(|b| {
+                format!(
+                    "{} {} (serial {})",
+                    b.camera_make.as_deref().unwrap_or("?"),
+                    b.camera_model.as_deref().unwrap_or("?"),
+                    b.body_serial.as_deref().unwrap_or("?")
+                )
+            })
+            .unwrap_or_default(),
+        lens: body
+            .map(|b| {
+                format!(
+                    "{} at {} mm",
+                    b.lens_model.as_deref().unwrap_or("?"),
+                    b.focal_length_mm.map_or("?".into(), |f| format!("{f}"))
+                )
+            })
+            .unwrap_or_default(),
+        camera: camera_source,
+        image_size_px,
+        placed_targets: 0,
+        unplaced_targets: 0,
+        reference_settings: reference,
+        copied: cfg.copy,
+        metadata_s,
+        decode_s,
+        total_s: 0.0,
+    };
+    let loaded = Session::load(&staging);
+    let session = match loaded {
+        Ok(s) => s,
+        Err(source) => {
+            let _ = std::fs::remove_dir_all(&staging);
+            return Err(IngestError::Session { source });
+        }
+    };
+    let t = &session.file.targets;
+    report.placed_targets = t.reference.len()
+        + t.headdress.len()
+        + session.file.flash.targets.len()
+        + session
+            .file
+            .standard
+            .as_ref()
+            .map_or(0, |s| s.targets.len());
+    report.unplaced_targets = t.unplaced.len();
+    report.total_s = t0.elapsed().as_secs_f64();
+    let json = serde_json::to_vec_pretty(&report).map_err(|e| IngestError::Input {
+        path: staging.join(INGEST_REPORT_FILE),
+        problem: format!("cannot serialise the report: {e}"),
+    })?;
+    write_file(&staging.join(INGEST_REPORT_FILE), &json)?;
+    move_into_place(&staging, &cfg.out_dir)?;
+    Ok(report)
+}
+
+/// The ingest's report inside the session directory.
+pub const INGEST_REPORT_FILE: &str = "ingest.json";
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> IngestError + '_ {
+    move |source| IngestError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
+    skinbrdf_core::fsio::write_atomic(path, bytes).map_err(|e| IngestError::Io {
+        path: e.path,
+        source: e.source,
+    })
+}
+
+fn read_capture(path: &Path) -> Result<CaptureRecord, IngestError> {
+    let bytes = std::fs::read(path).map_err(io(path))?;
+    let rec: CaptureRecord =
+        serde_json::from_slice(&bytes).map_err(|source| IngestError::Capture {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    if rec.format_version != skinbrdf_session::capture::CAPTURE_FORMAT_VERSION {
+        return Err(IngestError::Input {
+            path: path.to_path_buf(),
+            problem: format!(
+                "format_version {} is not supported (this build reads {})",
+                rec.format_version,
+                skinbrdf_session::capture::CAPTURE_FORMAT_VERSION
+            ),
+        });
+    }
+    if rec.exposures.is_empty() {
+        return Err(IngestError::Input {
+            path: path.to_path_buf(),
+            problem: "the record has no exposures".into(),
+        });
+    }
+    Ok(rec)
+}
+
+/// The scan's unit and the files that come with it (an OBJ's material library and textures).
+fn check_scan(
+    path: &Path,
+    units: Option<LengthUnit>,
+) -> Result<(LengthUnit, Vec<PathBuf>), IngestError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if !matches!(ext.as_deref(), Some("ply" | "obj")) {
+        return Err(IngestError::Input {
+            path: path.to_path_buf(),
+            problem: "a scan must be a .ply or .obj file".into(),
+        });
+    }
+    skinbrdf_mesh::load_mesh(path, &skinbrdf_mesh::LoadOptions::default()).map_err(|source| {
+        IngestError::Scan {
+            path: path.to_path_buf(),
+            source,
+        }
+    })?;
+    let head = std::fs::read(path).map_err(io(path))?;
+    let text = String::from_utf8_lossy(&head[..head.len().min(64 * 1024)]).into_owned();
+    let stated = units.or_else(|| units_in_header(&text));
+    let Some(units) = stated else {
+        return Err(IngestError::Input {
+            path: path.to_path_buf(),
+            problem: "the scan's length unit is not stated in the file: give --scan-units (m, cm, mm or in)".into(),
+        });
+    };
+    let mut extra = Vec::new();
+    if ext.as_deref() == Some("obj") {
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for line in text.lines() {
+            if let Some(mtl) = line.strip_prefix("mtllib ") {
+                let mtl_path = dir.join(mtl.trim());
+                let mtl_text = std::fs::read_to_string(&mtl_path).map_err(io(&mtl_path))?;
+                extra.push(mtl_path.clone());
+                for l in mtl_text.lines() {
+                    let l = l.trim();
+                    if let Some(rest) = l.strip_prefix("map_Kd ") {
+                        let tex = dir.join(rest.split_whitespace().last().unwrap_or(rest));
+                        if !tex.is_file() {
+                            return Err(IngestError::Input {
+                                path: mtl_path.clone(),
+                                problem: format!("texture `{}` does not exist", tex.display()),
+                            });
+                        }
+                        extra.push(tex);
+                    }
+                }
+            }
+        }
+    }
+    Ok((units, extra))
+}
+
+/// The unit a PLY or OBJ header's comment names (`comment skinbrdf mesh, millimetres`,
+/// `comment units mm`).
+fn units_in_header(text: &str) -> Option<LengthUnit> {
+    for line in text.lines().take(64) {
+        let l = line.to_ascii_lowercase();
+        if !(l.starts_with("comment") || l.starts_with('#')) {
+            if l.starts_with("end_header") {
+                break;
+            }
+            continue;
+        }
+        let words: Vec<&str> = l
+            .split(|c: char| !c.is_ascii_alphanumeric())
+            .filter(|w| !w.is_empty())
+            .collect();
+        for w in words {
+            match w {
+                "millimetres" | "millimeters" | "mm" => return Some(LengthUnit::Mm),
+                "centimetres" | "centimeters" | "cm" => return Some(LengthUnit::Cm),
+                "metres" | "meters" => return Some(LengthUnit::M),
+                "inches" => return Some(LengthUnit::In),
+                _ => {}
+            }
+        }
+    }
+    None
+}
+
+fn read_camera(path: &Path) -> Result<(PathBuf, CameraSpec), IngestError> {
+    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    let bad = |problem: String| IngestError::Input {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let mut table: toml::Table =
+        toml::from_str(&text).map_err(|e| bad(format!("not TOML: {}", e.message())))?;
+    let camera = table
+        .remove("camera")
+        .ok_or_else(|| bad("no [camera] table (as in session.toml)".into()))?;
+    let spec: CameraSpec = camera
+        .try_into()
+        .map_err(|e: toml::de::Error| bad(format!("`camera`: {}", e.message())))?;
+    if let CameraSpec::Calibrated(m) = &spec {
+        if let Err(e) = m.validate() {
+            return Err(bad(format!("`camera`: {e}")));
+        }
+    }
+    Ok((path.to_path_buf(), spec))
+}
+
+/// Every file under the card, photographs (with their metadata) and the rest.
+fn list_card(card: &Path) -> Result<(Vec<CardPhoto>, Vec<(String, String)>), IngestError> {
+    if !card.is_dir() {
+        return Err(IngestError::Input {
+            path: card.to_path_buf(),
+            problem: "not a directory (give the card's root or its DCIM folder)".into(),
+        });
+    }
+    let mut files = Vec::new();
+    let mut stack = vec![card.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).map_err(io(&dir))? {
+            let p = entry.map_err(io(&dir))?.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                files.push(p);
+            }
+        }
+    }
+    files.sort();
+    let name_of = |p: &Path| {
+        p.strip_prefix(card)
+            .unwrap_or(p)
+            .to_string_lossy()
+            .replace('\\', "/")
+    };
+    let kinds: Vec<(PathBuf, Result<FileKind, RawError>)> = files
+        .into_par_iter()
+        .map(|p| {
+            let k = skinbrdf_raw::sniff(&p);
+            (p, k)
+        })
+        .collect();
+    let mut photos_paths = Vec::new();
+    let mut skipped = Vec::new();
+    for (p, kind) in kinds {
+        match kind {
+            Ok(k) if k.is_raw() || matches!(k, FileKind::Jpeg | FileKind::Tiff) => {
+                skinbrdf_raw::check_extension(&p, k)?;
+                photos_paths.push(p);
+            }
+            Ok(k) => skipped.push((name_of(&p), format!("{} file, not a photograph", k.name()))),
+            Err(_) => skipped.push((name_of(&p), "not an image file".to_string())),
+        }
+    }
+    let photos: Vec<CardPhoto> = photos_paths
+        .into_par_iter()
+        .map(|p| {
+            let meta = skinbrdf_raw::read_metadata(&p)?;
+            Ok(CardPhoto {
+                name: name_of(&p),
+                path: p,
+                meta,
+            })
+        })
+        .collect::<Result<_, RawError>>()?;
+    if photos.is_empty() {
+        return Err(IngestError::Input {
+            path: card.to_path_buf(),
+            problem: format!(
+                "no photograph (camera raw, JPEG or TIFF) found ({} other files)",
+                skipped.len()
+            ),
+        });
+    }
+    Ok((photos, skipped))
+}
+
+fn sniff_raw(p: &Path) -> bool {
+    skinbrdf_raw::sniff(p).is_ok_and(FileKind::is_raw)
+}
+
+fn camera_shot(name: &str, meta: &ExposureMeta) -> Result<CameraShot, IngestError> {
+    let Some(t) = &meta.capture_time else {
+        return Err(IngestError::Input {
+            path: PathBuf::from(name),
+            problem: "no DateTimeOriginal in its metadata: it cannot be matched to an exposure"
+                .into(),
+        });
+    };
+    let subsec_s = t.subsec_digits.as_ref().map(|_| t.subsec_s());
+    Ok(CameraShot {
+        file: name.to_string(),
+        time: CameraTime {
+            naive_local_s: t.local.naive_seconds(),
+            subsec_s,
+            utc_offset_s: t.utc_offset_min.map(|m| m * 60),
+        },
+        shutter_count: meta.image_number,
+        file_number: matching::file_number_from_name(name),
+        body_serial: meta.body_serial.clone(),
+    })
+}
+
+fn settings_of(meta: &ExposureMeta) -> Option<ExposureSettings> {
+    Some(ExposureSettings {
+        exposure_time_s: meta.exposure_time_s?,
+        f_number: meta.f_number?,
+        iso: meta.iso?,
+    })
+}
+
+/// A body, lens or focal-length change among the session's files, or a file from another body
+/// taken during the session, is refused.
+fn check_one_camera(
+    m: &Matching,
+    matched: &[(&matching::MatchedPair, &CardPhoto)],
+    shots: &[CameraShot],
+) -> Result<(), IngestError> {
+    let during: Vec<String> = m
+        .extra_files
+        .iter()
+        .filter_map(|(file, reason)| match reason {
+            ExtraReason::AnotherBody { serial, expected } => {
+                let t = shots.iter().find(|s| &s.file == file)?.time;
+                let (first, last) = (
+                    matched
+                        .first()
+                        .and_then(|(_, p)| p.meta.capture_time.as_ref())?,
+                    matched
+                        .last()
+                        .and_then(|(_, p)| p.meta.capture_time.as_ref())?,
+                );
+                let ts = t.naive_local_s as f64 + t.subsec_s.unwrap_or(0.0);
+                (ts > first.naive_seconds() && ts < last.naive_seconds())
+                    .then(|| format!("  {file}: body {serial} (the session's body is {expected})"))
+            }
+            _ => None,
+        })
+        .collect();
+    if !during.is_empty() {
+        return Err(IngestError::CameraChanged {
+            what: "body",
+            files: during,
+        });
+    }
+    type Field = fn(&ExposureMeta) -> Option<String>;
+    let fields: [(&'static str, Field); 4] = [
+        ("body", |m| {
+            Some(format!(
+                "{} {} #{}",
+                m.camera_make.as_deref().unwrap_or(""),
+                m.camera_model.as_deref().unwrap_or(""),
+                m.body_serial.as_deref().unwrap_or("")
+            ))
+        }),
+        ("lens", |m| m.lens_model.clone()),
+        ("focal length", |m| {
+            m.focal_length_mm.map(|f| format!("{f:.1} mm"))
+        }),
+        ("lens make", |m| m.lens_make.clone()),
+    ];
+    for (what, field) in fields {
+        let mut values: BTreeMap<String, Vec<&str>> = BTreeMap::new();
+        for (_, p) in matched {
+            if let Some(v) = field(&p.meta) {
+                values.entry(v).or_default().push(p.name.as_str());
+            }
+        }
+        if values.len() > 1 {
+            return Err(IngestError::CameraChanged {
+                what,
+                files: values
+                    .iter()
+                    .map(|(v, files)| format!("  {v}: {}", files.join(", ")))
+                    .collect(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The size of a photograph as the session loads it (superpixels for raw files).
+fn decoded_size(path: &Path) -> Result<(u32, u32), IngestError> {
+    if sniff_raw(path) {
+        let f = skinbrdf_raw::decode_superpixel(path, &skinbrdf_raw::RawOptions::default())?;
+        Ok((f.width_px, f.height_px))
+    } else {
+        let h = skinbrdf_session::read_header(path).map_err(|e| IngestError::Input {
+            path: path.to_path_buf(),
+            problem: e.to_string(),
+        })?;
+        Ok((h.width, h.height))
+    }
+}
+
+/// A fresh directory beside `out` to build the session in.
+fn staging_dir(out: &Path) -> Result<PathBuf, IngestError> {
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&parent).map_err(io(&parent))?;
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "session".into());
+    let staging = parent.join(format!(".{name}.ingest-{}", std::process::id()));
+    if staging.exists() {
+        std::fs::remove_dir_all(&staging).map_err(io(&staging))?;
+    }
+    std::fs::create_dir_all(&staging).map_err(io(&staging))?;
+    Ok(staging)
+}
+
+/// Moves the staged session to `out`, replacing what is there only once the new one is ready.
+fn move_into_place(staging: &Path, out: &Path) -> Result<(), IngestError> {
+    if out.exists() {
+        let old = staging.with_extension("old");
+        std::fs::rename(out, &old).map_err(io(out))?;
+        if let Err(e) = std::fs::rename(staging, out) {
+            let _ = std::fs::rename(&old, out);
+            return Err(io(out)(e));
+        }
+        let _ = std::fs::remove_dir_all(&old);
+    } else {
+        std::fs::rename(staging, out).map_err(io(out))?;
+    }
+    Ok(())
+}
+
+/// `target` as a path relative to `base` when they share a root (else `target` absolute).
+fn relative_to(target: &Path, base: &Path) -> PathBuf {
+    let (Ok(t), Ok(b)) = (std::fs::canonicalize(target), std::fs::canonicalize(base)) else {
+        return target.to_path_buf();
+    };
+    let tc: Vec<Component<'_>> = t.components().collect();
+    let bc: Vec<Component<'_>> = b.components().collect();
+    let common = tc.iter().zip(&bc).take_while(|(a, b)| a == b).count();
+    if common == 0 {
+        return t;
+    }
+    let mut rel = PathBuf::new();
+    for _ in common..bc.len() {
+        rel.push("..");
+    }
+    for c in &tc[common..] {
+        rel.push(c.as_os_str());
+    }
+    rel
+}
+
+#[allow(clippy::too_many_arguments)]
+fn write_session(
+    cfg: &IngestConfig,
+    staging: &Path,
+    record: &CaptureRecord,
+    rig: &Rig,
+    parts: skinbrdf_session::SessionParts,
+    matched: &[(&matching::MatchedPair, &CardPhoto)],
+    scales: &[f64],
+    camera: CameraSpec,
+    scan_units: LengthUnit,
+    scan_files: &[PathBuf],
+) -> Result<Vec<IngestedImage>, IngestError> {
+    // The images: copied into images/, or referenced where they are, relative to the final
+    // directory (a sibling of the staging directory, so the same relative path).
+    let final_dir = cfg
+        .out_dir
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let mut images = Vec::new();
+    let mut entries = Vec::new();
+    if cfg.copy {
+        std::fs::create_dir_all(staging.join("images")).map_err(io(staging))?;
+    }
+    for ((pair, photo), &scale) in matched.iter().zip(scales) {
+        let file = if cfg.copy {
+            let base = photo
+                .path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| pair.file.clone());
+            let rel = format!("images/{base}");
+            let dst = staging.join(&rel);
+            std::fs::copy(&photo.path, &dst).map_err(io(&photo.path))?;
+            rel
+        } else {
+            let rel_to_parent = relative_to(&photo.path, &final_dir);
+            if rel_to_parent.is_absolute() {
+                rel_to_parent.to_string_lossy().into_owned()
+            } else {
+                Path::new("..")
+                    .join(rel_to_parent)
+                    .to_string_lossy()
+                    .replace('\\', "/")
+            }
+        };
+        entries.push(ImageEntry {
+            file: file.clone(),
+            role: pair.role,
+            exposure_index: Some(pair.exposure_index),
+            linearization: None,
+            mask: None,
+            world_from_camera: None,
+            world_from_head: None,
+            exposure_scale: (scale != 1.0).then_some(scale),
+        });
+        images.push(IngestedImage {
+            file,
+            card_file: photo.path.clone(),
+            exposure_index: pair.exposure_index,
+            role: pair.role,
+            settings: settings_of(&photo.meta),
+            exposure_scale: scale,
+            time_residual_s: pair.residual_s,
+        });
+    }
+    // The scan and what comes with it.
+    let scan_name = cfg
+        .scan
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scan.ply".into());
+    std::fs::copy(&cfg.scan, staging.join(&scan_name)).map_err(io(&cfg.scan))?;
+    for f in scan_files {
+        if let Some(n) = f.file_name() {
+            std::fs::copy(f, staging.join(n)).map_err(io(f))?;
+        }
+    }
+    // The capture record, with each exposure's image.
+    let mut rec = record.clone();
+    for e in &mut rec.exposures {
+        e.image = images
+            .iter()
+            .find(|i| i.exposure_index == e.index)
+            .map(|i| i.file.clone());
+    }
+    let json = serde_json::to_vec_pretty(&rec).map_err(|e| IngestError::Input {
+        path: cfg.capture.clone(),
+        problem: format!("cannot serialise the record: {e}"),
+    })?;
+    write_file(&staging.join("capture.json"), &json)?;
+    let session = SessionFile {
+        format_version: SESSION_FORMAT_VERSION,
+        description: format!(
+            "ingested from {} with rig {} ({} images)",
+            cfg.card_dir.display(),
+            cfg.rig.display(),
+            entries.len()
+        ),
+        capture: Some("capture.json".into()),
+        camera,
+        linearization: Linearization::LINEAR,
+        images: entries,
+        targets: parts.targets,
+        flash: parts.flash,
+        standard: parts.standard,
+        geometry: GeometrySpec::Scan {
+            file: scan_name,
+            units: scan_units,
+            accept_repair_loss: None,
+        },
+        roi: rig.file.roi,
+        known: Default::default(),
+    };
+    Session::write_file(staging, &session).map_err(|e| IngestError::Input {
+        path: staging.join("session.toml"),
+        problem: e.to_string(),
+    })?;
+    Ok(images)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn units_are_read_from_the_header_comment() {
+        let ply = "ply\nformat binary_little_endian 1.0\ncomment skinbrdf mesh, millimetres\nend_header\n";
+        assert_eq!(units_in_header(ply), Some(LengthUnit::Mm));
+        assert_eq!(units_in_header("ply\nend_header\n"), None);
+        assert_eq!(
+            units_in_header("# units: metres\nv 0 0 0\n"),
+            Some(LengthUnit::M)
+        );
+    }
+
+    #[test]
+    fn exposure_settings_compare_within_rational_rounding() {
+        let a = ExposureSettings {
+            exposure_time_s: 1.0 / 125.0,
+            f_number: 11.0,
+            iso: 100,
+        };
+        let b = ExposureSettings {
+            exposure_time_s: 0.008,
+            ..a
+        };
+        assert!(a.same_as(&b));
+        let c = ExposureSettings { iso: 200, ..a };
+        assert!(!a.same_as(&c));
+        assert!((c.factor() / a.factor() - 2.0).abs() < 1e-12);
+        assert_eq!(a.to_string(), "1/125 s, f/11, ISO 100");
+    }
+
+    #[test]
+    fn relative_paths_climb_to_the_common_root() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let card = dir.path().join("S/studio/card");
+        std::fs::create_dir_all(&card).expect("mkdir");
+        std::fs::write(card.join("a.dng"), b"x").expect("write");
+        let rel = relative_to(&card.join("a.dng"), dir.path());
+        assert_eq!(rel, PathBuf::from("S/studio/card/a.dng"));
+    }
+}
