@@ -495,23 +495,28 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
         decode_s,
         total_s: 0.0,
     };
-    let loaded = Session::load(&staging);
-    let session = match loaded {
-        Ok(s) => s,
-        Err(source) => {
+    // The written session must load; a rig without placements leaves exactly one kind of
+    // problem, the unplaced targets a stage needs, which the placement survey resolves.
+    if let Err(source) = Session::load(&staging) {
+        if !source
+            .problems
+            .iter()
+            .all(|p| p.field == "targets.unplaced")
+        {
             let _ = std::fs::remove_dir_all(&staging);
             return Err(IngestError::Session { source });
         }
+    }
+    let session_file = {
+        let p = staging.join("session.toml");
+        let text = std::fs::read_to_string(&p).map_err(io(&p))?;
+        Session::parse_toml(&text, &p).map_err(|source| IngestError::Session { source })?
     };
-    let t = &session.file.targets;
+    let t = &session_file.targets;
     report.placed_targets = t.reference.len()
         + t.headdress.len()
-        + session.file.flash.targets.len()
-        + session
-            .file
-            .standard
-            .as_ref()
-            .map_or(0, |s| s.targets.len());
+        + session_file.flash.targets.len()
+        + session_file.standard.as_ref().map_or(0, |s| s.targets.len());
     report.unplaced_targets = t.unplaced.len();
     report.total_s = t0.elapsed().as_secs_f64();
     let json = serde_json::to_vec_pretty(&report).map_err(|e| IngestError::Input {

@@ -1,0 +1,222 @@
+//! The studio's path end to end: `synth --studio` writes what a studio holds after a capture
+//! (raw files on a card, the controller's record, the rig files, the scan); `ingest` turns it
+//! into a session without reading the truth; `process` runs it, scored against the synthetic
+//! session's truth (`--truth`). The studio session must meet the default scene's bounds and
+//! derender as accurately as the PNG session of the same renders.
+//!
+//! Then the refusals: an image exposed unlike the reference-standard image, a camera body
+//! swapped during the session, a truncated raw file and a raw file with a wrong extension are
+//! each a precise error naming the file, and nothing is written.
+//!
+//! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
+
+use std::path::{Path, PathBuf};
+
+use skinbrdf_ingest::{ingest, ExposurePolicy, IngestConfig, IngestError};
+use skinbrdf_pipeline::process::bounds;
+use skinbrdf_pipeline::process::{process, ProcessConfig};
+use skinbrdf_session::Session;
+use skinbrdf_synth::studio::{ExposureChange, STUDIO_DIR};
+use skinbrdf_synth::{generate, Scene, SynthOptions};
+
+/// The studio session's sample median relative error may differ from the PNG session's by at
+/// most this many percentage points (issue's bound): the raw files carry the same renders with
+/// their own noise (per photosite, through the channel gains) and quantisation.
+const SAME_SCENE_SAMPLE_ERROR_PP: f64 = 0.1;
+
+fn studio_scene(measurement_images: u32, tweak: impl FnOnce(&mut Scene)) -> Scene {
+    let mut scene = Scene::load("default").expect("default scene");
+    scene.session.measurement_images = measurement_images;
+    tweak(&mut scene);
+    scene
+}
+
+fn synthesize(scene: &Scene, dir: &Path, resolution: (u32, u32)) -> PathBuf {
+    let s = dir.join("S");
+    generate(
+        scene,
+        &SynthOptions {
+            resolution: Some(resolution),
+            capture: None,
+            noise_free: false,
+            samples_per_pixel: None,
+            studio: true,
+        },
+        &s,
+    )
+    .expect("synthesis");
+    s
+}
+
+fn ingest_config(s: &Path, out: &Path, rig: &str) -> IngestConfig {
+    let studio = s.join(STUDIO_DIR);
+    IngestConfig::new(
+        studio.join("card"),
+        studio.join("capture.json"),
+        studio.join(rig),
+        studio.join("scan.ply"),
+        out.to_path_buf(),
+    )
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = studio_scene(30, |_| {});
+    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
+    let s = synthesize(&scene, dir.path(), half);
+    let s2 = dir.path().join("S2");
+    let report = ingest(&ingest_config(&s, &s2, "rig-measured.toml")).expect("ingest");
+    // Every exposure matched; the test shot left out; the clock offset found.
+    assert_eq!(report.images.len(), 36);
+    assert_eq!(report.matching.extra_files.len(), 1, "{:?}", report.matching.extra_files);
+    let st = &scene.studio;
+    assert!(
+        (report.matching.clock.offset_s - st.camera_clock_offset_s).abs() < 0.05,
+        "offset {}",
+        report.matching.clock.offset_s
+    );
+    assert_eq!(report.unplaced_targets, 0);
+    let session = Session::load(&s2).expect("the ingested session loads");
+    assert!(session.file.images.iter().all(|i| i.file.ends_with(".DNG")));
+
+    let mut cfg = ProcessConfig::new();
+    cfg.fit.figures = false;
+    let png = process(&s, &cfg, &mut |_| {}).expect("process the PNG session");
+    cfg.truth_file = Some(s.join("truth.json"));
+    let raw = process(&s2, &cfg, &mut |_| {}).expect("process the studio session");
+
+    let cam = raw.report.camera_poses().expect("camera poses ran");
+    assert!(cam.camera_position_error_median_mm.expect("scored") < bounds::CAMERA_POSITION_MM);
+    assert!(
+        cam.camera_orientation_error_median_deg.expect("scored")
+            < bounds::CAMERA_ORIENTATION_DEG
+    );
+    let head = raw.report.head_tracking().expect("head tracking ran");
+    assert!(head.head_position_error_median_mm.expect("scored") < bounds::HEAD_POSITION_MM);
+    let flash = raw.report.flash().and_then(|f| f.flash_position_error_mm);
+    assert!(flash.expect("flash ran") < bounds::FLASH_POSITION_MM);
+    let e_raw = raw
+        .report
+        .derender()
+        .and_then(|d| d.sample_median_rel_error_pct)
+        .expect("scored");
+    let e_png = png
+        .report
+        .derender()
+        .and_then(|d| d.sample_median_rel_error_pct)
+        .expect("scored");
+    assert!(e_raw < bounds::SAMPLE_MEDIAN_REL_ERROR_PCT);
+    assert!(
+        (e_raw - e_png).abs() <= SAME_SCENE_SAMPLE_ERROR_PP,
+        "studio {e_raw:.3} % vs PNG {e_png:.3} %"
+    );
+}
+
+/// A small studio for the refusals (they fail before any pixel is used).
+fn small_studio(dir: &Path, tweak: impl FnOnce(&mut Scene)) -> PathBuf {
+    let scene = studio_scene(6, tweak);
+    synthesize(&scene, dir, (200, 133))
+}
+
+fn assert_nothing_written(out: &Path) {
+    assert!(!out.exists(), "{} was written", out.display());
+    let parent = out.parent().expect("parent");
+    for e in std::fs::read_dir(parent).expect("read_dir") {
+        let name = e.expect("entry").file_name().to_string_lossy().into_owned();
+        assert!(!name.contains(".ingest-"), "staging directory {name} left behind");
+    }
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn an_exposure_change_is_refused_or_normalised() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let s = small_studio(dir.path(), |sc| {
+        sc.studio.exposure_change = Some(ExposureChange {
+            exposure_index: 2,
+            iso: 200,
+        })
+    });
+    let out = dir.path().join("S2");
+    let err = ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect_err("refused");
+    let msg = err.to_string();
+    assert!(matches!(err, IngestError::ExposureMismatch { .. }), "{msg}");
+    assert!(msg.contains("ISO 200") && msg.contains(".DNG"), "{msg}");
+    assert_nothing_written(&out);
+
+    let mut cfg = ingest_config(&s, &out, "rig-measured.toml");
+    cfg.exposure = ExposurePolicy::Normalise;
+    let r = ingest(&cfg).expect("normalised");
+    let scaled: Vec<_> = r.images.iter().filter(|i| i.exposure_scale != 1.0).collect();
+    assert_eq!(scaled.len(), 1);
+    assert_eq!(scaled[0].exposure_index, 2);
+    assert!((scaled[0].exposure_scale - 0.5).abs() < 1e-9);
+    let session = Session::load(&out).expect("loads");
+    let entry = session
+        .file
+        .images
+        .iter()
+        .find(|i| i.exposure_index == Some(2))
+        .expect("image 2");
+    assert_eq!(entry.exposure_scale, Some(0.5));
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn damaged_and_misnamed_raw_files_are_refused_by_name() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let s = small_studio(dir.path(), |_| {});
+    let card = s.join(STUDIO_DIR).join("card/DCIM/100SKBRF");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&card)
+        .expect("card")
+        .map(|e| e.expect("entry").path())
+        .collect();
+    files.sort();
+    let out = dir.path().join("S2");
+
+    // A truncated file.
+    let victim = files[3].clone();
+    let bytes = std::fs::read(&victim).expect("read");
+    std::fs::write(&victim, &bytes[..bytes.len() / 2]).expect("truncate");
+    let err = ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect_err("truncated");
+    let name = victim.file_name().expect("name").to_string_lossy().into_owned();
+    assert!(err.to_string().contains(&name), "{err}");
+    assert_nothing_written(&out);
+    std::fs::write(&victim, &bytes).expect("restore");
+
+    // A raw file named as a PNG.
+    let renamed = victim.with_extension("PNG");
+    std::fs::rename(&victim, &renamed).expect("rename");
+    let err = ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect_err("misnamed");
+    let msg = err.to_string();
+    assert!(msg.contains(&*renamed.file_name().expect("name").to_string_lossy()), "{msg}");
+    assert!(msg.contains("DNG"), "{msg}");
+    assert_nothing_written(&out);
+    std::fs::rename(&renamed, &victim).expect("restore");
+
+    // A file from another body taken during the session: the body was swapped.
+    let mut meta_time = skinbrdf_raw::read_metadata(&files[3])
+        .expect("metadata")
+        .capture_time
+        .expect("time");
+    meta_time.subsec_digits = Some("99".into());
+    let mut other = skinbrdf_raw::dng::DngImage::new(8, 8, skinbrdf_raw::BayerPhase::Rggb, 16, vec![600; 64]);
+    other.body_serial = Some("OTHER-BODY-77".into());
+    other.capture_time = Some(meta_time);
+    let other_path = card.join("IMG_7777.DNG");
+    skinbrdf_raw::dng::write_dng(&other_path, &other).expect("write");
+    let err = ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect_err("body swapped");
+    let msg = err.to_string();
+    assert!(matches!(err, IngestError::CameraChanged { .. }), "{msg}");
+    assert!(msg.contains("IMG_7777.DNG") && msg.contains("OTHER-BODY-77"), "{msg}");
+    assert_nothing_written(&out);
+    std::fs::remove_file(&other_path).expect("remove");
+
+    // The ingest then succeeds, and a rig without placements gives a session that says so.
+    let r = ingest(&ingest_config(&s, &out, "rig.toml")).expect("ingest");
+    assert!(r.unplaced_targets > 0 && r.placed_targets == 0);
+    let err = Session::load(&out).expect_err("placements needed");
+    assert!(err.has_field("targets.unplaced"), "{err}");
+}
