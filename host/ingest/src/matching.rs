@@ -117,6 +117,9 @@ const SCORE_EPS: f64 = 1e-9;
 /// A chain is consistent when its minimax error is at most its tolerance; this allows the
 /// rounding of the fit's arithmetic (about 1e-7 s relative to tolerances of milliseconds).
 const CONSISTENCY_EPS: f64 = 1e-6;
+/// A candidate offset sits exactly on the edge of its own pair's window; this keeps the pair
+/// inside despite rounding (it only widens the relaxed windows, which is the safe side).
+const WINDOW_EPS_S: f64 = 1e-9;
 /// Golden-section iterations of the drift search: the bracket shrinks by 0.618 each time, so
 /// 100 iterations take a ±1e-3 bracket below 1e-23, far below any measurable drift.
 const DRIFT_SEARCH_ITERATIONS: usize = 100;
@@ -212,6 +215,11 @@ pub struct MatchOptions {
     pub min_matched_fraction: f64,
     /// Cost, in pairs, of a counter step a chain cannot explain (see the module docs).
     pub counter_penalty_pairs: f64,
+    /// Cost, in pairs, of leaving an unmatched file that fits an unmatched fired exposure
+    /// between two pairs of a chain (a test shot at the very time of a deleted file). One pair
+    /// less than the counter penalty, so that "this file is that exposure's, plus an
+    /// unexplained actuation" ties with "a test shot coinciding with a deleted file".
+    pub coincidence_penalty_pairs: f64,
 }
 
 impl Default for MatchOptions {
@@ -225,6 +233,7 @@ impl Default for MatchOptions {
             ambiguity_margin_pairs: 1.0,
             min_matched_fraction: 0.5,
             counter_penalty_pairs: 3.0,
+            coincidence_penalty_pairs: 2.0,
         }
     }
 }
@@ -558,6 +567,7 @@ struct Problem {
     use_file_numbers: bool,
     jitter_s: f64,
     penalty: f64,
+    coincidence_penalty: f64,
     max_drift: f64,
     drift_slack_s: f64,
 }
@@ -569,13 +579,52 @@ struct Chains {
     pred: Vec<Option<usize>>,
     bwd: Vec<f64>,
     succ: Vec<Option<usize>>,
+    /// Cost of ending a chain at each pair.
+    end: Vec<f64>,
+}
+
+/// Prefix counts of a set of pairs over the exposure x file grid, for rectangle queries.
+struct Grid {
+    cols: usize,
+    prefix: Vec<u32>,
+}
+
+impl Grid {
+    fn new(pairs: &[Pair], rows: usize, cols: usize) -> Self {
+        let stride = cols + 1;
+        let mut prefix = vec![0u32; (rows + 1) * stride];
+        for &(i, j) in pairs {
+            prefix[(i + 1) * stride + j + 1] += 1;
+        }
+        for i in 1..=rows {
+            for j in 1..=cols {
+                prefix[i * stride + j] += prefix[(i - 1) * stride + j] + prefix[i * stride + j - 1]
+                    - prefix[(i - 1) * stride + j - 1];
+            }
+        }
+        Self { cols, prefix }
+    }
+
+    /// True when some pair has exposure in `i0..i1` and file in `j0..j1`.
+    fn any(&self, i0: usize, i1: usize, j0: usize, j1: usize) -> bool {
+        if i0 >= i1 || j0 >= j1 {
+            return false;
+        }
+        let s = self.cols + 1;
+        let at = |i: usize, j: usize| i64::from(self.prefix[i * s + j]);
+        at(i1, j1) - at(i0, j1) - at(i1, j0) + at(i0, j0) > 0
+    }
 }
 
 impl Chains {
+    fn total(&self, k: usize) -> f64 {
+        self.fwd[k] - self.end[k]
+    }
+
     fn best(&self) -> Option<usize> {
         let mut best: Option<usize> = None;
         for k in 0..self.pairs.len() {
-            if best.is_none_or(|b| self.fwd[k] > self.fwd[b] + SCORE_EPS) {
+            if best.is_none_or(|b| self.total(k) > self.total(b) + SCORE_EPS) {
                 best = Some(k);
             }
         }
@@ -640,8 +689,7 @@ impl Problem {
             }
         }
         if self.use_file_numbers {
-            if let (Some(a), Some(b)) = (self.shots[p.1].file_number, self.shots[q.1].file_number)
-            {
+            if let (Some(a), Some(b)) = (self.shots[p.1].file_number, self.shots[q.1].file_number) {
                 let step = (i64::from(b) - i64::from(a)).rem_euclid(FILE_NUMBER_MODULUS);
                 if step != need.rem_euclid(FILE_NUMBER_MODULUS) {
                     cost += self.penalty;
@@ -651,25 +699,63 @@ impl Problem {
         Some(cost)
     }
 
-    /// Score of a chain (one per pair minus transition costs); `None` if forbidden.
-    fn chain_score(&self, chain: &[Pair]) -> Option<f64> {
-        let mut score = chain.len() as f64;
+    /// Cost of leaving a pair of `grid` unmatched inside the open rectangle of exposures
+    /// `i0..i1` and files `j0..j1` between two chain neighbours: an unmatched file that fits an
+    /// unmatched fired exposure is a coincidence a chain must pay for.
+    fn skip_cost(&self, grid: &Grid, i0: usize, i1: usize, j0: usize, j1: usize) -> f64 {
+        if grid.any(i0, i1, j0, j1) {
+            self.coincidence_penalty
+        } else {
+            0.0
+        }
+    }
+
+    fn start_cost(&self, grid: &Grid, q: Pair) -> f64 {
+        self.skip_cost(grid, 0, q.0, 0, q.1)
+    }
+
+    fn end_cost(&self, grid: &Grid, p: Pair) -> f64 {
+        self.skip_cost(grid, p.0 + 1, self.fired.len(), p.1 + 1, self.shots.len())
+    }
+
+    fn step_cost(&self, grid: &Grid, p: Pair, q: Pair) -> Option<f64> {
+        Some(self.transition_cost(p, q)? + self.skip_cost(grid, p.0 + 1, q.0, p.1 + 1, q.1))
+    }
+
+    /// Score of a chain among the consistent pairs `set`; `None` if forbidden.
+    fn chain_score(&self, chain: &[Pair], set: &[Pair]) -> Option<f64> {
+        let (Some(&first), Some(&last)) = (chain.first(), chain.last()) else {
+            return Some(0.0);
+        };
+        let grid = Grid::new(set, self.fired.len(), self.shots.len());
+        let mut score =
+            chain.len() as f64 - self.start_cost(&grid, first) - self.end_cost(&grid, last);
         for w in chain.windows(2) {
-            score -= self.transition_cost(w[0], w[1])?;
+            score -= self.step_cost(&grid, w[0], w[1])?;
         }
         Some(score)
     }
 
     /// Both dynamic programmes over `pairs` (any order; sorted here by exposure, then file).
-    fn chains(&self, mut pairs: Vec<Pair>) -> Chains {
+    fn chains(&self, pairs: Vec<Pair>) -> Chains {
+        let grid = Grid::new(&pairs, self.fired.len(), self.shots.len());
+        self.chains_in(pairs, &grid)
+    }
+
+    /// [`Self::chains`] over `pairs` with coincidences counted among the pairs of `grid`.
+    fn chains_in(&self, mut pairs: Vec<Pair>, grid: &Grid) -> Chains {
         pairs.sort_unstable();
         let n = pairs.len();
-        let mut fwd = vec![1.0; n];
+        let end: Vec<f64> = pairs.iter().map(|&p| self.end_cost(grid, p)).collect();
+        let mut fwd: Vec<f64> = pairs
+            .iter()
+            .map(|&q| 1.0 - self.start_cost(grid, q))
+            .collect();
         let mut pred = vec![None; n];
         for q in 0..n {
             for p in 0..q {
                 if pairs[p].0 < pairs[q].0 && pairs[p].1 < pairs[q].1 {
-                    if let Some(cost) = self.transition_cost(pairs[p], pairs[q]) {
+                    if let Some(cost) = self.step_cost(grid, pairs[p], pairs[q]) {
                         let score = fwd[p] + 1.0 - cost;
                         if score > fwd[q] + SCORE_EPS {
                             fwd[q] = score;
@@ -679,12 +765,12 @@ impl Problem {
                 }
             }
         }
-        let mut bwd = vec![1.0; n];
+        let mut bwd: Vec<f64> = end.iter().map(|e| 1.0 - e).collect();
         let mut succ = vec![None; n];
         for p in (0..n).rev() {
             for q in p + 1..n {
                 if pairs[p].0 < pairs[q].0 && pairs[p].1 < pairs[q].1 {
-                    if let Some(cost) = self.transition_cost(pairs[p], pairs[q]) {
+                    if let Some(cost) = self.step_cost(grid, pairs[p], pairs[q]) {
                         let score = bwd[q] + 1.0 - cost;
                         if score > bwd[p] + SCORE_EPS {
                             bwd[p] = score;
@@ -700,6 +786,7 @@ impl Problem {
             pred,
             bwd,
             succ,
+            end,
         }
     }
 
@@ -733,11 +820,11 @@ impl Problem {
         let mut seen: HashSet<Vec<Pair>> = HashSet::new();
         for &(d, (_, j)) in &diffs {
             let offset = d - self.tolerance_s(j, slack);
-            let lo = diffs.partition_point(|e| e.0 < offset - tol_max);
-            let hi = diffs.partition_point(|e| e.0 <= offset + tol_max);
+            let lo = diffs.partition_point(|e| e.0 < offset - tol_max - WINDOW_EPS_S);
+            let hi = diffs.partition_point(|e| e.0 <= offset + tol_max + WINDOW_EPS_S);
             let mut set: Vec<Pair> = diffs[lo..hi]
                 .iter()
-                .filter(|e| (e.0 - offset).abs() <= self.tolerance_s(e.1 .1, slack))
+                .filter(|e| (e.0 - offset).abs() <= self.tolerance_s(e.1 .1, slack) + WINDOW_EPS_S)
                 .map(|e| e.1)
                 .collect();
             set.sort_unstable();
@@ -948,6 +1035,7 @@ pub fn match_shots(
         use_file_numbers,
         jitter_s: opts.jitter_tolerance_s,
         penalty: opts.counter_penalty_pairs,
+        coincidence_penalty: opts.coincidence_penalty_pairs,
         max_drift,
         drift_slack_s: max_drift * mid_s,
     };
@@ -956,7 +1044,7 @@ pub fn match_shots(
     let mut best: Option<(f64, Vec<Pair>)> = None;
     problem.sweep(|chains, _offset| {
         if let Some(k) = chains.best() {
-            let score = chains.fwd[k];
+            let score = chains.total(k);
             if best.as_ref().is_none_or(|b| score > b.0 + SCORE_EPS) {
                 best = Some((score, chains.chain_ending(k)));
             }
@@ -968,7 +1056,9 @@ pub fn match_shots(
 
     // Step 3: refit and re-assign until stable.
     let (chain, clock) = refine(&problem, relaxed_chain, opts.min_pairs_for_drift);
-    let best_score = problem.chain_score(&chain).unwrap_or(0.0);
+    let best_score = problem
+        .chain_score(&chain, &problem.consistent_pairs(&clock))
+        .unwrap_or(0.0);
 
     let n_fired = problem.fired.len();
     let n_shots = problem.shots.len();
@@ -991,14 +1081,29 @@ pub fn match_shots(
                 continue;
             }
             let score = chains.forced_score(k);
-            if alternative
-                .as_ref()
-                .is_none_or(|a| score > a.0 + SCORE_EPS)
-            {
+            if alternative.as_ref().is_none_or(|a| score > a.0 + SCORE_EPS) {
                 alternative = Some((score, chains.chain_through(k)));
             }
         }
     });
+    // Chains that only drop pairs of the answer are consistent with its own clock: the best
+    // of them, one dropped pair at a time, under the answer's consistent pairs.
+    let final_set = problem.consistent_pairs(&clock);
+    let final_grid = Grid::new(&final_set, problem.fired.len(), problem.shots.len());
+    for &dropped in &chain {
+        let set: Vec<Pair> = final_set
+            .iter()
+            .copied()
+            .filter(|&p| p != dropped)
+            .collect();
+        let chains = problem.chains_in(set, &final_grid);
+        if let Some(k) = chains.best() {
+            let score = chains.total(k);
+            if alternative.as_ref().is_none_or(|a| score > a.0 + SCORE_EPS) {
+                alternative = Some((score, chains.chain_ending(k)));
+            }
+        }
+    }
     let offset_base_s = base_s as f64 - first_us * 1e-6;
     if let Some((alt_score, alt_chain)) = alternative {
         if alt_score >= best_score - opts.ambiguity_margin_pairs - SCORE_EPS {
@@ -1031,7 +1136,13 @@ pub fn match_shots(
 }
 
 fn validate_options(opts: &MatchOptions) -> Result<(), MatchError> {
-    let checks: [(&'static str, f64, bool, &'static str); 6] = [
+    let checks: [(&'static str, f64, bool, &'static str); 7] = [
+        (
+            "coincidence_penalty_pairs",
+            opts.coincidence_penalty_pairs,
+            opts.coincidence_penalty_pairs > 0.0 && opts.coincidence_penalty_pairs.is_finite(),
+            "finite and > 0",
+        ),
         (
             "jitter_tolerance_s",
             opts.jitter_tolerance_s,
@@ -1175,7 +1286,11 @@ fn remove_duplicates(
 }
 
 /// Step 3: alternate the Chebyshev fit and the assignment under the fitted clock.
-fn refine(problem: &Problem, relaxed_chain: Vec<Pair>, min_pairs_for_drift: usize) -> (Vec<Pair>, Clock) {
+fn refine(
+    problem: &Problem,
+    relaxed_chain: Vec<Pair>,
+    min_pairs_for_drift: usize,
+) -> (Vec<Pair>, Clock) {
     let fallback = {
         let (clock, _) = problem.fit(&relaxed_chain, false);
         (relaxed_chain.clone(), clock)
@@ -1194,9 +1309,13 @@ fn refine(problem: &Problem, relaxed_chain: Vec<Pair>, min_pairs_for_drift: usiz
         chain = next;
     }
     let (clock, level) = problem.fit(&chain, problem.fits_drift(&chain, min_pairs_for_drift));
+    let score_of = |chain: &[Pair], clock: &Clock| {
+        problem
+            .chain_score(chain, &problem.consistent_pairs(clock))
+            .unwrap_or(f64::NEG_INFINITY)
+    };
     if level <= 1.0 + CONSISTENCY_EPS
-        && problem.chain_score(&chain).unwrap_or(f64::NEG_INFINITY)
-            >= problem.chain_score(&fallback.0).unwrap_or(0.0) - SCORE_EPS
+        && score_of(&chain, &clock) >= score_of(&fallback.0, &fallback.1) - SCORE_EPS
     {
         (chain, clock)
     } else {
@@ -1315,15 +1434,15 @@ fn assemble(
         let tol = problem.tolerance_s(j, clock.slack_s);
         // Invert c = h + offset + drift * (h - mid) for the host time the file was taken at.
         let h_s = (s.c_s - clock.offset_s + clock.drift * mid_s) / (1.0 + clock.drift);
-        let reason = if h_s < -tol {
-            ExtraReason::BeforeSession
-        } else if h_s > last_h_s + tol {
-            ExtraReason::AfterSession
-        } else if let Some(&(exposure_index, _)) = unfired
+        let reason = if let Some(&(exposure_index, _)) = unfired
             .iter()
             .find(|(_, hu)| (h_s - hu).abs() <= tol + UNFIRED_LAG_WINDOW_S)
         {
             ExtraReason::NearUnfiredExposure { exposure_index }
+        } else if h_s < -tol {
+            ExtraReason::BeforeSession
+        } else if h_s > last_h_s + tol {
+            ExtraReason::AfterSession
         } else {
             ExtraReason::BetweenShots
         };
@@ -1361,3 +1480,6 @@ fn assemble(
         file_numbers_used: problem.use_file_numbers,
     }
 }
+
+#[cfg(test)]
+mod tests;
