@@ -49,60 +49,84 @@
 //!   strictly increasing in exposure time and in camera time, with gaps (missing files, extra
 //!   files).
 //!
-//! # Counters
+//! # Score
 //!
-//! Shutter counts (when every file has one and they increase with camera time) and file
-//! numbers (when every file has one; DCF numbers roll over from 9999 to 0001) count
-//! actuations. Between two consecutive pairs `(i, j)` and `(i', j')` of a chain the camera
-//! actuated at least `need = (i' - i) + (j' - j - 1)` times: the fired exposures after `i` up
-//! to `i'` (including those whose file is missing) plus the unmatched files in between. A
-//! shutter-count step below `need` is impossible and forbids the transition; a step above it
-//! (an actuation the chain cannot explain) costs [`MatchOptions::counter_penalty_pairs`]; a
-//! file-number step other than `need` costs the same (numbers can reset, so they never forbid).
+//! A chain scores one per pair, minus the costs below; every cost is in pairs.
+//!
+//! * **Counters.** Shutter counts (when every file has one and they increase with camera time)
+//!   and file numbers (when every file has one; DCF numbers roll over from 9999 to 0001) count
+//!   actuations. Between two consecutive pairs `(i, j)` and `(i', j')` of a chain the camera
+//!   actuated at least `need = (i' - i) + (j' - j - 1)` times: the fired exposures after `i` up
+//!   to `i'` (including those whose file is missing) plus the unmatched files in between. A
+//!   shutter-count step below `need` is impossible and forbids the transition; a step above it
+//!   (an actuation the chain cannot explain) costs [`MatchOptions::counter_penalty_pairs`]; a
+//!   file-number step other than `need` costs the same (numbers can reset, so they never
+//!   forbid).
+//! * **Coincidences.** An unmatched file that is consistent with an unmatched fired exposure
+//!   between the same two neighbours of the chain (or before its first or after its last pair)
+//!   costs [`MatchOptions::coincidence_penalty_pairs`] once per gap: such a chain claims that
+//!   a test shot was taken at the very time of an exposure whose own file is missing. This
+//!   cost is one pair below the counter cost, so "this file is that exposure's, plus an
+//!   unexplained actuation" ties with "a test shot coinciding with a deleted file" (a refusal),
+//!   and it makes every chain that merely drops a consistent pair of the answer score at least
+//!   `1 + coincidence cost` below it.
 //!
 //! # Algorithm
 //!
 //! 1. **Candidate offsets.** For every pair `(i, j)` the offset difference `d_ij = c_j - h_i`.
-//!    Under the offset-only model with the tolerance widened by the drift slack, the set of
-//!    pairs consistent with offset `o` changes only at the ends of the windows `d_ij ± tol_j`,
-//!    and every such set is contained in the set at some left end `o = d_ij - tol_j`. Sweeping
-//!    those `n·m` candidates therefore visits every maximal set of pairs a clock within the
-//!    drift bound can make consistent; identical sets are visited once.
+//!    Under the offset-only model with the tolerance widened by the drift slack
+//!    `max_drift * span / 2`, the set of pairs consistent with offset `o` changes only at the
+//!    ends of the windows `d_ij ± tol_j`, and every such set is contained in the set at some left
+//!    end `o = d_ij - tol_j`. Sweeping those `n·m` candidates therefore visits every maximal set
+//!    of pairs that a clock within the drift bound can make consistent; identical sets are
+//!    visited once. A known offset ([`MatchOptions::known_offset_s`]) removes the pairs outside
+//!    its window first.
 //! 2. **Monotone assignment.** For each set, a dynamic programme over its pairs (sorted by
 //!    exposure, then file) gives the best chain ending at every pair (`F`) and starting at every
-//!    pair (`B`); a chain scores one per pair minus counter penalties.
+//!    pair (`B`), with the score above (coincidences counted by prefix sums over the
+//!    exposure x file grid, `O(1)` per transition).
 //! 3. **Refit.** The best chain over all candidates is refitted by a Chebyshev (minimax) fit of
 //!    `offset` and `drift` (weighted by `tol_j`): the errors are bounded (truncation and bounded
 //!    jitter), not Gaussian, so the minimax fit is the natural estimator and its value decides
 //!    consistency exactly. The drift is found by a golden-section search on `[-max, max]` (the
 //!    minimax error is convex in the drift), the offset in closed form. The pairs consistent
-//!    with the refitted clock are re-assigned by the same programme until the chain is stable.
-//! 4. **Ambiguity.** An *alternative* is any chain that contains at least one pair the answer
-//!    does not contain (a different file for an exposure, a different exposure for a file, or
-//!    an additional pair); chains that only drop pairs are not alternatives. The best
-//!    alternative through pair `p` scores `F[p] + B[p] - 1`; the sweep of step 1 is run again
-//!    to find the best alternative over every candidate set. If it scores at least
-//!    `best - ambiguity_margin_pairs`, the match is refused with [`MatchError::Ambiguous`],
-//!    naming every file whose exposure differs and what would tell the two apart.
+//!    with the refitted clock are re-assigned by the same programme until the chain is stable;
+//!    if the refitted chain is not consistent or scores lower, the offset-only fit of the
+//!    swept chain (drift fixed at 0 within its slack) is kept.
+//! 4. **Ambiguity.** Every chain other than the answer is an *alternative*. Those that contain
+//!    a pair the answer does not (a different file for an exposure, a different exposure for a
+//!    file, an additional pair) are found by running step 1 again: the best one through pair `p`
+//!    scores `F[p] + B[p] - 1`. Those that only drop pairs are consistent with the answer's own
+//!    clock: the best one is found under it, one dropped pair at a time. If the best
+//!    alternative scores at least `best - ambiguity_margin_pairs`, the match is refused with
+//!    [`MatchError::Ambiguous`], naming every file whose exposure differs and what would tell
+//!    the two apart. The default margin of one pair means that an explanation needing one more
+//!    missing file and one more extra file counts as about as good.
 //!
 //! # Cost
 //!
 //! With `n` fired exposures, `m` files and `P` pairs per candidate set (about `n` when the
 //! shot interval exceeds the tolerance): sorting the `n·m` differences is
-//! `O(n·m·log(n·m))`, each distinct candidate set costs `O(P²)` for the two programmes, so the
-//! whole is `O(n·m·P²)` in the worst case and far less in practice, as most candidates give the
-//! same set. The minimax fit is `O(k)` per drift value for a chain of `k` pairs.
+//! `O(n·m·log(n·m))`; each distinct candidate set costs `O(n·m)` for its grid and `O(P²)` for
+//! the two programmes, so the sweeps are `O(n·m·(n·m + P²))` in the worst case and far less in
+//! practice, as most candidates give the same set. The drop-one check is `O(k·P²)` for an
+//! answer of `k` pairs; the minimax fit `O(k)` per drift value.
 //!
 //! # Guarantees
 //!
-//! * If the true assignment satisfies the model (jitter within its tolerance, drift within
-//!   its bound), it is a chain of some visited candidate set; the answer either is the best
-//!   chain and every alternative scores below `best - ambiguity_margin_pairs`, or the call
-//!   refuses. The answer is wrong only if the truth is a strict subset of it: an extra file taken
-//!   within one time step of a fired exposure whose own file is missing looks exactly like that
-//!   file, unless shutter counts or file numbers show the additional actuation.
 //! * No file appears in two pairs, no exposure in two pairs, and every pair's residual is within
 //!   its tolerance.
+//! * If the true assignment satisfies the model (jitter within its tolerance, drift within its
+//!   bound), it is a chain of some visited candidate set. The answer is then either the truth,
+//!   or refused, or a chain scoring more than the truth by more than the margin. The last
+//!   happens when a file taken within one time step of a fired exposure whose own file is
+//!   missing is taken for that file while neither shutter counts nor file numbers show the
+//!   additional actuation (with either, the two explanations tie and the call refuses).
+//! * Candidate windows are widened by the drift slack, never narrowed, so rounding and drift can
+//!   only add alternatives (more refusals), not hide them; the coincidence cost of an
+//!   alternative is counted among its candidate set's pairs, whose windows are at most the
+//!   drift slack (a few milliseconds over a session) wider than its own clock's.
+//! * Refusal rates against a simulated studio are in `docs/ingest.md`.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
@@ -220,6 +244,10 @@ pub struct MatchOptions {
     /// less than the counter penalty, so that "this file is that exposure's, plus an
     /// unexplained actuation" ties with "a test shot coinciding with a deleted file".
     pub coincidence_penalty_pairs: f64,
+    /// The camera clock's offset (camera minus host, seconds, as [`CameraClockFit::offset_s`])
+    /// and how far it may be off, when known in advance (say from a photograph of the host's
+    /// clock); `None`: any offset.
+    pub known_offset_s: Option<(f64, f64)>,
 }
 
 impl Default for MatchOptions {
@@ -234,6 +262,7 @@ impl Default for MatchOptions {
             min_matched_fraction: 0.5,
             counter_penalty_pairs: 3.0,
             coincidence_penalty_pairs: 2.0,
+            known_offset_s: None,
         }
     }
 }
@@ -392,7 +421,7 @@ pub enum Remedy {
     FewerMissingFiles,
     /// Test shots and other files that are not the session's moved off the card.
     RemoveExtraFiles,
-    /// The expected offset (`--camera-offset`) or a photographed clock at the start.
+    /// The camera clock's offset known in advance ([`MatchOptions::known_offset_s`]).
     KnownClockOffset,
 }
 
@@ -403,7 +432,9 @@ impl fmt::Display for Remedy {
             Self::ShutterCounts => "shutter counts in every file",
             Self::FewerMissingFiles => "the missing files",
             Self::RemoveExtraFiles => "moving test shots and foreign files off the card",
-            Self::KnownClockOffset => "the camera clock's offset known in advance",
+            Self::KnownClockOffset => {
+                "the camera clock's offset known in advance (a photograph of the host's clock)"
+            }
         })
     }
 }
@@ -570,6 +601,9 @@ struct Problem {
     coincidence_penalty: f64,
     max_drift: f64,
     drift_slack_s: f64,
+    /// Camera-minus-host offsets allowed by [`MatchOptions::known_offset_s`], in the problem's
+    /// relative times.
+    known_offset_window_s: Option<(f64, f64)>,
 }
 
 /// Best chains ending at and starting at every pair of a candidate set.
@@ -790,12 +824,25 @@ impl Problem {
         }
     }
 
+    /// False when a known offset rules the pair out (its offset difference is farther from the
+    /// known window than the pair's relaxed tolerance).
+    fn within_known_offset(&self, (i, j): Pair) -> bool {
+        let Some((lo, hi)) = self.known_offset_window_s else {
+            return true;
+        };
+        let d = self.shots[j].c_s - self.fired[i].h_s;
+        let tol = self.tolerance_s(j, self.drift_slack_s);
+        d >= lo - tol && d <= hi + tol
+    }
+
     /// Every pair consistent with `clock`.
     fn consistent_pairs(&self, clock: &Clock) -> Vec<Pair> {
         let mut pairs = Vec::new();
         for i in 0..self.fired.len() {
             for j in 0..self.shots.len() {
-                if self.residual_s(clock, (i, j)).abs() <= self.tolerance_s(j, clock.slack_s) {
+                if self.residual_s(clock, (i, j)).abs() <= self.tolerance_s(j, clock.slack_s)
+                    && self.within_known_offset((i, j))
+                {
                     pairs.push((i, j));
                 }
             }
@@ -810,7 +857,9 @@ impl Problem {
         let mut diffs: Vec<(f64, Pair)> = Vec::with_capacity(self.fired.len() * self.shots.len());
         for (i, f) in self.fired.iter().enumerate() {
             for (j, s) in self.shots.iter().enumerate() {
-                diffs.push((s.c_s - f.h_s, (i, j)));
+                if self.within_known_offset((i, j)) {
+                    diffs.push((s.c_s - f.h_s, (i, j)));
+                }
             }
         }
         diffs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
@@ -1038,6 +1087,10 @@ pub fn match_shots(
         coincidence_penalty: opts.coincidence_penalty_pairs,
         max_drift,
         drift_slack_s: max_drift * mid_s,
+        known_offset_window_s: opts.known_offset_s.map(|(offset_s, tolerance_s)| {
+            let relative_s = offset_s - (base_s as f64 - first_us * 1e-6);
+            (relative_s - tolerance_s, relative_s + tolerance_s)
+        }),
     };
 
     // Step 1-2: the best chain over every candidate set.
@@ -1136,6 +1189,22 @@ pub fn match_shots(
 }
 
 fn validate_options(opts: &MatchOptions) -> Result<(), MatchError> {
+    if let Some((offset_s, tolerance_s)) = opts.known_offset_s {
+        if !offset_s.is_finite() {
+            return Err(MatchError::InvalidOption {
+                option: "known_offset_s",
+                value: offset_s,
+                expected: "finite",
+            });
+        }
+        if !(tolerance_s >= 0.0 && tolerance_s.is_finite()) {
+            return Err(MatchError::InvalidOption {
+                option: "known_offset_s tolerance",
+                value: tolerance_s,
+                expected: "finite and >= 0",
+            });
+        }
+    }
     let checks: [(&'static str, f64, bool, &'static str); 7] = [
         (
             "coincidence_penalty_pairs",
@@ -1354,7 +1423,16 @@ fn ambiguity(
     if problem.shots.iter().any(|s| s.resolution_s >= 1.0) {
         remedies.push(Remedy::SubSecondTimes);
     }
-    if !problem.use_shutter {
+    // Counters only tell apart explanations on the same clock (which exposure lacks a file);
+    // a shift of the whole clock keeps every counter step.
+    let same_clock = (best_offset_s - alternative_offset_s).abs()
+        <= 2.0 * problem.jitter_s
+            + problem
+                .shots
+                .iter()
+                .map(|s| s.resolution_s)
+                .fold(0.0, f64::max);
+    if !problem.use_shutter && same_clock {
         remedies.push(Remedy::ShutterCounts);
     }
     let fired = problem.fired.len();
@@ -1364,7 +1442,9 @@ fn ambiguity(
     if chain.len() < problem.shots.len() || alt_chain.len() < problem.shots.len() {
         remedies.push(Remedy::RemoveExtraFiles);
     }
-    remedies.push(Remedy::KnownClockOffset);
+    if !same_clock {
+        remedies.push(Remedy::KnownClockOffset);
+    }
     MatchError::Ambiguous {
         best_pairs: chain.len(),
         alternative_pairs: alt_chain.len(),

@@ -425,8 +425,17 @@ fn refuses_a_shift_by_one_shot_at_one_second_resolution() {
     assert!(!conflicts.is_empty());
     assert!(remedies.contains(&Remedy::SubSecondTimes));
     assert!(remedies.contains(&Remedy::FewerMissingFiles));
+    assert!(remedies.contains(&Remedy::KnownClockOffset));
     let text = err.to_string();
     assert!(text.contains("SKB_0001.DNG"), "{text}");
+    // A known offset (within a second) leaves one explanation.
+    let opts = MatchOptions {
+        known_offset_s: Some((10.3, 0.5)),
+        ..MatchOptions::default()
+    };
+    let m = match_shots(&shots, &exposures, &opts).unwrap();
+    assert_eq!(m.missing, vec![5]);
+    assert_eq!(pairs_of(&m)[0], (0, "SKB_0001.DNG".to_owned()));
     // With sub-second times the same session is unambiguous... only if the intervals are not
     // all equal; a perfectly steady rhythm stays ambiguous, which is right.
     let shots_subsec: Vec<CameraShot> = (0..5)
