@@ -1103,8 +1103,17 @@ pub fn match_shots(
             }
         }
     });
+    let n_fired = problem.fired.len();
+    let n_shots = problem.shots.len();
+    let needed = ((opts.min_matched_fraction * n_fired.min(n_shots) as f64).ceil() as usize).max(1);
     let Some((_, relaxed_chain)) = best else {
-        return Err(MatchError::NoShots);
+        // Only a known offset that no pair fits leaves no candidate at all.
+        return Err(MatchError::NoConsistentOffset {
+            fired_exposures: n_fired,
+            files: n_shots,
+            best_pairs: 0,
+            needed_pairs: needed,
+        });
     };
 
     // Step 3: refit and re-assign until stable.
@@ -1113,9 +1122,6 @@ pub fn match_shots(
         .chain_score(&chain, &problem.consistent_pairs(&clock))
         .unwrap_or(0.0);
 
-    let n_fired = problem.fired.len();
-    let n_shots = problem.shots.len();
-    let needed = ((opts.min_matched_fraction * n_fired.min(n_shots) as f64).ceil() as usize).max(1);
     if chain.len() < needed {
         return Err(MatchError::NoConsistentOffset {
             fired_exposures: n_fired,

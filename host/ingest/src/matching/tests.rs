@@ -398,6 +398,25 @@ fn error_when_no_offset_explains_the_files() {
 }
 
 #[test]
+fn error_when_a_known_offset_fits_no_file() {
+    let exposures = regular_session(6);
+    let shots = files_for(&exposures, 30.0);
+    let opts = MatchOptions {
+        known_offset_s: Some((-3600.0, 60.0)),
+        ..MatchOptions::default()
+    };
+    assert_eq!(
+        match_shots(&shots, &exposures, &opts),
+        Err(MatchError::NoConsistentOffset {
+            fired_exposures: 6,
+            files: 6,
+            best_pairs: 0,
+            needed_pairs: 3
+        })
+    );
+}
+
+#[test]
 fn refuses_a_shift_by_one_shot_at_one_second_resolution() {
     // The brief's case: 1 s time stamps, a steady 2 s interval and the last file missing, so
     // the files fit the exposures shifted by one shot just as well.
