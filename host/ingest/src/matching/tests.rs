@@ -585,6 +585,24 @@ struct Studio {
     extras: BTreeMap<String, ExtraReason>,
     missing: Vec<u32>,
     fired: usize,
+    /// Camera minus host at a host time (seconds after `SESSION_START_S`), time zone
+    /// included when the files carry none.
+    true_offset: TrueClock,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct TrueClock {
+    offset_s: f64,
+    drift: f64,
+    lag_s: f64,
+    zone_s: f64,
+    first_s: f64,
+}
+
+impl TrueClock {
+    fn at(&self, host_s: f64) -> f64 {
+        self.offset_s + self.drift * (host_s - self.first_s) + self.lag_s + self.zone_s
+    }
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -751,6 +769,13 @@ fn studio(seed: u64, regime: Regime) -> Studio {
         extras,
         missing: missing_files.iter().map(|&k| k as u32).collect(),
         fired: fired.len(),
+        true_offset: TrueClock {
+            offset_s,
+            drift,
+            lag_s,
+            zone_s: if zone_field { 0.0 } else { f64::from(zone_s) },
+            first_s: first,
+        },
     }
 }
 
@@ -779,6 +804,16 @@ fn judge(seed: u64, regime: Regime) -> (Verdict, usize) {
             assert_eq!(extras, s.extras, "extra files, seed {seed}, {regime:?}");
             assert_eq!(m.missing, s.missing, "missing, seed {seed}, {regime:?}");
             assert!(m.clock.residual_max_s <= m.clock.tolerance_s + 1e-9);
+            // The true clock and the fitted one are both within tolerance of every pair, so at
+            // the reference time they differ by at most twice the tolerance.
+            let truth_s = s
+                .true_offset
+                .at(m.clock.host_ref_us * 1e-6 - SESSION_START_S);
+            assert!(
+                (m.clock.offset_s - truth_s).abs() <= 2.0 * m.clock.tolerance_s + 1e-6,
+                "offset {} vs true {truth_s}, seed {seed}, {regime:?}",
+                m.clock.offset_s
+            );
             (Verdict::Correct, s.fired)
         }
         Err(MatchError::Ambiguous { .. }) => (Verdict::Ambiguous, s.fired),
