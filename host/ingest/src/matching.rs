@@ -108,9 +108,11 @@
 //! With `n` fired exposures, `m` files and `P` pairs per candidate set (about `n` when the
 //! shot interval exceeds the tolerance): sorting the `n·m` differences is
 //! `O(n·m·log(n·m))`; each distinct candidate set costs `O(n·m)` for its grid and `O(P²)` for
-//! the two programmes, so the sweeps are `O(n·m·(n·m + P²))` in the worst case and far less in
-//! practice, as most candidates give the same set. The drop-one check is `O(k·P²)` for an
-//! answer of `k` pairs; the minimax fit `O(k)` per drift value.
+//! the two programmes, so the sweeps are `O(n·m·(n·m + P²))` in the worst case. In practice
+//! most candidates give the same set, and the sets are visited largest first and the sweep
+//! stops at the first set smaller than the score still sought (no chain scores more than its
+//! set's size). The drop-one check is `O(k·P²)` for an answer of `k` pairs; the minimax fit
+//! `O(k)` per drift value. Measured times: `docs/benchmarks-matching.md`.
 //!
 //! # Guarantees
 //!
@@ -617,26 +619,36 @@ struct Chains {
     end: Vec<f64>,
 }
 
-/// Prefix counts of a set of pairs over the exposure x file grid, for rectangle queries.
+/// Prefix counts of a set of pairs over the exposure x file grid (compressed to the rows and
+/// columns the set uses), for rectangle queries.
 struct Grid {
-    cols: usize,
+    rows: Vec<usize>,
+    cols: Vec<usize>,
     prefix: Vec<u32>,
 }
 
 impl Grid {
-    fn new(pairs: &[Pair], rows: usize, cols: usize) -> Self {
-        let stride = cols + 1;
-        let mut prefix = vec![0u32; (rows + 1) * stride];
+    fn new(pairs: &[Pair]) -> Self {
+        let mut rows: Vec<usize> = pairs.iter().map(|p| p.0).collect();
+        let mut cols: Vec<usize> = pairs.iter().map(|p| p.1).collect();
+        rows.sort_unstable();
+        rows.dedup();
+        cols.sort_unstable();
+        cols.dedup();
+        let stride = cols.len() + 1;
+        let mut prefix = vec![0u32; (rows.len() + 1) * stride];
         for &(i, j) in pairs {
-            prefix[(i + 1) * stride + j + 1] += 1;
+            let r = rows.partition_point(|&x| x < i);
+            let c = cols.partition_point(|&x| x < j);
+            prefix[(r + 1) * stride + c + 1] += 1;
         }
-        for i in 1..=rows {
-            for j in 1..=cols {
-                prefix[i * stride + j] += prefix[(i - 1) * stride + j] + prefix[i * stride + j - 1]
-                    - prefix[(i - 1) * stride + j - 1];
+        for r in 1..=rows.len() {
+            for c in 1..=cols.len() {
+                prefix[r * stride + c] += prefix[(r - 1) * stride + c] + prefix[r * stride + c - 1]
+                    - prefix[(r - 1) * stride + c - 1];
             }
         }
-        Self { cols, prefix }
+        Self { rows, cols, prefix }
     }
 
     /// True when some pair has exposure in `i0..i1` and file in `j0..j1`.
@@ -644,9 +656,17 @@ impl Grid {
         if i0 >= i1 || j0 >= j1 {
             return false;
         }
-        let s = self.cols + 1;
-        let at = |i: usize, j: usize| i64::from(self.prefix[i * s + j]);
-        at(i1, j1) - at(i0, j1) - at(i1, j0) + at(i0, j0) > 0
+        let (r0, r1) = (
+            self.rows.partition_point(|&x| x < i0),
+            self.rows.partition_point(|&x| x < i1),
+        );
+        let (c0, c1) = (
+            self.cols.partition_point(|&x| x < j0),
+            self.cols.partition_point(|&x| x < j1),
+        );
+        let s = self.cols.len() + 1;
+        let at = |r: usize, c: usize| i64::from(self.prefix[r * s + c]);
+        at(r1, c1) - at(r0, c1) - at(r1, c0) + at(r0, c0) > 0
     }
 }
 
@@ -761,7 +781,7 @@ impl Problem {
         let (Some(&first), Some(&last)) = (chain.first(), chain.last()) else {
             return Some(0.0);
         };
-        let grid = Grid::new(set, self.fired.len(), self.shots.len());
+        let grid = Grid::new(set);
         let mut score =
             chain.len() as f64 - self.start_cost(&grid, first) - self.end_cost(&grid, last);
         for w in chain.windows(2) {
@@ -772,7 +792,7 @@ impl Problem {
 
     /// Both dynamic programmes over `pairs` (any order; sorted here by exposure, then file).
     fn chains(&self, pairs: Vec<Pair>) -> Chains {
-        let grid = Grid::new(&pairs, self.fired.len(), self.shots.len());
+        let grid = Grid::new(&pairs);
         self.chains_in(pairs, &grid)
     }
 
@@ -851,8 +871,9 @@ impl Problem {
     }
 
     /// Step 1 of the algorithm: every maximal candidate set of the relaxed offset-only model,
-    /// each visited once, with the offset that makes it consistent.
-    fn sweep(&self, mut visit: impl FnMut(&Chains, f64)) {
+    /// each visited once, largest first, until the sets are smaller than the score `visit`
+    /// returns it still needs.
+    fn sweep(&self, mut visit: impl FnMut(&Chains) -> f64) {
         let slack = self.drift_slack_s;
         let mut diffs: Vec<(f64, Pair)> = Vec::with_capacity(self.fired.len() * self.shots.len());
         for (i, f) in self.fired.iter().enumerate() {
@@ -867,6 +888,7 @@ impl Problem {
             .map(|j| self.tolerance_s(j, slack))
             .fold(0.0, f64::max);
         let mut seen: HashSet<Vec<Pair>> = HashSet::new();
+        let mut sets: Vec<Vec<Pair>> = Vec::new();
         for &(d, (_, j)) in &diffs {
             let offset = d - self.tolerance_s(j, slack);
             let lo = diffs.partition_point(|e| e.0 < offset - tol_max - WINDOW_EPS_S);
@@ -877,11 +899,19 @@ impl Problem {
                 .map(|e| e.1)
                 .collect();
             set.sort_unstable();
-            if !seen.insert(set.clone()) {
-                continue;
+            if seen.insert(set.clone()) {
+                sets.push(set);
             }
-            let chains = self.chains(set);
-            visit(&chains, offset);
+        }
+        // Largest sets first: no chain scores more than its set's size, so once the sets are
+        // smaller than what `visit` still looks for, the rest cannot matter.
+        sets.sort_by_key(|set| std::cmp::Reverse(set.len()));
+        let mut wanted = f64::NEG_INFINITY;
+        for set in sets {
+            if (set.len() as f64) < wanted {
+                break;
+            }
+            wanted = visit(&self.chains(set));
         }
     }
 
@@ -1095,13 +1125,16 @@ pub fn match_shots(
 
     // Step 1-2: the best chain over every candidate set.
     let mut best: Option<(f64, Vec<Pair>)> = None;
-    problem.sweep(|chains, _offset| {
+    problem.sweep(|chains| {
         if let Some(k) = chains.best() {
             let score = chains.total(k);
             if best.as_ref().is_none_or(|b| score > b.0 + SCORE_EPS) {
                 best = Some((score, chains.chain_ending(k)));
             }
         }
+        // Only a larger score can replace the best.
+        best.as_ref()
+            .map_or(f64::NEG_INFINITY, |b| b.0 + 2.0 * SCORE_EPS)
     });
     let n_fired = problem.fired.len();
     let n_shots = problem.shots.len();
@@ -1134,7 +1167,8 @@ pub fn match_shots(
     // Step 4: the best alternative over every candidate set.
     let in_chain: HashSet<Pair> = chain.iter().copied().collect();
     let mut alternative: Option<(f64, Vec<Pair>)> = None;
-    problem.sweep(|chains, _offset| {
+    let ambiguous_from = best_score - opts.ambiguity_margin_pairs - SCORE_EPS;
+    problem.sweep(|chains| {
         for k in 0..chains.pairs.len() {
             if in_chain.contains(&chains.pairs[k]) {
                 continue;
@@ -1144,11 +1178,13 @@ pub fn match_shots(
                 alternative = Some((score, chains.chain_through(k)));
             }
         }
+        // Sets smaller than an ambiguous score cannot hold an ambiguous alternative.
+        ambiguous_from
     });
     // Chains that only drop pairs of the answer are consistent with its own clock: the best
     // of them, one dropped pair at a time, under the answer's consistent pairs.
     let final_set = problem.consistent_pairs(&clock);
-    let final_grid = Grid::new(&final_set, problem.fired.len(), problem.shots.len());
+    let final_grid = Grid::new(&final_set);
     for &dropped in &chain {
         let set: Vec<Pair> = final_set
             .iter()
@@ -1165,7 +1201,7 @@ pub fn match_shots(
     }
     let offset_base_s = base_s as f64 - first_us * 1e-6;
     if let Some((alt_score, alt_chain)) = alternative {
-        if alt_score >= best_score - opts.ambiguity_margin_pairs - SCORE_EPS {
+        if alt_score >= ambiguous_from {
             let (alt_clock, _) = problem.fit(&alt_chain, false);
             return Err(ambiguity(
                 &problem,
