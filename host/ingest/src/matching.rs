@@ -49,60 +49,86 @@
 //!   strictly increasing in exposure time and in camera time, with gaps (missing files, extra
 //!   files).
 //!
-//! # Counters
+//! # Score
 //!
-//! Shutter counts (when every file has one and they increase with camera time) and file
-//! numbers (when every file has one; DCF numbers roll over from 9999 to 0001) count
-//! actuations. Between two consecutive pairs `(i, j)` and `(i', j')` of a chain the camera
-//! actuated at least `need = (i' - i) + (j' - j - 1)` times: the fired exposures after `i` up
-//! to `i'` (including those whose file is missing) plus the unmatched files in between. A
-//! shutter-count step below `need` is impossible and forbids the transition; a step above it
-//! (an actuation the chain cannot explain) costs [`MatchOptions::counter_penalty_pairs`]; a
-//! file-number step other than `need` costs the same (numbers can reset, so they never forbid).
+//! A chain scores one per pair, minus the costs below; every cost is in pairs.
+//!
+//! * **Counters.** Shutter counts (when every file has one and they increase with camera time)
+//!   and file numbers (when every file has one; DCF numbers roll over from 9999 to 0001) count
+//!   actuations. Between two consecutive pairs `(i, j)` and `(i', j')` of a chain the camera
+//!   actuated at least `need = (i' - i) + (j' - j - 1)` times: the fired exposures after `i` up
+//!   to `i'` (including those whose file is missing) plus the unmatched files in between. A
+//!   shutter-count step below `need` is impossible and forbids the transition; a step above it
+//!   (an actuation the chain cannot explain) costs [`MatchOptions::counter_penalty_pairs`]; a
+//!   file-number step other than `need` costs the same (numbers can reset, so they never
+//!   forbid).
+//! * **Coincidences.** An unmatched file that is consistent with an unmatched fired exposure
+//!   between the same two neighbours of the chain (or before its first or after its last pair)
+//!   costs [`MatchOptions::coincidence_penalty_pairs`] once per gap: such a chain claims that
+//!   a test shot was taken at the very time of an exposure whose own file is missing. This
+//!   cost is one pair below the counter cost, so "this file is that exposure's, plus an
+//!   unexplained actuation" ties with "a test shot coinciding with a deleted file" (a refusal),
+//!   and it makes every chain that merely drops a consistent pair of the answer score at least
+//!   `1 + coincidence cost` below it.
 //!
 //! # Algorithm
 //!
 //! 1. **Candidate offsets.** For every pair `(i, j)` the offset difference `d_ij = c_j - h_i`.
-//!    Under the offset-only model with the tolerance widened by the drift slack, the set of
-//!    pairs consistent with offset `o` changes only at the ends of the windows `d_ij ± tol_j`,
-//!    and every such set is contained in the set at some left end `o = d_ij - tol_j`. Sweeping
-//!    those `n·m` candidates therefore visits every maximal set of pairs a clock within the
-//!    drift bound can make consistent; identical sets are visited once.
+//!    Under the offset-only model with the tolerance widened by the drift slack
+//!    `max_drift * span / 2`, the set of pairs consistent with offset `o` changes only at the
+//!    ends of the windows `d_ij ± tol_j`, and every such set is contained in the set at some left
+//!    end `o = d_ij - tol_j`. Sweeping those `n·m` candidates therefore visits every maximal set
+//!    of pairs that a clock within the drift bound can make consistent; identical sets are
+//!    visited once. A known offset ([`MatchOptions::known_offset_s`]) removes the pairs outside
+//!    its window first.
 //! 2. **Monotone assignment.** For each set, a dynamic programme over its pairs (sorted by
 //!    exposure, then file) gives the best chain ending at every pair (`F`) and starting at every
-//!    pair (`B`); a chain scores one per pair minus counter penalties.
+//!    pair (`B`), with the score above (coincidences counted by prefix sums over the
+//!    exposure x file grid, `O(1)` per transition).
 //! 3. **Refit.** The best chain over all candidates is refitted by a Chebyshev (minimax) fit of
 //!    `offset` and `drift` (weighted by `tol_j`): the errors are bounded (truncation and bounded
 //!    jitter), not Gaussian, so the minimax fit is the natural estimator and its value decides
 //!    consistency exactly. The drift is found by a golden-section search on `[-max, max]` (the
 //!    minimax error is convex in the drift), the offset in closed form. The pairs consistent
-//!    with the refitted clock are re-assigned by the same programme until the chain is stable.
-//! 4. **Ambiguity.** An *alternative* is any chain that contains at least one pair the answer
-//!    does not contain (a different file for an exposure, a different exposure for a file, or
-//!    an additional pair); chains that only drop pairs are not alternatives. The best
-//!    alternative through pair `p` scores `F[p] + B[p] - 1`; the sweep of step 1 is run again
-//!    to find the best alternative over every candidate set. If it scores at least
-//!    `best - ambiguity_margin_pairs`, the match is refused with [`MatchError::Ambiguous`],
-//!    naming every file whose exposure differs and what would tell the two apart.
+//!    with the refitted clock are re-assigned by the same programme until the chain is stable;
+//!    if the refitted chain is not consistent or scores lower, the offset-only fit of the
+//!    swept chain (drift fixed at 0 within its slack) is kept.
+//! 4. **Ambiguity.** Every chain other than the answer is an *alternative*. Those that contain
+//!    a pair the answer does not (a different file for an exposure, a different exposure for a
+//!    file, an additional pair) are found by running step 1 again: the best one through pair `p`
+//!    scores `F[p] + B[p] - 1`. Those that only drop pairs are consistent with the answer's own
+//!    clock: the best one is found under it, one dropped pair at a time. If the best
+//!    alternative scores at least `best - ambiguity_margin_pairs`, the match is refused with
+//!    [`MatchError::Ambiguous`], naming every file whose exposure differs and what would tell
+//!    the two apart. The default margin of one pair means that an explanation needing one more
+//!    missing file and one more extra file counts as about as good.
 //!
 //! # Cost
 //!
 //! With `n` fired exposures, `m` files and `P` pairs per candidate set (about `n` when the
 //! shot interval exceeds the tolerance): sorting the `n·m` differences is
-//! `O(n·m·log(n·m))`, each distinct candidate set costs `O(P²)` for the two programmes, so the
-//! whole is `O(n·m·P²)` in the worst case and far less in practice, as most candidates give the
-//! same set. The minimax fit is `O(k)` per drift value for a chain of `k` pairs.
+//! `O(n·m·log(n·m))`; each distinct candidate set costs `O(n·m)` for its grid and `O(P²)` for
+//! the two programmes, so the sweeps are `O(n·m·(n·m + P²))` in the worst case. In practice
+//! most candidates give the same set, and the sets are visited largest first and the sweep
+//! stops at the first set smaller than the score still sought (no chain scores more than its
+//! set's size). The drop-one check is `O(k·P²)` for an answer of `k` pairs; the minimax fit
+//! `O(k)` per drift value. Measured times: `docs/benchmarks-matching.md`.
 //!
 //! # Guarantees
 //!
-//! * If the true assignment satisfies the model (jitter within its tolerance, drift within
-//!   its bound), it is a chain of some visited candidate set; the answer either is the best
-//!   chain and every alternative scores below `best - ambiguity_margin_pairs`, or the call
-//!   refuses. The answer is wrong only if the truth is a strict subset of it: an extra file taken
-//!   within one time step of a fired exposure whose own file is missing looks exactly like that
-//!   file, unless shutter counts or file numbers show the additional actuation.
 //! * No file appears in two pairs, no exposure in two pairs, and every pair's residual is within
 //!   its tolerance.
+//! * If the true assignment satisfies the model (jitter within its tolerance, drift within its
+//!   bound), it is a chain of some visited candidate set. The answer is then either the truth,
+//!   or refused, or a chain scoring more than the truth by more than the margin. The last
+//!   happens when a file taken within one time step of a fired exposure whose own file is
+//!   missing is taken for that file while neither shutter counts nor file numbers show the
+//!   additional actuation (with either, the two explanations tie and the call refuses).
+//! * Candidate windows are widened by the drift slack, never narrowed, so rounding and drift can
+//!   only add alternatives (more refusals), not hide them; the coincidence cost of an
+//!   alternative is counted among its candidate set's pairs, whose windows are at most the
+//!   drift slack (a few milliseconds over a session) wider than its own clock's.
+//! * Refusal rates against a simulated studio are in `docs/ingest.md`.
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
@@ -117,6 +143,9 @@ const SCORE_EPS: f64 = 1e-9;
 /// A chain is consistent when its minimax error is at most its tolerance; this allows the
 /// rounding of the fit's arithmetic (about 1e-7 s relative to tolerances of milliseconds).
 const CONSISTENCY_EPS: f64 = 1e-6;
+/// A candidate offset sits exactly on the edge of its own pair's window; this keeps the pair
+/// inside despite rounding (it only widens the relaxed windows, which is the safe side).
+const WINDOW_EPS_S: f64 = 1e-9;
 /// Golden-section iterations of the drift search: the bracket shrinks by 0.618 each time, so
 /// 100 iterations take a ±1e-3 bracket below 1e-23, far below any measurable drift.
 const DRIFT_SEARCH_ITERATIONS: usize = 100;
@@ -212,6 +241,15 @@ pub struct MatchOptions {
     pub min_matched_fraction: f64,
     /// Cost, in pairs, of a counter step a chain cannot explain (see the module docs).
     pub counter_penalty_pairs: f64,
+    /// Cost, in pairs, of leaving an unmatched file that fits an unmatched fired exposure
+    /// between two pairs of a chain (a test shot at the very time of a deleted file). One pair
+    /// less than the counter penalty, so that "this file is that exposure's, plus an
+    /// unexplained actuation" ties with "a test shot coinciding with a deleted file".
+    pub coincidence_penalty_pairs: f64,
+    /// The camera clock's offset (camera minus host, seconds, as [`CameraClockFit::offset_s`])
+    /// and how far it may be off, when known in advance (say from a photograph of the host's
+    /// clock); `None`: any offset.
+    pub known_offset_s: Option<(f64, f64)>,
 }
 
 impl Default for MatchOptions {
@@ -225,6 +263,8 @@ impl Default for MatchOptions {
             ambiguity_margin_pairs: 1.0,
             min_matched_fraction: 0.5,
             counter_penalty_pairs: 3.0,
+            coincidence_penalty_pairs: 2.0,
+            known_offset_s: None,
         }
     }
 }
@@ -383,7 +423,7 @@ pub enum Remedy {
     FewerMissingFiles,
     /// Test shots and other files that are not the session's moved off the card.
     RemoveExtraFiles,
-    /// The expected offset (`--camera-offset`) or a photographed clock at the start.
+    /// The camera clock's offset known in advance ([`MatchOptions::known_offset_s`]).
     KnownClockOffset,
 }
 
@@ -394,7 +434,9 @@ impl fmt::Display for Remedy {
             Self::ShutterCounts => "shutter counts in every file",
             Self::FewerMissingFiles => "the missing files",
             Self::RemoveExtraFiles => "moving test shots and foreign files off the card",
-            Self::KnownClockOffset => "the camera clock's offset known in advance",
+            Self::KnownClockOffset => {
+                "the camera clock's offset known in advance (a photograph of the host's clock)"
+            }
         })
     }
 }
@@ -558,8 +600,12 @@ struct Problem {
     use_file_numbers: bool,
     jitter_s: f64,
     penalty: f64,
+    coincidence_penalty: f64,
     max_drift: f64,
     drift_slack_s: f64,
+    /// Camera-minus-host offsets allowed by [`MatchOptions::known_offset_s`], in the problem's
+    /// relative times.
+    known_offset_window_s: Option<(f64, f64)>,
 }
 
 /// Best chains ending at and starting at every pair of a candidate set.
@@ -569,13 +615,70 @@ struct Chains {
     pred: Vec<Option<usize>>,
     bwd: Vec<f64>,
     succ: Vec<Option<usize>>,
+    /// Cost of ending a chain at each pair.
+    end: Vec<f64>,
+}
+
+/// Prefix counts of a set of pairs over the exposure x file grid (compressed to the rows and
+/// columns the set uses), for rectangle queries.
+struct Grid {
+    rows: Vec<usize>,
+    cols: Vec<usize>,
+    prefix: Vec<u32>,
+}
+
+impl Grid {
+    fn new(pairs: &[Pair]) -> Self {
+        let mut rows: Vec<usize> = pairs.iter().map(|p| p.0).collect();
+        let mut cols: Vec<usize> = pairs.iter().map(|p| p.1).collect();
+        rows.sort_unstable();
+        rows.dedup();
+        cols.sort_unstable();
+        cols.dedup();
+        let stride = cols.len() + 1;
+        let mut prefix = vec![0u32; (rows.len() + 1) * stride];
+        for &(i, j) in pairs {
+            let r = rows.partition_point(|&x| x < i);
+            let c = cols.partition_point(|&x| x < j);
+            prefix[(r + 1) * stride + c + 1] += 1;
+        }
+        for r in 1..=rows.len() {
+            for c in 1..=cols.len() {
+                prefix[r * stride + c] += prefix[(r - 1) * stride + c] + prefix[r * stride + c - 1]
+                    - prefix[(r - 1) * stride + c - 1];
+            }
+        }
+        Self { rows, cols, prefix }
+    }
+
+    /// True when some pair has exposure in `i0..i1` and file in `j0..j1`.
+    fn any(&self, i0: usize, i1: usize, j0: usize, j1: usize) -> bool {
+        if i0 >= i1 || j0 >= j1 {
+            return false;
+        }
+        let (r0, r1) = (
+            self.rows.partition_point(|&x| x < i0),
+            self.rows.partition_point(|&x| x < i1),
+        );
+        let (c0, c1) = (
+            self.cols.partition_point(|&x| x < j0),
+            self.cols.partition_point(|&x| x < j1),
+        );
+        let s = self.cols.len() + 1;
+        let at = |r: usize, c: usize| i64::from(self.prefix[r * s + c]);
+        at(r1, c1) - at(r0, c1) - at(r1, c0) + at(r0, c0) > 0
+    }
 }
 
 impl Chains {
+    fn total(&self, k: usize) -> f64 {
+        self.fwd[k] - self.end[k]
+    }
+
     fn best(&self) -> Option<usize> {
         let mut best: Option<usize> = None;
         for k in 0..self.pairs.len() {
-            if best.is_none_or(|b| self.fwd[k] > self.fwd[b] + SCORE_EPS) {
+            if best.is_none_or(|b| self.total(k) > self.total(b) + SCORE_EPS) {
                 best = Some(k);
             }
         }
@@ -650,25 +753,63 @@ impl Problem {
         Some(cost)
     }
 
-    /// Score of a chain (one per pair minus transition costs); `None` if forbidden.
-    fn chain_score(&self, chain: &[Pair]) -> Option<f64> {
-        let mut score = chain.len() as f64;
+    /// Cost of leaving a pair of `grid` unmatched inside the open rectangle of exposures
+    /// `i0..i1` and files `j0..j1` between two chain neighbours: an unmatched file that fits an
+    /// unmatched fired exposure is a coincidence a chain must pay for.
+    fn skip_cost(&self, grid: &Grid, i0: usize, i1: usize, j0: usize, j1: usize) -> f64 {
+        if grid.any(i0, i1, j0, j1) {
+            self.coincidence_penalty
+        } else {
+            0.0
+        }
+    }
+
+    fn start_cost(&self, grid: &Grid, q: Pair) -> f64 {
+        self.skip_cost(grid, 0, q.0, 0, q.1)
+    }
+
+    fn end_cost(&self, grid: &Grid, p: Pair) -> f64 {
+        self.skip_cost(grid, p.0 + 1, self.fired.len(), p.1 + 1, self.shots.len())
+    }
+
+    fn step_cost(&self, grid: &Grid, p: Pair, q: Pair) -> Option<f64> {
+        Some(self.transition_cost(p, q)? + self.skip_cost(grid, p.0 + 1, q.0, p.1 + 1, q.1))
+    }
+
+    /// Score of a chain among the consistent pairs `set`; `None` if forbidden.
+    fn chain_score(&self, chain: &[Pair], set: &[Pair]) -> Option<f64> {
+        let (Some(&first), Some(&last)) = (chain.first(), chain.last()) else {
+            return Some(0.0);
+        };
+        let grid = Grid::new(set);
+        let mut score =
+            chain.len() as f64 - self.start_cost(&grid, first) - self.end_cost(&grid, last);
         for w in chain.windows(2) {
-            score -= self.transition_cost(w[0], w[1])?;
+            score -= self.step_cost(&grid, w[0], w[1])?;
         }
         Some(score)
     }
 
     /// Both dynamic programmes over `pairs` (any order; sorted here by exposure, then file).
-    fn chains(&self, mut pairs: Vec<Pair>) -> Chains {
+    fn chains(&self, pairs: Vec<Pair>) -> Chains {
+        let grid = Grid::new(&pairs);
+        self.chains_in(pairs, &grid)
+    }
+
+    /// [`Self::chains`] over `pairs` with coincidences counted among the pairs of `grid`.
+    fn chains_in(&self, mut pairs: Vec<Pair>, grid: &Grid) -> Chains {
         pairs.sort_unstable();
         let n = pairs.len();
-        let mut fwd = vec![1.0; n];
+        let end: Vec<f64> = pairs.iter().map(|&p| self.end_cost(grid, p)).collect();
+        let mut fwd: Vec<f64> = pairs
+            .iter()
+            .map(|&q| 1.0 - self.start_cost(grid, q))
+            .collect();
         let mut pred = vec![None; n];
         for q in 0..n {
             for p in 0..q {
                 if pairs[p].0 < pairs[q].0 && pairs[p].1 < pairs[q].1 {
-                    if let Some(cost) = self.transition_cost(pairs[p], pairs[q]) {
+                    if let Some(cost) = self.step_cost(grid, pairs[p], pairs[q]) {
                         let score = fwd[p] + 1.0 - cost;
                         if score > fwd[q] + SCORE_EPS {
                             fwd[q] = score;
@@ -678,12 +819,12 @@ impl Problem {
                 }
             }
         }
-        let mut bwd = vec![1.0; n];
+        let mut bwd: Vec<f64> = end.iter().map(|e| 1.0 - e).collect();
         let mut succ = vec![None; n];
         for p in (0..n).rev() {
             for q in p + 1..n {
                 if pairs[p].0 < pairs[q].0 && pairs[p].1 < pairs[q].1 {
-                    if let Some(cost) = self.transition_cost(pairs[p], pairs[q]) {
+                    if let Some(cost) = self.step_cost(grid, pairs[p], pairs[q]) {
                         let score = bwd[q] + 1.0 - cost;
                         if score > bwd[p] + SCORE_EPS {
                             bwd[p] = score;
@@ -699,7 +840,19 @@ impl Problem {
             pred,
             bwd,
             succ,
+            end,
         }
+    }
+
+    /// False when a known offset rules the pair out (its offset difference is farther from the
+    /// known window than the pair's relaxed tolerance).
+    fn within_known_offset(&self, (i, j): Pair) -> bool {
+        let Some((lo, hi)) = self.known_offset_window_s else {
+            return true;
+        };
+        let d = self.shots[j].c_s - self.fired[i].h_s;
+        let tol = self.tolerance_s(j, self.drift_slack_s);
+        d >= lo - tol && d <= hi + tol
     }
 
     /// Every pair consistent with `clock`.
@@ -707,7 +860,9 @@ impl Problem {
         let mut pairs = Vec::new();
         for i in 0..self.fired.len() {
             for j in 0..self.shots.len() {
-                if self.residual_s(clock, (i, j)).abs() <= self.tolerance_s(j, clock.slack_s) {
+                if self.residual_s(clock, (i, j)).abs() <= self.tolerance_s(j, clock.slack_s)
+                    && self.within_known_offset((i, j))
+                {
                     pairs.push((i, j));
                 }
             }
@@ -716,13 +871,16 @@ impl Problem {
     }
 
     /// Step 1 of the algorithm: every maximal candidate set of the relaxed offset-only model,
-    /// each visited once, with the offset that makes it consistent.
-    fn sweep(&self, mut visit: impl FnMut(&Chains, f64)) {
+    /// each visited once, largest first, until the sets are smaller than the score `visit`
+    /// returns it still needs.
+    fn sweep(&self, mut visit: impl FnMut(&Chains) -> f64) {
         let slack = self.drift_slack_s;
         let mut diffs: Vec<(f64, Pair)> = Vec::with_capacity(self.fired.len() * self.shots.len());
         for (i, f) in self.fired.iter().enumerate() {
             for (j, s) in self.shots.iter().enumerate() {
-                diffs.push((s.c_s - f.h_s, (i, j)));
+                if self.within_known_offset((i, j)) {
+                    diffs.push((s.c_s - f.h_s, (i, j)));
+                }
             }
         }
         diffs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
@@ -730,21 +888,30 @@ impl Problem {
             .map(|j| self.tolerance_s(j, slack))
             .fold(0.0, f64::max);
         let mut seen: HashSet<Vec<Pair>> = HashSet::new();
+        let mut sets: Vec<Vec<Pair>> = Vec::new();
         for &(d, (_, j)) in &diffs {
             let offset = d - self.tolerance_s(j, slack);
-            let lo = diffs.partition_point(|e| e.0 < offset - tol_max);
-            let hi = diffs.partition_point(|e| e.0 <= offset + tol_max);
+            let lo = diffs.partition_point(|e| e.0 < offset - tol_max - WINDOW_EPS_S);
+            let hi = diffs.partition_point(|e| e.0 <= offset + tol_max + WINDOW_EPS_S);
             let mut set: Vec<Pair> = diffs[lo..hi]
                 .iter()
-                .filter(|e| (e.0 - offset).abs() <= self.tolerance_s(e.1 .1, slack))
+                .filter(|e| (e.0 - offset).abs() <= self.tolerance_s(e.1 .1, slack) + WINDOW_EPS_S)
                 .map(|e| e.1)
                 .collect();
             set.sort_unstable();
-            if !seen.insert(set.clone()) {
-                continue;
+            if seen.insert(set.clone()) {
+                sets.push(set);
             }
-            let chains = self.chains(set);
-            visit(&chains, offset);
+        }
+        // Largest sets first: no chain scores more than its set's size, so once the sets are
+        // smaller than what `visit` still looks for, the rest cannot matter.
+        sets.sort_by_key(|set| std::cmp::Reverse(set.len()));
+        let mut wanted = f64::NEG_INFINITY;
+        for set in sets {
+            if (set.len() as f64) < wanted {
+                break;
+            }
+            wanted = visit(&self.chains(set));
         }
     }
 
@@ -947,31 +1114,47 @@ pub fn match_shots(
         use_file_numbers,
         jitter_s: opts.jitter_tolerance_s,
         penalty: opts.counter_penalty_pairs,
+        coincidence_penalty: opts.coincidence_penalty_pairs,
         max_drift,
         drift_slack_s: max_drift * mid_s,
+        known_offset_window_s: opts.known_offset_s.map(|(offset_s, tolerance_s)| {
+            let relative_s = offset_s - (base_s as f64 - first_us * 1e-6);
+            (relative_s - tolerance_s, relative_s + tolerance_s)
+        }),
     };
 
     // Step 1-2: the best chain over every candidate set.
     let mut best: Option<(f64, Vec<Pair>)> = None;
-    problem.sweep(|chains, _offset| {
+    problem.sweep(|chains| {
         if let Some(k) = chains.best() {
-            let score = chains.fwd[k];
+            let score = chains.total(k);
             if best.as_ref().is_none_or(|b| score > b.0 + SCORE_EPS) {
                 best = Some((score, chains.chain_ending(k)));
             }
         }
+        // Only a larger score can replace the best.
+        best.as_ref()
+            .map_or(f64::NEG_INFINITY, |b| b.0 + 2.0 * SCORE_EPS)
     });
+    let n_fired = problem.fired.len();
+    let n_shots = problem.shots.len();
+    let needed = ((opts.min_matched_fraction * n_fired.min(n_shots) as f64).ceil() as usize).max(1);
     let Some((_, relaxed_chain)) = best else {
-        return Err(MatchError::NoShots);
+        // Only a known offset that no pair fits leaves no candidate at all.
+        return Err(MatchError::NoConsistentOffset {
+            fired_exposures: n_fired,
+            files: n_shots,
+            best_pairs: 0,
+            needed_pairs: needed,
+        });
     };
 
     // Step 3: refit and re-assign until stable.
     let (chain, clock) = refine(&problem, relaxed_chain, opts.min_pairs_for_drift);
-    let best_score = problem.chain_score(&chain).unwrap_or(0.0);
+    let best_score = problem
+        .chain_score(&chain, &problem.consistent_pairs(&clock))
+        .unwrap_or(0.0);
 
-    let n_fired = problem.fired.len();
-    let n_shots = problem.shots.len();
-    let needed = ((opts.min_matched_fraction * n_fired.min(n_shots) as f64).ceil() as usize).max(1);
     if chain.len() < needed {
         return Err(MatchError::NoConsistentOffset {
             fired_exposures: n_fired,
@@ -984,7 +1167,8 @@ pub fn match_shots(
     // Step 4: the best alternative over every candidate set.
     let in_chain: HashSet<Pair> = chain.iter().copied().collect();
     let mut alternative: Option<(f64, Vec<Pair>)> = None;
-    problem.sweep(|chains, _offset| {
+    let ambiguous_from = best_score - opts.ambiguity_margin_pairs - SCORE_EPS;
+    problem.sweep(|chains| {
         for k in 0..chains.pairs.len() {
             if in_chain.contains(&chains.pairs[k]) {
                 continue;
@@ -994,10 +1178,30 @@ pub fn match_shots(
                 alternative = Some((score, chains.chain_through(k)));
             }
         }
+        // Sets smaller than an ambiguous score cannot hold an ambiguous alternative.
+        ambiguous_from
     });
+    // Chains that only drop pairs of the answer are consistent with its own clock: the best
+    // of them, one dropped pair at a time, under the answer's consistent pairs.
+    let final_set = problem.consistent_pairs(&clock);
+    let final_grid = Grid::new(&final_set);
+    for &dropped in &chain {
+        let set: Vec<Pair> = final_set
+            .iter()
+            .copied()
+            .filter(|&p| p != dropped)
+            .collect();
+        let chains = problem.chains_in(set, &final_grid);
+        if let Some(k) = chains.best() {
+            let score = chains.total(k);
+            if alternative.as_ref().is_none_or(|a| score > a.0 + SCORE_EPS) {
+                alternative = Some((score, chains.chain_ending(k)));
+            }
+        }
+    }
     let offset_base_s = base_s as f64 - first_us * 1e-6;
     if let Some((alt_score, alt_chain)) = alternative {
-        if alt_score >= best_score - opts.ambiguity_margin_pairs - SCORE_EPS {
+        if alt_score >= ambiguous_from {
             let (alt_clock, _) = problem.fit(&alt_chain, false);
             return Err(ambiguity(
                 &problem,
@@ -1027,7 +1231,29 @@ pub fn match_shots(
 }
 
 fn validate_options(opts: &MatchOptions) -> Result<(), MatchError> {
-    let checks: [(&'static str, f64, bool, &'static str); 6] = [
+    if let Some((offset_s, tolerance_s)) = opts.known_offset_s {
+        if !offset_s.is_finite() {
+            return Err(MatchError::InvalidOption {
+                option: "known_offset_s",
+                value: offset_s,
+                expected: "finite",
+            });
+        }
+        if !(tolerance_s >= 0.0 && tolerance_s.is_finite()) {
+            return Err(MatchError::InvalidOption {
+                option: "known_offset_s tolerance",
+                value: tolerance_s,
+                expected: "finite and >= 0",
+            });
+        }
+    }
+    let checks: [(&'static str, f64, bool, &'static str); 7] = [
+        (
+            "coincidence_penalty_pairs",
+            opts.coincidence_penalty_pairs,
+            opts.coincidence_penalty_pairs > 0.0 && opts.coincidence_penalty_pairs.is_finite(),
+            "finite and > 0",
+        ),
         (
             "jitter_tolerance_s",
             opts.jitter_tolerance_s,
@@ -1194,9 +1420,13 @@ fn refine(
         chain = next;
     }
     let (clock, level) = problem.fit(&chain, problem.fits_drift(&chain, min_pairs_for_drift));
+    let score_of = |chain: &[Pair], clock: &Clock| {
+        problem
+            .chain_score(chain, &problem.consistent_pairs(clock))
+            .unwrap_or(f64::NEG_INFINITY)
+    };
     if level <= 1.0 + CONSISTENCY_EPS
-        && problem.chain_score(&chain).unwrap_or(f64::NEG_INFINITY)
-            >= problem.chain_score(&fallback.0).unwrap_or(0.0) - SCORE_EPS
+        && score_of(&chain, &clock) >= score_of(&fallback.0, &fallback.1) - SCORE_EPS
     {
         (chain, clock)
     } else {
@@ -1235,7 +1465,16 @@ fn ambiguity(
     if problem.shots.iter().any(|s| s.resolution_s >= 1.0) {
         remedies.push(Remedy::SubSecondTimes);
     }
-    if !problem.use_shutter {
+    // Counters only tell apart explanations on the same clock (which exposure lacks a file);
+    // a shift of the whole clock keeps every counter step.
+    let same_clock = (best_offset_s - alternative_offset_s).abs()
+        <= 2.0 * problem.jitter_s
+            + problem
+                .shots
+                .iter()
+                .map(|s| s.resolution_s)
+                .fold(0.0, f64::max);
+    if !problem.use_shutter && same_clock {
         remedies.push(Remedy::ShutterCounts);
     }
     let fired = problem.fired.len();
@@ -1245,7 +1484,9 @@ fn ambiguity(
     if chain.len() < problem.shots.len() || alt_chain.len() < problem.shots.len() {
         remedies.push(Remedy::RemoveExtraFiles);
     }
-    remedies.push(Remedy::KnownClockOffset);
+    if !same_clock {
+        remedies.push(Remedy::KnownClockOffset);
+    }
     MatchError::Ambiguous {
         best_pairs: chain.len(),
         alternative_pairs: alt_chain.len(),
@@ -1315,15 +1556,15 @@ fn assemble(
         let tol = problem.tolerance_s(j, clock.slack_s);
         // Invert c = h + offset + drift * (h - mid) for the host time the file was taken at.
         let h_s = (s.c_s - clock.offset_s + clock.drift * mid_s) / (1.0 + clock.drift);
-        let reason = if h_s < -tol {
-            ExtraReason::BeforeSession
-        } else if h_s > last_h_s + tol {
-            ExtraReason::AfterSession
-        } else if let Some(&(exposure_index, _)) = unfired
+        let reason = if let Some(&(exposure_index, _)) = unfired
             .iter()
             .find(|(_, hu)| (h_s - hu).abs() <= tol + UNFIRED_LAG_WINDOW_S)
         {
             ExtraReason::NearUnfiredExposure { exposure_index }
+        } else if h_s < -tol {
+            ExtraReason::BeforeSession
+        } else if h_s > last_h_s + tol {
+            ExtraReason::AfterSession
         } else {
             ExtraReason::BetweenShots
         };
@@ -1361,3 +1602,6 @@ fn assemble(
         file_numbers_used: problem.use_file_numbers,
     }
 }
+
+#[cfg(test)]
+mod tests;
