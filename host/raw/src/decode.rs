@@ -20,6 +20,7 @@
 //!   data: every strip or tile of a TIFF-based raw image must lie inside the file.
 //! * Non-Bayer data is refused ([`RawError::UnsupportedLayout`]).
 
+use std::io::{Read, Seek};
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -123,14 +124,22 @@ const PHOTOMETRIC_LINEAR_RAW: u16 = 34892;
 
 /// Checks that every strip and tile of a TIFF-based file's raw images lies inside the file.
 fn check_tiff_extents(path: &Path, file_len: u64) -> Result<(), RawError> {
-    let Ok(file) = std::fs::File::open(path) else {
-        return Ok(());
+    let io = |source| RawError::Io {
+        path: path.to_path_buf(),
+        source,
     };
-    let mut reader = std::io::BufReader::new(file);
-    let Ok(tiff) = GenericTiffReader::new(&mut reader, 0, 0, None, &[]) else {
-        // Not a plain TIFF container (ORF, RW2 variants...): the decoder checks.
+    let mut reader = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
+    let mut magic = [0u8; 4];
+    if reader.read_exact(&mut magic).is_err() || !(&magic == b"II*\0" || &magic == b"MM\0*") {
+        // Not a standard TIFF container (ORF, RW2, CR3, RAF...): the decoder checks.
         return Ok(());
-    };
+    }
+    reader.rewind().map_err(io)?;
+    let tiff =
+        GenericTiffReader::new(&mut reader, 0, 0, None, &[]).map_err(|e| RawError::Truncated {
+            path: path.to_path_buf(),
+            what: format!("TIFF structure unreadable ({e})"),
+        })?;
     let is_raw = |ifd: &IFD| {
         ifd.get_entry(TiffCommonTag::PhotometricInt)
             .map(|e| e.force_u16(0))
