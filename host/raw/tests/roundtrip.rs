@@ -7,8 +7,8 @@ use std::path::Path;
 use proptest::prelude::*;
 use skinbrdf_raw::dng::{write_dng, DngImage};
 use skinbrdf_raw::{
-    check_extension, decode_superpixel, read_metadata, sniff, BayerPhase, CaptureTime, FileKind,
-    LocalDateTime, RawError, RawOptions,
+    check_extension, decode_superpixel, read_metadata, read_raw_header, sniff, BayerPhase,
+    CaptureTime, FileKind, LocalDateTime, RawError, RawOptions,
 };
 
 /// A sensor with the given active area and margins whose width packs into whole bytes.
@@ -108,6 +108,8 @@ proptest! {
         prop_assert_eq!((f.sensor_width_px, f.sensor_height_px), (sw, sh));
         prop_assert_eq!((f.active_left_px, f.active_top_px), (left, top));
         prop_assert_eq!(f.bits_per_sample, bits);
+        let hd = read_raw_header(&path).unwrap();
+        prop_assert_eq!((hd.width_px, hd.height_px, hd.bits_per_sample, hd.cfa), (f.width_px, f.height_px, bits, phase));
         prop_assert_eq!(f.black_levels, black.map(f64::from));
         prop_assert_eq!(f.white_level, f64::from(white));
         let (rgb, sat) = expected(&l, &data, black.map(f64::from), f64::from(white));
