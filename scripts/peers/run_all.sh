@@ -5,13 +5,15 @@
 #
 # 1. creates (or reuses) a Python venv in VENV_DIR and installs the peers from PyPI:
 #    embreex (Embree), scipy (least_squares), scikit-misc (netlib loess, as R's loess),
-#    pupil-apriltags (the AprilTag reference C library), opencv-python-headless, numpy;
+#    pupil-apriltags (the AprilTag reference C library), opencv-python-headless, numpy, rawpy (LibRaw);
 # 2. builds our side (release): the ray-throughput, tag-detection and fit examples;
 # 3. runs each peer script in scripts/peers/ next to ours on the same inputs, back to back:
 #      ray casting      embree_bench.py --compare          (same mesh, same 1.5 Mpx rays)
 #      tag detection    apriltag_compare.py                 (same synthetic images, same truth)
 #      least squares    peer_fit example + scipy_least_squares.py (same 1M samples, model, start)
 #      loess            loess_reference.py into a scratch copy, then our parity test against it
+#      DNG files        write_test_dngs example + dng_rawpy_check.py (LibRaw reads our DNGs bit for bit;
+#                       decode time per 6000x4000 file: ours vs LibRaw's unpack)
 # 4. writes the combined table to OUT.md (default VENV_DIR/peers.md) and prints it; the raw
 #    output of every step is kept next to it (VENV_DIR/logs/).
 #
@@ -38,13 +40,14 @@ if [[ ! -x $VENV/bin/python ]]; then
 fi
 PY=$VENV/bin/python
 "$PY" -m pip install --quiet --upgrade pip
-"$PY" -m pip install --quiet numpy scipy embreex scikit-misc pupil-apriltags opencv-python-headless
+"$PY" -m pip install --quiet numpy scipy embreex scikit-misc pupil-apriltags opencv-python-headless rawpy
 
 echo "== building our side (release)" >&2
 (cd "$ROOT" && cargo build --quiet --release \
     -p skinbrdf-mesh --example ray_throughput \
     -p skinbrdf-targets --example detect_json \
-    -p skinbrdf-fit --example peer_fit)
+    -p skinbrdf-fit --example peer_fit \
+    -p skinbrdf-raw --example write_test_dngs --example decode_time)
 
 load() { cut -d' ' -f1-3 /proc/loadavg; }
 LOAD0=$(load)
@@ -146,6 +149,25 @@ else
     fail "loess" loess.txt
 fi
 rm -rf "$SCRATCH"
+
+# --- DNG files: LibRaw (rawpy) -------------------------------------------------------------------
+echo "== DNG files: ours vs LibRaw (rawpy)" >&2
+DNGS=$LOGS/dngs
+rm -rf "$DNGS"
+if "$CARGO_TARGET_DIR/release/examples/write_test_dngs" "$DNGS" --big >"$LOGS/dng_write.txt" 2>&1 &&
+    "$PY" "$ROOT/scripts/peers/dng_rawpy_check.py" "$DNGS" >"$LOGS/dng_check.txt" 2>&1; then
+    SUMMARY=$(grep -E '^[0-9]+ passed, [0-9]+ failed' "$LOGS/dng_check.txt")
+    DEV=$(grep -c '^known deviation' "$LOGS/dng_check.txt" || true)
+    OURS=$("$CARGO_TARGET_DIR/release/examples/decode_time" "$DNGS/big_6000x4000_14.dng" | "$PY" -c 'import json,sys; print(json.load(sys.stdin)["median_s"])')
+    PEER=$("$PY" "$ROOT/scripts/peers/dng_rawpy_check.py" --time "$DNGS/big_6000x4000_14.dng" | "$PY" -c 'import json,sys; print(json.load(sys.stdin)["median_s"])')
+    RATIO=$("$PY" -c "print(f'{$PEER / $OURS:.2f}x')")
+    row "DNG files (our writer, 4 phases x 12/14/16 bits x even/odd active area, + 6000x4000)" \
+        "skinbrdf-raw (rawler decode + superpixels)" "LibRaw (rawpy)" \
+        "bit for bit: $SUMMARY ($DEV known deviations, logs/dng_check.txt)" \
+        "decode 6000x4000 14-bit: ours $OURS s, LibRaw unpack $PEER s (median of 5)" "LibRaw takes $RATIO our time"
+else
+    fail "DNG files" dng_check.txt
+fi
 
 {
     echo "# Peers side by side"

@@ -516,7 +516,10 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     report.placed_targets = t.reference.len()
         + t.headdress.len()
         + session_file.flash.targets.len()
-        + session_file.standard.as_ref().map_or(0, |s| s.targets.len());
+        + session_file
+            .standard
+            .as_ref()
+            .map_or(0, |s| s.targets.len());
     report.unplaced_targets = t.unplaced.len();
     report.total_s = t0.elapsed().as_secs_f64();
     let json = serde_json::to_vec_pretty(&report).map_err(|e| IngestError::Input {

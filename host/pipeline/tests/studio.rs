@@ -70,7 +70,12 @@ fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
     let report = ingest(&ingest_config(&s, &s2, "rig-measured.toml")).expect("ingest");
     // Every exposure matched; the test shot left out; the clock offset found.
     assert_eq!(report.images.len(), 36);
-    assert_eq!(report.matching.extra_files.len(), 1, "{:?}", report.matching.extra_files);
+    assert_eq!(
+        report.matching.extra_files.len(),
+        1,
+        "{:?}",
+        report.matching.extra_files
+    );
     let st = &scene.studio;
     assert!(
         (report.matching.clock.offset_s - st.camera_clock_offset_s).abs() < 0.05,
@@ -90,8 +95,7 @@ fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
     let cam = raw.report.camera_poses().expect("camera poses ran");
     assert!(cam.camera_position_error_median_mm.expect("scored") < bounds::CAMERA_POSITION_MM);
     assert!(
-        cam.camera_orientation_error_median_deg.expect("scored")
-            < bounds::CAMERA_ORIENTATION_DEG
+        cam.camera_orientation_error_median_deg.expect("scored") < bounds::CAMERA_ORIENTATION_DEG
     );
     let head = raw.report.head_tracking().expect("head tracking ran");
     assert!(head.head_position_error_median_mm.expect("scored") < bounds::HEAD_POSITION_MM);
@@ -125,7 +129,10 @@ fn assert_nothing_written(out: &Path) {
     let parent = out.parent().expect("parent");
     for e in std::fs::read_dir(parent).expect("read_dir") {
         let name = e.expect("entry").file_name().to_string_lossy().into_owned();
-        assert!(!name.contains(".ingest-"), "staging directory {name} left behind");
+        assert!(
+            !name.contains(".ingest-"),
+            "staging directory {name} left behind"
+        );
     }
 }
 
@@ -149,7 +156,11 @@ fn an_exposure_change_is_refused_or_normalised() {
     let mut cfg = ingest_config(&s, &out, "rig-measured.toml");
     cfg.exposure = ExposurePolicy::Normalise;
     let r = ingest(&cfg).expect("normalised");
-    let scaled: Vec<_> = r.images.iter().filter(|i| i.exposure_scale != 1.0).collect();
+    let scaled: Vec<_> = r
+        .images
+        .iter()
+        .filter(|i| i.exposure_scale != 1.0)
+        .collect();
     assert_eq!(scaled.len(), 1);
     assert_eq!(scaled[0].exposure_index, 2);
     assert!((scaled[0].exposure_scale - 0.5).abs() < 1e-9);
@@ -181,7 +192,11 @@ fn damaged_and_misnamed_raw_files_are_refused_by_name() {
     let bytes = std::fs::read(&victim).expect("read");
     std::fs::write(&victim, &bytes[..bytes.len() / 2]).expect("truncate");
     let err = ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect_err("truncated");
-    let name = victim.file_name().expect("name").to_string_lossy().into_owned();
+    let name = victim
+        .file_name()
+        .expect("name")
+        .to_string_lossy()
+        .into_owned();
     assert!(err.to_string().contains(&name), "{err}");
     assert_nothing_written(&out);
     std::fs::write(&victim, &bytes).expect("restore");
@@ -191,7 +206,10 @@ fn damaged_and_misnamed_raw_files_are_refused_by_name() {
     std::fs::rename(&victim, &renamed).expect("rename");
     let err = ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect_err("misnamed");
     let msg = err.to_string();
-    assert!(msg.contains(&*renamed.file_name().expect("name").to_string_lossy()), "{msg}");
+    assert!(
+        msg.contains(&*renamed.file_name().expect("name").to_string_lossy()),
+        "{msg}"
+    );
     assert!(msg.contains("DNG"), "{msg}");
     assert_nothing_written(&out);
     std::fs::rename(&renamed, &victim).expect("restore");
@@ -202,7 +220,8 @@ fn damaged_and_misnamed_raw_files_are_refused_by_name() {
         .capture_time
         .expect("time");
     meta_time.subsec_digits = Some("99".into());
-    let mut other = skinbrdf_raw::dng::DngImage::new(8, 8, skinbrdf_raw::BayerPhase::Rggb, 16, vec![600; 64]);
+    let mut other =
+        skinbrdf_raw::dng::DngImage::new(8, 8, skinbrdf_raw::BayerPhase::Rggb, 16, vec![600; 64]);
     other.body_serial = Some("OTHER-BODY-77".into());
     other.capture_time = Some(meta_time);
     let other_path = card.join("IMG_7777.DNG");
@@ -210,7 +229,10 @@ fn damaged_and_misnamed_raw_files_are_refused_by_name() {
     let err = ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect_err("body swapped");
     let msg = err.to_string();
     assert!(matches!(err, IngestError::CameraChanged { .. }), "{msg}");
-    assert!(msg.contains("IMG_7777.DNG") && msg.contains("OTHER-BODY-77"), "{msg}");
+    assert!(
+        msg.contains("IMG_7777.DNG") && msg.contains("OTHER-BODY-77"),
+        "{msg}"
+    );
     assert_nothing_written(&out);
     std::fs::remove_file(&other_path).expect("remove");
 

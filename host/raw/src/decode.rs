@@ -20,6 +20,7 @@
 //!   data: every strip or tile of a TIFF-based raw image must lie inside the file.
 //! * Non-Bayer data is refused ([`RawError::UnsupportedLayout`]).
 
+use std::io::{Read, Seek};
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -123,14 +124,22 @@ const PHOTOMETRIC_LINEAR_RAW: u16 = 34892;
 
 /// Checks that every strip and tile of a TIFF-based file's raw images lies inside the file.
 fn check_tiff_extents(path: &Path, file_len: u64) -> Result<(), RawError> {
-    let Ok(file) = std::fs::File::open(path) else {
-        return Ok(());
+    let io = |source| RawError::Io {
+        path: path.to_path_buf(),
+        source,
     };
-    let mut reader = std::io::BufReader::new(file);
-    let Ok(tiff) = GenericTiffReader::new(&mut reader, 0, 0, None, &[]) else {
-        // Not a plain TIFF container (ORF, RW2 variants...): the decoder checks.
+    let mut reader = std::io::BufReader::new(std::fs::File::open(path).map_err(io)?);
+    let mut magic = [0u8; 4];
+    if reader.read_exact(&mut magic).is_err() || !(&magic == b"II*\0" || &magic == b"MM\0*") {
+        // Not a standard TIFF container (ORF, RW2, CR3, RAF...): the decoder checks.
         return Ok(());
-    };
+    }
+    reader.rewind().map_err(io)?;
+    let tiff =
+        GenericTiffReader::new(&mut reader, 0, 0, None, &[]).map_err(|e| RawError::Truncated {
+            path: path.to_path_buf(),
+            what: format!("TIFF structure unreadable ({e})"),
+        })?;
     let is_raw = |ifd: &IFD| {
         ifd.get_entry(TiffCommonTag::PhotometricInt)
             .map(|e| e.force_u16(0))
@@ -173,8 +182,8 @@ fn check_tiff_extents(path: &Path, file_len: u64) -> Result<(), RawError> {
     Ok(())
 }
 
-/// Decodes a Bayer raw file to superpixels (see the module and crate docs).
-pub fn decode_superpixel(path: &Path, opts: &RawOptions) -> Result<RawFrame, RawError> {
+/// Sniffs, checks the file's extents and maps it.
+fn open_raw(path: &Path) -> Result<(FileKind, RawSource), RawError> {
     let kind = sniff(path)?;
     if !kind.is_raw() {
         return Err(RawError::NotRaw {
@@ -188,7 +197,12 @@ pub fn decode_superpixel(path: &Path, opts: &RawOptions) -> Result<RawFrame, Raw
     };
     let file_len = std::fs::metadata(path).map_err(io)?.len();
     check_tiff_extents(path, file_len)?;
-    let src = RawSource::new(path).map_err(io)?;
+    Ok((kind, RawSource::new(path).map_err(io)?))
+}
+
+/// Decodes a Bayer raw file to superpixels (see the module and crate docs).
+pub fn decode_superpixel(path: &Path, opts: &RawOptions) -> Result<RawFrame, RawError> {
+    let (kind, src) = open_raw(path)?;
     let image = loader()
         .decode(&src, &RawDecodeParams::default(), false)
         .map_err(|e| RawError::Decode {
@@ -198,13 +212,53 @@ pub fn decode_superpixel(path: &Path, opts: &RawOptions) -> Result<RawFrame, Raw
     superpixel(path, kind, &image, opts)
 }
 
-/// The layout check and the superpixel computation on a decoded image.
-fn superpixel(
-    path: &Path,
-    kind: FileKind,
-    image: &RawImage,
-    opts: &RawOptions,
-) -> Result<RawFrame, RawError> {
+/// What [`read_raw_header`] tells without computing superpixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RawHeader {
+    /// What the file is.
+    pub kind: FileKind,
+    /// Width of the image as loaded (superpixels).
+    pub width_px: u32,
+    /// Height of the image as loaded (superpixels).
+    pub height_px: u32,
+    /// Bits per stored sample.
+    pub bits_per_sample: u32,
+    /// The Bayer phase at the active area's top-left photosite.
+    pub cfa: BayerPhase,
+}
+
+/// The size of the image [`decode_superpixel`] would give, its bit depth and phase, with the
+/// same layout checks (non-Bayer data is refused here too).
+pub fn read_raw_header(path: &Path) -> Result<RawHeader, RawError> {
+    let (kind, src) = open_raw(path)?;
+    let image = loader()
+        .decode(&src, &RawDecodeParams::default(), true)
+        .map_err(|e| RawError::Decode {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+    let g = geometry(path, &image)?;
+    let to_u32 = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+    Ok(RawHeader {
+        kind,
+        width_px: to_u32(g.aw / 2),
+        height_px: to_u32(g.ah / 2),
+        bits_per_sample: to_u32(image.bps),
+        cfa: g.phase,
+    })
+}
+
+/// Where the active area is and which Bayer phase starts it.
+struct Geometry {
+    left: usize,
+    top: usize,
+    aw: usize,
+    ah: usize,
+    phase: BayerPhase,
+}
+
+/// The layout checks (Bayer, one sample per pixel, active area inside the sensor).
+fn geometry(path: &Path, image: &RawImage) -> Result<Geometry, RawError> {
     let layout_err = |layout: String| RawError::UnsupportedLayout {
         path: path.to_path_buf(),
         layout,
@@ -266,7 +320,30 @@ fn superpixel(
     let phase = BayerPhase::from_quad(quad)
         .filter(|_| periodic)
         .ok_or_else(|| layout_err(describe_cfa()))?;
+    Ok(Geometry {
+        left,
+        top,
+        aw,
+        ah,
+        phase,
+    })
+}
 
+/// The superpixel computation on a decoded image.
+fn superpixel(
+    path: &Path,
+    kind: FileKind,
+    image: &RawImage,
+    opts: &RawOptions,
+) -> Result<RawFrame, RawError> {
+    let Geometry {
+        left,
+        top,
+        aw,
+        ah,
+        phase,
+    } = geometry(path, image)?;
+    let (sw, sh) = (image.width, image.height);
     let black_levels = match opts.black_levels {
         Some(b) => b,
         None => file_black_levels(path, kind, image, left, top)?,

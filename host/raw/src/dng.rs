@@ -422,6 +422,62 @@ mod tests {
         assert_eq!(to_rational(2.8), (14, 5));
     }
 
+    fn write_altered(
+        name: &str,
+        alter: impl FnOnce(&mut Directory),
+    ) -> (tempfile::TempDir, std::path::PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(name);
+        let img = DngImage::new(12, 12, BayerPhase::Rggb, 16, vec![1000; 144]);
+        let mut d = directory(&path, &img).unwrap();
+        alter(&mut d);
+        std::fs::write(&path, encode(&d)).unwrap();
+        (dir, path)
+    }
+
+    #[test]
+    fn x_trans_is_refused_naming_the_file_and_layout() {
+        // Fujifilm's X-Trans pattern (6x6).
+        let xtrans = b"GGRGGBGGBGGRBRGRBGGGBGGRGGRGGBRBGBRG".map(|c| match c {
+            b'R' => 0,
+            b'G' => 1,
+            _ => 2,
+        });
+        let (_dir, path) = write_altered("XT_0001.DNG", |d| {
+            d.set(33421, TagValue::Short(vec![6, 6]));
+            d.set(33422, TagValue::Byte(xtrans.to_vec()));
+        });
+        let err = crate::decode_superpixel(&path, &crate::RawOptions::default()).unwrap_err();
+        let msg = err.to_string();
+        assert!(matches!(err, RawError::UnsupportedLayout { .. }), "{msg}");
+        assert!(
+            msg.contains("XT_0001.DNG") && msg.contains("X-Trans 6x6"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn linear_three_channel_raw_is_refused() {
+        let (_dir, path) = write_altered("LIN_0001.DNG", |d| {
+            d.set(262, TagValue::Short(vec![34892]));
+            d.set(277, TagValue::Short(vec![3]));
+            d.set(258, TagValue::Short(vec![16, 16, 16]));
+            d.entries.remove(&33421);
+            d.entries.remove(&33422);
+            d.set(50713, TagValue::Short(vec![1, 1]));
+            d.set(50714, TagValue::Short(vec![0, 0, 0]));
+            d.set(50717, TagValue::Long(vec![65535, 65535, 65535]));
+            d.strip = Some(vec![0x10; 12 * 12 * 3 * 2]);
+        });
+        let err = crate::decode_superpixel(&path, &crate::RawOptions::default()).unwrap_err();
+        let msg = err.to_string();
+        assert!(matches!(err, RawError::UnsupportedLayout { .. }), "{msg}");
+        assert!(
+            msg.contains("LIN_0001.DNG") && msg.contains("3 samples per pixel"),
+            "{msg}"
+        );
+    }
+
     #[test]
     fn bad_images_are_refused_with_every_problem() {
         let mut img = DngImage::new(6, 4, BayerPhase::Rggb, 14, vec![0; 10]);

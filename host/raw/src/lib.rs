@@ -46,8 +46,8 @@ pub mod tiff;
 
 pub use bayer::{BayerPhase, CfaColour};
 pub use decode::{
-    decode_superpixel, sensor_camera_to_superpixel, sensor_to_superpixel_centre,
-    sensor_to_superpixel_focal, RawFrame, RawOptions,
+    decode_superpixel, read_raw_header, sensor_camera_to_superpixel, sensor_to_superpixel_centre,
+    sensor_to_superpixel_focal, RawFrame, RawHeader, RawOptions,
 };
 pub use error::RawError;
 pub use kind::{check_extension, sniff, FileKind};

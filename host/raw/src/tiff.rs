@@ -1,8 +1,9 @@
 //! A small little-endian TIFF writer: directories of tagged values, sub-directories behind
 //! pointer tags (e.g. the EXIF IFD) and one uncompressed strip of image data per directory.
 //!
-//! Layout: the 8-byte header, then for each directory its strip data, its sub-directories
-//! (depth first), the directory itself and the values that do not fit an entry's 4 bytes. Every
+//! Layout: the 8-byte header, then for each directory its sub-directories (depth first), the
+//! directory itself, the values that do not fit an entry's 4 bytes, and last its strip (so a
+//! file cut short loses image data, which a reader can detect, rather than metadata). Every
 //! directory and value starts at an even offset (TIFF's word alignment). Entries are written in
 //! ascending tag order, as TIFF requires.
 
@@ -114,30 +115,32 @@ fn offset32(n: usize) -> u32 {
 /// Appends `dir` (and what it points to) to `buf`; returns the directory's offset.
 fn write_directory(buf: &mut Vec<u8>, dir: &Directory) -> u32 {
     let mut entries = dir.entries.clone();
+    for (tag, sub) in &dir.subs {
+        let off = write_directory(buf, sub);
+        entries.insert(*tag, TagValue::Long(vec![off]));
+    }
     if let Some(strip) = &dir.strip {
-        align(buf);
-        let off = offset32(buf.len());
-        buf.extend_from_slice(strip);
-        entries.insert(TAG_STRIP_OFFSETS, TagValue::Long(vec![off]));
+        // Patched once the strip's offset is known.
+        entries.insert(TAG_STRIP_OFFSETS, TagValue::Long(vec![0]));
         entries.insert(
             TAG_STRIP_BYTE_COUNTS,
             TagValue::Long(vec![offset32(strip.len())]),
         );
     }
-    for (tag, sub) in &dir.subs {
-        let off = write_directory(buf, sub);
-        entries.insert(*tag, TagValue::Long(vec![off]));
-    }
     align(buf);
     let start = buf.len();
     let dir_len = 2 + 12 * entries.len() + 4;
     let mut extra: Vec<u8> = Vec::new();
+    let mut strip_offset_field = None;
     buf.extend_from_slice(&(entries.len().min(usize::from(u16::MAX)) as u16).to_le_bytes());
     for (tag, value) in &entries {
         let bytes = value.bytes();
         buf.extend_from_slice(&tag.to_le_bytes());
         buf.extend_from_slice(&value.type_code().to_le_bytes());
         buf.extend_from_slice(&offset32(value.count()).to_le_bytes());
+        if *tag == TAG_STRIP_OFFSETS && dir.strip.is_some() {
+            strip_offset_field = Some(buf.len());
+        }
         if bytes.len() <= 4 {
             let mut field = [0u8; 4];
             field[..bytes.len()].copy_from_slice(&bytes);
@@ -151,6 +154,12 @@ fn write_directory(buf: &mut Vec<u8>, dir: &Directory) -> u32 {
     }
     buf.extend_from_slice(&0u32.to_le_bytes());
     buf.extend_from_slice(&extra);
+    if let (Some(strip), Some(field)) = (&dir.strip, strip_offset_field) {
+        align(buf);
+        let off = offset32(buf.len());
+        buf[field..field + 4].copy_from_slice(&off.to_le_bytes());
+        buf.extend_from_slice(strip);
+    }
     offset32(start)
 }
 

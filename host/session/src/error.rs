@@ -122,6 +122,10 @@ pub enum FileError {
         /// What is wrong.
         problem: String,
     },
+    /// A camera raw file could not be sniffed or decoded, or its name disagrees with its
+    /// content (the message names the file).
+    #[error(transparent)]
+    Raw(#[from] skinbrdf_raw::RawError),
     /// JSON (de)serialisation failed.
     #[error("{path}: {source}")]
     Json {

@@ -8,7 +8,7 @@
 //!   session.toml     format version, camera, images (file, role, linearization), target layouts,
 //!                    flash, reflectance standard, geometry, region of interest, known quantities
 //!   capture.json     the trigger controller's record (optional; see [`capture`])
-//!   images/...       the photographs (PNG/TIFF 8/16-bit, OpenEXR, JPEG)
+//!   images/...       the photographs (PNG/TIFF 8/16-bit, OpenEXR, JPEG, camera raw files)
 //!   scan.ply         the head scan (or an ideal sphere/cylinder in session.toml)
 //!   truth.json       ground truth (synthetic sessions only; see [`truth`])
 //!   truth/...        per-image truth masks
@@ -47,8 +47,8 @@ pub use capture::{CaptureRecord, ImageRole};
 pub use error::{FileError, SessionErrors, SessionProblem};
 pub use format::*;
 pub use linear::{
-    load_linear_image, read_header, ImageHeader, LinearImage, Linearization, ResponseTable,
-    StoredFormat, ToneCurve,
+    load_linear_image, load_raw_image, raw_kind, raw_options, read_header, ImageHeader,
+    LinearImage, Linearization, ResponseTable, StoredFormat, ToneCurve,
 };
 pub use load::{
     BadImagePolicy, LinearizationSource, SectionNeeds, Session, SkippedImage, TAG36H11_CODES,

@@ -14,6 +14,17 @@
 //! measured camera response: piecewise-linear, strictly increasing `code -> linear` samples,
 //! both normalised to `[0, 1]`, as for 8-bit JPEGs). Negative `n` (noise below the black level)
 //! stays negative and odd-symmetric so averages remain unbiased.
+//!
+//! # Camera raw files
+//!
+//! A raw file (DNG, CR2, NEF, ARW...; recognised by its content, see [`skinbrdf_raw::sniff`])
+//! is decoded by [`skinbrdf_raw::decode_superpixel`]: `V = (raw - black_c) / (white -
+//! black_c)` per CFA position with the file's own levels, 2x2 superpixels (half resolution),
+//! saturated where any photosite of the quad is at or above the white level. No session-wide
+//! `[linearization]` applies to it. An image's own `linearization` may override its levels:
+//! it must have `curve = "linear"`, and it overrides only when it states `white_level` (then
+//! `black_level`, default 0, and `white_level` replace the file's levels for every CFA
+//! position); `gamma`, `response` and `saturation_level` are errors on a raw file.
 
 use std::path::Path;
 
@@ -273,6 +284,11 @@ pub enum StoredFormat {
     U16,
     /// 32-bit float values (OpenEXR).
     F32,
+    /// Camera raw photosites of this many bits, loaded as superpixels.
+    Raw {
+        /// Bits per stored sample.
+        bits: u32,
+    },
 }
 
 impl StoredFormat {
@@ -282,17 +298,19 @@ impl StoredFormat {
             Self::U8 => Some(255.0),
             Self::U16 => Some(65535.0),
             Self::F32 => None,
+            Self::Raw { bits } => Some(((1u64 << if bits < 32 { bits } else { 32 }) - 1) as f64),
         }
     }
 }
 
 impl StoredFormat {
-    /// "8-bit", "16-bit" or "32-bit float".
+    /// "8-bit", "16-bit", "32-bit float" or "camera raw".
     pub const fn describe(self) -> &'static str {
         match self {
             Self::U8 => "8-bit",
             Self::U16 => "16-bit",
             Self::F32 => "32-bit float",
+            Self::Raw { .. } => "camera raw",
         }
     }
 
@@ -317,9 +335,70 @@ pub struct ImageHeader {
     pub format: StoredFormat,
 }
 
-/// Reads an image file's header only (no pixel data).
+/// The file's kind when its content is a camera raw file (its name checked against it), else
+/// `None` (other images are read by the `image` crate, which reports their problems). A non-raw
+/// file named like a raw file is an error naming the file.
+pub fn raw_kind(path: &Path) -> Result<Option<skinbrdf_raw::FileKind>, FileError> {
+    match skinbrdf_raw::sniff(path) {
+        Ok(kind) => {
+            skinbrdf_raw::check_extension(path, kind)?;
+            Ok(kind.is_raw().then_some(kind))
+        }
+        Err(skinbrdf_raw::RawError::UnrecognisedContent { .. }) => Ok(None),
+        Err(e) => Err(e.into()),
+    }
+}
+
+/// The level overrides a raw file takes from a linearization (see the module docs), or the
+/// `(field, problem)` that forbids it.
+pub fn raw_options(
+    lin: &Linearization,
+) -> Result<skinbrdf_raw::RawOptions, (&'static str, String)> {
+    if lin.curve != ToneCurve::Linear {
+        return Err((
+            "curve",
+            format!(
+                "{:?} on a camera raw file: raw values are linear, only curve = \"linear\" applies",
+                lin.curve
+            ),
+        ));
+    }
+    if lin.response.is_some() {
+        return Err(("response", "not meaningful for a camera raw file".into()));
+    }
+    if lin.saturation_level.is_some() {
+        return Err((
+            "saturation_level",
+            "not used for a camera raw file: a quad is saturated at the white level".into(),
+        ));
+    }
+    match lin.white_level {
+        Some(w) => Ok(skinbrdf_raw::RawOptions {
+            black_levels: Some([lin.black_level; 4]),
+            white_level: Some(w),
+        }),
+        None if lin.black_level != 0.0 => Err((
+            "black_level",
+            "overrides a camera raw file's levels only together with `white_level`".into(),
+        )),
+        None => Ok(skinbrdf_raw::RawOptions::default()),
+    }
+}
+
+/// Reads an image file's header only (no pixel data; a raw file's size is its superpixel
+/// size, the image as loaded).
 pub fn read_header(path: &Path) -> Result<ImageHeader, FileError> {
     use image::ImageDecoder;
+    if raw_kind(path)?.is_some() {
+        let hd = skinbrdf_raw::read_raw_header(path)?;
+        return Ok(ImageHeader {
+            width: hd.width_px,
+            height: hd.height_px,
+            format: StoredFormat::Raw {
+                bits: hd.bits_per_sample,
+            },
+        });
+    }
     let img_err = |source| FileError::Image {
         path: path.to_path_buf(),
         source,
@@ -377,8 +456,31 @@ impl LinearImage {
     }
 }
 
-/// Reads an image (PNG, TIFF, JPEG, OpenEXR; grey or RGB, alpha ignored) and linearizes it.
+/// Decodes a camera raw file with the level overrides of `lin` (see the module docs).
+pub fn load_raw_image(path: &Path, lin: &Linearization) -> Result<LinearImage, FileError> {
+    let opts = raw_options(lin).map_err(|(field, problem)| FileError::Invalid {
+        path: path.to_path_buf(),
+        field: format!("linearization.{field}"),
+        problem,
+    })?;
+    let f = skinbrdf_raw::decode_superpixel(path, &opts)?;
+    Ok(LinearImage {
+        width: f.width_px,
+        height: f.height_px,
+        rgb: f.rgb,
+        saturated: f.saturated,
+        format: StoredFormat::Raw {
+            bits: f.bits_per_sample,
+        },
+    })
+}
+
+/// Reads an image and linearizes it: camera raw files (by content) with [`load_raw_image`],
+/// others (PNG, TIFF, JPEG, OpenEXR; grey or RGB, alpha ignored) with `lin`.
 pub fn load_linear_image(path: &Path, lin: &Linearization) -> Result<LinearImage, FileError> {
+    if raw_kind(path)?.is_some() {
+        return load_raw_image(path, lin);
+    }
     let img = image::open(path).map_err(|source| FileError::Image {
         path: path.to_path_buf(),
         source,
@@ -399,7 +501,10 @@ pub fn load_linear_image(path: &Path, lin: &Linearization) -> Result<LinearImage
             .pixels()
             .map(|p| p.0.map(f32::from))
             .collect(),
-        StoredFormat::F32 => img.to_rgb32f().pixels().map(|p| p.0).collect(),
+        // `of` never gives `Raw` (raw files are decoded above).
+        StoredFormat::F32 | StoredFormat::Raw { .. } => {
+            img.to_rgb32f().pixels().map(|p| p.0).collect()
+        }
     };
     if let Some((field, problem)) = lin
         .problems()

@@ -16,7 +16,7 @@ use skinbrdf_core::Pose;
 use crate::capture::{CaptureRecord, ImageRole, CAPTURE_FORMAT_VERSION};
 use crate::error::{FileError, SessionErrors};
 use crate::format::*;
-use crate::linear::{load_linear_image, LinearImage, Linearization};
+use crate::linear::{load_linear_image, raw_options, LinearImage, Linearization, StoredFormat};
 use crate::parse::{parse_session_toml, Stated};
 use crate::truth::Truth;
 
@@ -116,7 +116,11 @@ impl Session {
         let capture = validate(&dir, &file, stated, &mut errs);
         let linearization_source = if stated.linearization {
             LinearizationSource::Stated
-        } else if file.images.iter().any(|i| i.linearization.is_none()) {
+        } else if file
+            .images
+            .iter()
+            .any(|i| i.linearization.is_none() && !is_raw_file(&i.file))
+        {
             LinearizationSource::FloatDefault
         } else {
             LinearizationSource::Unused
@@ -160,13 +164,16 @@ impl Session {
             .filter(move |(_, e)| e.role == role)
     }
 
-    /// The linearization of image `index` (its override or the session default).
+    /// The linearization of image `index`: its override, else for a camera raw file
+    /// [`Linearization::LINEAR`] (the file's own levels), else the session default.
     pub fn linearization(&self, index: usize) -> &Linearization {
-        self.file
-            .images
-            .get(index)
-            .and_then(|e| e.linearization.as_ref())
-            .unwrap_or(&self.file.linearization)
+        static RAW_OWN_LEVELS: Linearization = Linearization::LINEAR;
+        let entry = self.file.images.get(index);
+        match entry.and_then(|e| e.linearization.as_ref()) {
+            Some(l) => l,
+            None if entry.is_some_and(|e| is_raw_file(&e.file)) => &RAW_OWN_LEVELS,
+            None => &self.file.linearization,
+        }
     }
 
     /// Loads image `index` as linear RGB.
@@ -180,7 +187,14 @@ impl Session {
                 field: format!("images[{index}]"),
                 problem: format!("no such image (the session has {})", self.file.images.len()),
             })?;
-        load_linear_image(&self.path(&entry.file), self.linearization(index))
+        let mut img = load_linear_image(&self.path(&entry.file), self.linearization(index))?;
+        if let Some(k) = entry.exposure_scale {
+            let k = k as f32;
+            img.rgb
+                .iter_mut()
+                .for_each(|p| p.iter_mut().for_each(|c| *c *= k));
+        }
+        Ok(img)
     }
 
     /// Decodes every image and checks that its values are usable: readable to the end, every
@@ -536,6 +550,17 @@ fn validate(
                         im.file, hd.width, hd.height
                     ),
                 ),
+                Ok(hd) if matches!(hd.format, StoredFormat::Raw { .. }) => {
+                    // No session default applies to a raw file; its own table may override
+                    // the levels.
+                    if let Some(Err((f, p))) = im.linearization.as_ref().map(raw_options) {
+                        errs.push(
+                            file,
+                            format!("{field}.linearization.{f}"),
+                            format!("`{}` (camera raw): {p}", im.file),
+                        );
+                    }
+                }
                 Ok(hd) => {
                     let (lin, lin_field) = match &im.linearization {
                         Some(l) => (l, format!("{field}.linearization")),
@@ -559,6 +584,15 @@ fn validate(
         if let Some(l) = &im.linearization {
             for (f, p) in l.problems() {
                 errs.push(file, format!("{field}.linearization.{f}"), p);
+            }
+        }
+        if let Some(k) = im.exposure_scale {
+            if !(k.is_finite() && k > 0.0) {
+                errs.push(
+                    file,
+                    format!("{field}.exposure_scale"),
+                    format!("must be positive and finite, got {k}"),
+                );
             }
         }
         if let Some(m) = &im.mask {
@@ -962,7 +996,9 @@ impl SectionNeeds {
         let linearization = images
             .iter()
             .enumerate()
-            .find(|(_, im)| im.linearization.is_none() && !is_float_file(&im.file))
+            .find(|(_, im)| {
+                im.linearization.is_none() && !is_float_file(&im.file) && !is_raw_file(&im.file)
+            })
             .map(|(i, im)| {
                 format!(
                     "images[{i}] (`{}`) is an integer image without a linearization of its own",
@@ -977,6 +1013,15 @@ impl SectionNeeds {
             linearization,
         }
     }
+}
+
+/// True for a camera raw file, by its extension (a content that disagrees with the name is
+/// refused when the image is read).
+fn is_raw_file(name: &str) -> bool {
+    Path::new(name)
+        .extension()
+        .and_then(|e| skinbrdf_raw::FileKind::from_extension(&e.to_string_lossy()))
+        .is_some_and(|k| k.is_raw())
 }
 
 /// True for an OpenEXR file (float values), by its extension.

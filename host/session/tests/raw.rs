@@ -1,0 +1,292 @@
+//! Sessions whose images are camera raw files (DNG): they load without `[linearization]`, pass
+//! the image check, and give the same values as 16-bit PNGs of the same linear data.
+#![allow(clippy::unwrap_used)] // test helpers
+
+use std::path::Path;
+
+use glam::DVec3;
+use skinbrdf_brdf::BrdfModel;
+use skinbrdf_core::{CameraModel, Pose};
+use skinbrdf_raw::dng::{write_dng, DngImage};
+use skinbrdf_raw::BayerPhase;
+use skinbrdf_session::write::write_png_rgb16;
+use skinbrdf_session::*;
+
+/// Superpixel image size.
+const W: u32 = 10;
+const H: u32 = 8;
+const BLACK: u16 = 512;
+const WHITE: u16 = 16_383;
+/// A DNG and a PNG of the same value differ by at most half a 14-bit step (over the range
+/// `WHITE - BLACK`) plus half a 16-bit step, plus the f32 rounding of both.
+const QUANT_TOL: f32 = 0.5 / (WHITE - BLACK) as f32 + 0.5 / 65_535.0 + 1e-6;
+
+fn target(id: u32, centre: DVec3) -> Target {
+    Target::square(id, 0.04, centre, DVec3::NEG_Z, DVec3::Y).unwrap()
+}
+
+fn session_file(ext: &str) -> SessionFile {
+    let images = ["m0", "m1", "l0", "s0"]
+        .into_iter()
+        .zip([
+            ImageRole::Measurement,
+            ImageRole::Measurement,
+            ImageRole::LightPosition,
+            ImageRole::ReferenceStandard,
+        ])
+        .map(|(f, role)| ImageEntry {
+            file: format!("images/{f}.{ext}"),
+            role,
+            exposure_index: None,
+            linearization: None,
+            mask: None,
+            world_from_camera: None,
+            world_from_head: None,
+            exposure_scale: None,
+        })
+        .collect();
+    SessionFile {
+        format_version: SESSION_FORMAT_VERSION,
+        description: "raw test".into(),
+        capture: None,
+        camera: CameraSpec::Calibrated(CameraModel::from_fov(W, H, 0.8)),
+        linearization: Linearization::LINEAR,
+        images,
+        targets: TargetLayouts {
+            family: TAG_FAMILY.into(),
+            reference: vec![target(0, DVec3::new(0.0, 0.0, 2.0))],
+            headdress: vec![target(10, DVec3::new(0.0, 0.1, 0.0))],
+            unplaced: Vec::new(),
+        },
+        flash: FlashSpec {
+            diameter_m: 0.082,
+            light_centre_m: DVec3::ZERO,
+            targets: vec![target(20, DVec3::new(0.08, 0.0, 0.0))],
+        },
+        standard: Some(StandardSpec {
+            brdf: BrdfModel::Lambertian { albedo: [0.99; 3] },
+            size_m: [0.1, 0.1],
+            targets: vec![target(30, DVec3::new(0.08, 0.0, 0.0))],
+        }),
+        geometry: GeometrySpec::Sphere {
+            centre_m: DVec3::ZERO,
+            radius_m: 0.08,
+        },
+        roi: None,
+        known: KnownQuantities {
+            world_from_standard: Some(Pose::IDENTITY),
+            ..Default::default()
+        },
+    }
+}
+
+/// Linear RGB of image `i` at superpixel (u, v), in [0, 1].
+fn value(i: usize, u: u32, v: u32) -> [f64; 3] {
+    let t = (u as f64 + 0.37 * v as f64 + 0.11 * i as f64) / 14.0;
+    [0.05 + 0.8 * t, 0.02 + 0.5 * t * t, 0.9 - 0.6 * t]
+}
+
+/// Writes the session with DNG images (phase GBRG at an odd active-area offset) or PNGs.
+fn write_session(dir: &Path, ext: &str, edit: impl FnOnce(&mut SessionFile)) -> SessionFile {
+    let mut f = session_file(ext);
+    edit(&mut f);
+    let (left, top) = (1u32, 3u32);
+    let (sw, sh) = (2 * W + left + 3, 2 * H + top + 1);
+    let phase = BayerPhase::Gbrg;
+    for (i, im) in f.images.iter().enumerate() {
+        let path = dir.join(&im.file);
+        if ext == "png" {
+            let px: Vec<u16> = (0..H)
+                .flat_map(|v| (0..W).flat_map(move |u| value(i, u, v)))
+                .map(|c| (c * 65_535.0).round() as u16)
+                .collect();
+            write_png_rgb16(&path, W, H, &px).unwrap();
+            continue;
+        }
+        let mut data = vec![BLACK; (sw * sh) as usize];
+        for v in 0..H {
+            for u in 0..W {
+                let rgb = value(i, u, v);
+                for k in 0..4 {
+                    let (x, y) = (left + 2 * u + k % 2, top + 2 * v + k / 2);
+                    let c = match phase.colour_at(k as usize % 2, k as usize / 2) {
+                        skinbrdf_raw::CfaColour::Red => rgb[0],
+                        skinbrdf_raw::CfaColour::Green => rgb[1],
+                        skinbrdf_raw::CfaColour::Blue => rgb[2],
+                    };
+                    data[(y * sw + x) as usize] =
+                        (f64::from(BLACK) + c * f64::from(WHITE - BLACK)).round() as u16;
+                }
+            }
+        }
+        let mut img = DngImage::new(sw, sh, phase, 14, data);
+        img.active_area = Some([top, left, top + 2 * H, left + 2 * W]);
+        img.black_levels = [BLACK; 4];
+        img.white_level = WHITE;
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        write_dng(&path, &img).unwrap();
+    }
+    Session::write_file(dir, &f).unwrap();
+    // A raw session needs no [linearization]: take it out of the file.
+    let toml_path = dir.join(SESSION_FILE);
+    let mut table: toml::Table = std::fs::read_to_string(&toml_path)
+        .unwrap()
+        .parse()
+        .unwrap();
+    if ext != "png" {
+        table.remove("linearization");
+    }
+    std::fs::write(&toml_path, toml::to_string(&table).unwrap()).unwrap();
+    f
+}
+
+#[test]
+fn a_dng_session_loads_and_matches_its_png_twin() {
+    let raw_dir = tempfile::tempdir().unwrap();
+    let png_dir = tempfile::tempdir().unwrap();
+    write_session(raw_dir.path(), "dng", |_| {});
+    write_session(png_dir.path(), "png", |_| {});
+    let mut raw = Session::load(raw_dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    let png = Session::load(png_dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(raw.linearization_source, LinearizationSource::Unused);
+    let needs = SectionNeeds::of(&raw.file.images, &raw.file.known, Some(&raw.file.camera));
+    assert_eq!(needs.linearization, None);
+    raw.check_images(BadImagePolicy::Fail)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let hd = read_header(&raw.path(&raw.file.images[0].file)).unwrap();
+    assert_eq!(
+        (hd.width, hd.height, hd.format),
+        (W, H, StoredFormat::Raw { bits: 14 })
+    );
+    for i in 0..4 {
+        let a = raw.load_image(i).unwrap();
+        let b = png.load_image(i).unwrap();
+        assert_eq!((a.width, a.height), (W, H));
+        assert_eq!(a.format, StoredFormat::Raw { bits: 14 });
+        for (p, q) in a.rgb.iter().zip(&b.rgb) {
+            for c in 0..3 {
+                assert!(
+                    (p[c] - q[c]).abs() <= QUANT_TOL,
+                    "image {i}: {p:?} vs {q:?}"
+                );
+            }
+        }
+        assert!(a.saturated.iter().all(|s| !s));
+    }
+}
+
+#[test]
+fn exposure_scale_multiplies_v_and_is_validated() {
+    let dir = tempfile::tempdir().unwrap();
+    write_session(dir.path(), "dng", |f| {
+        f.images[1].exposure_scale = Some(2.0)
+    });
+    let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    let a = s.load_image(1).unwrap();
+    let plain = load_linear_image(&s.path(&s.file.images[1].file), s.linearization(1)).unwrap();
+    for (p, q) in a.rgb.iter().zip(&plain.rgb) {
+        for c in 0..3 {
+            assert_eq!(p[c], 2.0 * q[c]);
+        }
+    }
+    let bad = tempfile::tempdir().unwrap();
+    write_session(bad.path(), "dng", |f| {
+        f.images[0].exposure_scale = Some(-1.0);
+        f.images[2].exposure_scale = Some(f64::INFINITY);
+    });
+    let errs = Session::load(bad.path()).unwrap_err();
+    assert!(errs.has_field("images[0].exposure_scale"), "{errs}");
+    assert!(errs.has_field("images[2].exposure_scale"), "{errs}");
+}
+
+#[test]
+fn raw_level_overrides_and_their_refusals() {
+    // An override with white_level replaces the file's levels.
+    let dir = tempfile::tempdir().unwrap();
+    write_session(dir.path(), "dng", |f| {
+        f.images[0].linearization = Some(Linearization {
+            black_level: 0.0,
+            white_level: Some(f64::from(WHITE)),
+            ..Linearization::LINEAR
+        });
+    });
+    let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    let img = s.load_image(0).unwrap();
+    let rgb = value(0, 0, 0);
+    let g = (f64::from(BLACK) + rgb[1] * f64::from(WHITE - BLACK)).round() / f64::from(WHITE);
+    assert!(
+        (f64::from(img.rgb[0][1]) - g).abs() < 1e-6,
+        "{:?}",
+        img.rgb[0]
+    );
+
+    // Other curves, saturation levels and a lone black level are refused, naming the field.
+    let bad = tempfile::tempdir().unwrap();
+    write_session(bad.path(), "dng", |f| {
+        f.images[0].linearization = Some(Linearization {
+            curve: ToneCurve::Srgb,
+            ..Linearization::LINEAR
+        });
+        f.images[1].linearization = Some(Linearization {
+            black_level: 100.0,
+            ..Linearization::LINEAR
+        });
+        f.images[2].linearization = Some(Linearization {
+            white_level: Some(9000.0),
+            saturation_level: Some(8000.0),
+            ..Linearization::LINEAR
+        });
+    });
+    let errs = Session::load(bad.path()).unwrap_err();
+    assert!(errs.has_field("images[0].linearization.curve"), "{errs}");
+    assert!(
+        errs.has_field("images[1].linearization.black_level"),
+        "{errs}"
+    );
+    assert!(
+        errs.has_field("images[2].linearization.saturation_level"),
+        "{errs}"
+    );
+}
+
+#[test]
+fn size_and_extension_problems_name_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    write_session(dir.path(), "dng", |f| {
+        f.camera = CameraSpec::Calibrated(CameraModel::from_fov(2 * W, 2 * H, 0.8));
+    });
+    let errs = Session::load(dir.path()).unwrap_err().to_string();
+    assert!(
+        errs.contains("images/m0.dng") && errs.contains("is 10x8 px but the camera is 20x16 px"),
+        "{errs}"
+    );
+
+    // A DNG named .png, a PNG named .dng.
+    let dir = tempfile::tempdir().unwrap();
+    write_session(dir.path(), "dng", |_| {});
+    let images = dir.path().join("images");
+    std::fs::rename(images.join("m0.dng"), images.join("m0x.png")).unwrap();
+    write_png_rgb16(
+        &images.join("m1x.dng"),
+        W,
+        H,
+        &vec![1000; (3 * W * H) as usize],
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(dir.path().join(SESSION_FILE))
+        .unwrap()
+        .replace("images/m0.dng", "images/m0x.png")
+        .replace("images/m1.dng", "images/m1x.dng")
+        // The .png name asks for a [linearization].
+        + "\n[linearization]\ncurve = \"linear\"\n";
+    std::fs::write(dir.path().join(SESSION_FILE), text).unwrap();
+    let errs = Session::load(dir.path()).unwrap_err().to_string();
+    assert!(
+        errs.contains("m0x.png: the file is DNG but its name says PNG"),
+        "{errs}"
+    );
+    assert!(
+        errs.contains("m1x.dng: the file is PNG but its name says DNG"),
+        "{errs}"
+    );
+}
