@@ -481,7 +481,7 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
                 format!(
                     "{} at {} mm",
                     b.lens_model.as_deref().unwrap_or("?"),
-                    b.focal_length_mm.map_or("?".into(), |f| format!("{f}"))
+                    b.focal_length_mm.map_or("?".into(), |f| format!("{f:.1}"))
                 )
             })
             .unwrap_or_default(),

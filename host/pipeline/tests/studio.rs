@@ -242,3 +242,72 @@ fn damaged_and_misnamed_raw_files_are_refused_by_name() {
     let err = Session::load(&out).expect_err("placements needed");
     assert!(err.has_field("targets.unplaced"), "{err}");
 }
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn the_studio_faults_scene_is_ingested_with_every_fault_reported() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = Scene::load("studio-faults").expect("scene");
+    let st = scene.studio.clone();
+    let s = synthesize(&scene, dir.path(), (254, 169));
+    let out = dir.path().join("S2");
+    let mut cfg = ingest_config(&s, &out, "rig-measured.toml");
+    cfg.exposure = ExposurePolicy::Normalise;
+    let r = ingest(&cfg).expect("ingest");
+    let m = &r.matching;
+    assert_eq!(m.missing, st.missing_files, "the deleted file's exposure");
+    assert_eq!(m.no_file_expected, st.misfired_exposures, "the misfire");
+    assert_eq!(
+        m.extra_files.len() as u32,
+        st.test_shots_before + st.test_shots_after,
+        "{:?}",
+        m.extra_files
+    );
+    // 36 exposures, one misfired, one file deleted.
+    assert_eq!(r.images.len(), 34);
+    // The clock: offset within the release jitter, drift within what 34 pairs over ~80 s of
+    // 1 ms jitter and 10 ms sub-seconds resolve (about 10 ppm; a third of the set drift).
+    assert!(
+        (m.clock.offset_s - st.camera_clock_offset_s).abs() < 0.02,
+        "{:?}",
+        m.clock
+    );
+    assert!(
+        (m.clock.drift_ppm - st.camera_clock_drift_ppm).abs() < 30.0,
+        "{:?}",
+        m.clock
+    );
+    let change = st.exposure_change.as_ref().expect("an ISO slip");
+    for i in &r.images {
+        let expected = if i.exposure_index == change.exposure_index {
+            f64::from(st.iso) / f64::from(change.iso)
+        } else {
+            1.0
+        };
+        assert!((i.exposure_scale - expected).abs() < 1e-12, "{i:?}");
+    }
+    // Each pair's file is the one the generator wrote for that exposure.
+    let rec: skinbrdf_session::CaptureRecord =
+        serde_json::from_slice(&std::fs::read(s.join("studio/capture.json")).expect("record"))
+            .expect("record");
+    let rig = skinbrdf_synth::layout::build_rig(&scene);
+    let shots = skinbrdf_synth::layout::shots_from_capture(&scene, &rig, &rec);
+    let card = skinbrdf_synth::studio::card_files(&scene, &rec, &shots);
+    for pair in &m.pairs {
+        let written = card
+            .iter()
+            .find(|c| c.exposure_index == Some(pair.exposure_index))
+            .expect("a card file per fired exposure");
+        assert!(
+            pair.file.ends_with(&written.file),
+            "{pair:?} vs {}",
+            written.file
+        );
+    }
+    let session = Session::load(&out).expect("the ingested session loads");
+    assert_eq!(session.file.images.len(), 34);
+    let img = session
+        .load_image(0)
+        .expect("a 12-bit BGGR raw with an odd border decodes");
+    assert_eq!((img.width, img.height), (254, 169));
+}

@@ -15,6 +15,10 @@ use skinbrdf_core::BrownConrady;
 /// The built-in scenes: `(name, TOML text)`.
 pub const BUILTIN_SCENES: &[(&str, &str)] = &[
     ("default", include_str!("../../../scenes/default.toml")),
+    (
+        "studio-faults",
+        include_str!("../../../scenes/studio-faults.toml"),
+    ),
     ("sphere", include_str!("../../../scenes/sphere.toml")),
     ("cylinder", include_str!("../../../scenes/cylinder.toml")),
     ("oily", include_str!("../../../scenes/oily.toml")),
