@@ -681,8 +681,11 @@ fn read_camera(path: &Path) -> Result<(PathBuf, CameraSpec), IngestError> {
     Ok((path.to_path_buf(), spec))
 }
 
+/// Files on the card that are not photographs: name and what it is.
+type SkippedFiles = Vec<(String, String)>;
+
 /// Every file under the card, photographs (with their metadata) and the rest.
-fn list_card(card: &Path) -> Result<(Vec<CardPhoto>, Vec<(String, String)>), IngestError> {
+fn list_card(card: &Path) -> Result<(Vec<CardPhoto>, SkippedFiles), IngestError> {
     if !card.is_dir() {
         return Err(IngestError::Input {
             path: card.to_path_buf(),

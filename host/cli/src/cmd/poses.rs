@@ -1,7 +1,9 @@
 //! `skinbrdf poses SESSION_DIR [--json]`: detect the coded targets in every image, estimate the
 //! camera, head, flash and standard poses with covariances, write `out/poses.json` (atomically)
 //! and print per image the targets found, reprojection RMS and time. With `truth.json` present,
-//! errors against the truth are printed too.
+//! errors against the truth are printed too. When the camera was calibrated (`--recalibrate`,
+//! or `status = "to-be-calibrated"`), the calibration is also written as `camera.toml` beside
+//! `poses.json`: the `[camera]` table that `skinbrdf ingest --camera` reads.
 //!
 //! `skinbrdf poses --scenes all --work DIR` is the per-scene benchmark: it renders every
 //! built-in scene (or the comma-separated list given) into `DIR/<scene>` (kept with `--keep`,
@@ -65,6 +67,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     write_json_atomic(&out, &est)?;
+    if let Some(cal) = &est.calibration {
+        let path = out.with_file_name("camera.toml");
+        write_camera_file(&path, cal, &dir)?;
+        eprintln!(
+            "camera calibration written to {} (`skinbrdf ingest --camera`)",
+            path.display()
+        );
+    }
     let truth = session.load_truth().transpose()?;
     let errs = truth.as_ref().map(|t| compare_truth(&est, t));
     if args.json {
@@ -253,5 +263,30 @@ fn bench_scenes(list: &str, args: &Args) -> anyhow::Result<()> {
     } else {
         print!("{}", skinbrdf_pipeline::scenes::markdown(&rows));
     }
+    Ok(())
+}
+
+/// Writes a calibration as a `[camera]` table (the `session.toml` format), the file
+/// `skinbrdf ingest --camera` reads.
+fn write_camera_file(
+    path: &std::path::Path,
+    cal: &skinbrdf_poses::calib::Calibration,
+    session: &std::path::Path,
+) -> anyhow::Result<()> {
+    #[derive(serde::Serialize)]
+    struct CameraFile {
+        camera: skinbrdf_session::CameraSpec,
+    }
+    let body = toml::to_string(&CameraFile {
+        camera: skinbrdf_session::CameraSpec::Calibrated(cal.camera),
+    })
+    .context("serialising the calibration")?;
+    let text = format!(
+        "# Camera calibration from the reference targets of {} ({} points, reprojection RMS {:.3} px).\n# The image size is the images' as loaded (2x2 superpixels for raw files).\n{body}",
+        session.display(),
+        cal.points,
+        cal.rms_px,
+    );
+    skinbrdf_session::write_atomic(path, text.as_bytes())?;
     Ok(())
 }
