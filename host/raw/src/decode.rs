@@ -231,6 +231,11 @@ pub struct RawHeader {
 /// same layout checks (non-Bayer data is refused here too).
 pub fn read_raw_header(path: &Path) -> Result<RawHeader, RawError> {
     let (kind, src) = open_raw(path)?;
+    if kind == FileKind::Dng {
+        if let Some(h) = dng_header(path) {
+            return Ok(h);
+        }
+    }
     let image = loader()
         .decode(&src, &RawDecodeParams::default(), true)
         .map_err(|e| RawError::Decode {
@@ -245,6 +250,73 @@ pub fn read_raw_header(path: &Path) -> Result<RawHeader, RawError> {
         height_px: to_u32(g.ah / 2),
         bits_per_sample: to_u32(image.bps),
         cfa: g.phase,
+    })
+}
+
+/// A DNG's header from its tags alone, without unpacking the image (rawler's decoder unpacks
+/// every photosite even when asked for the header only): the raw IFD (photometric CFA, full
+/// resolution), its size, bit depth, active area and 2x2 `CFAPattern`, which the DNG
+/// specification anchors at the active area's top-left photosite. `None` when any of it is
+/// missing or not a one-sample 2x2 Bayer layout: the full decoder then checks and reports.
+fn dng_header(path: &Path) -> Option<RawHeader> {
+    let mut reader = std::io::BufReader::new(std::fs::File::open(path).ok()?);
+    let tiff = GenericTiffReader::new(&mut reader, 0, 0, None, &[]).ok()?;
+    let mut ifds: Vec<&IFD> = Vec::new();
+    for ifd in tiff.chains() {
+        ifds.push(ifd);
+        ifds.extend(ifd.sub_ifds().values().flatten());
+    }
+    let raw = ifds.into_iter().find(|ifd| {
+        let cfa = ifd
+            .get_entry(TiffCommonTag::PhotometricInt)
+            .is_some_and(|e| e.force_u16(0) == PHOTOMETRIC_CFA);
+        let reduced = ifd
+            .get_entry(TiffCommonTag::NewSubFileType)
+            .is_some_and(|e| e.force_u32(0) & 1 != 0);
+        cfa && !reduced
+    })?;
+    let get = |tag: TiffCommonTag| raw.get_entry(tag);
+    let width = get(TiffCommonTag::ImageWidth)?.force_u32(0);
+    let height = get(TiffCommonTag::ImageLength)?.force_u32(0);
+    let bits = get(TiffCommonTag::BitsPerSample)?.force_u32(0);
+    let spp = get(TiffCommonTag::SamplesPerPixel).map_or(1, |e| e.force_u32(0));
+    if spp != 1 {
+        return None;
+    }
+    let dim = get(TiffCommonTag::CFARepeatPatternDim)?;
+    if dim.count() != 2 || dim.force_u32(0) != 2 || dim.force_u32(1) != 2 {
+        return None;
+    }
+    let pattern = get(TiffCommonTag::CFAPattern)?;
+    if pattern.count() != 4 {
+        return None;
+    }
+    let colour = |i: usize| match pattern.force_u32(i) {
+        0 => Some(CfaColour::Red),
+        1 => Some(CfaColour::Green),
+        2 => Some(CfaColour::Blue),
+        _ => None,
+    };
+    let cfa = BayerPhase::from_quad([colour(0)?, colour(1)?, colour(2)?, colour(3)?])?;
+    let (top, left, bottom, right) = match get(TiffCommonTag::ActiveArea) {
+        Some(a) if a.count() == 4 => (
+            a.force_u32(0),
+            a.force_u32(1),
+            a.force_u32(2),
+            a.force_u32(3),
+        ),
+        Some(_) => return None,
+        None => (0, 0, height, width),
+    };
+    if !(top < bottom && left < right && bottom <= height && right <= width) {
+        return None;
+    }
+    Some(RawHeader {
+        kind: FileKind::Dng,
+        width_px: (right - left) / 2,
+        height_px: (bottom - top) / 2,
+        bits_per_sample: bits,
+        cfa,
     })
 }
 
@@ -461,4 +533,40 @@ fn file_black_levels(
         });
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dng::{write_dng, DngImage};
+
+    #[test]
+    fn a_dng_header_is_read_from_its_tags_and_agrees_with_the_decoder() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        for (phase, border) in [(BayerPhase::Rggb, 0u32), (BayerPhase::Gbrg, 3)] {
+            let (w, h) = (40 + 2 * border, 30 + 2 * border);
+            let mut img = DngImage::new(w, h, phase, 16, vec![1000; (w * h) as usize]);
+            if border > 0 {
+                img.active_area = Some([border, border, h - border, w - border]);
+            }
+            let path = dir.path().join(format!("b{border}.dng"));
+            write_dng(&path, &img).expect("write");
+            let fast = dng_header(&path).expect("the tags give the header");
+            let full = decode_superpixel(&path, &RawOptions::default()).expect("decode");
+            assert_eq!(
+                (
+                    fast.width_px,
+                    fast.height_px,
+                    fast.cfa,
+                    fast.bits_per_sample
+                ),
+                (
+                    full.width_px,
+                    full.height_px,
+                    full.cfa,
+                    full.bits_per_sample
+                )
+            );
+        }
+    }
 }
