@@ -914,13 +914,19 @@ fn report_identical_contents(
     }
     let mut groups: Vec<Vec<usize>> = by_len.into_values().filter(|g| g.len() > 1).collect();
     groups.sort();
+    let path_of = |i: usize| dir.join(&s.images[i].file);
     for group in groups {
-        let mut seen: Vec<(usize, Vec<u8>)> = Vec::new();
+        // A digest per file, streamed (a session's raw files are tens of MB each, all of one
+        // length); files are compared byte for byte only when their digests agree.
+        let mut seen: Vec<(usize, u64)> = Vec::new();
         for i in group {
-            let Ok(bytes) = std::fs::read(dir.join(&s.images[i].file)) else {
+            let Some(digest) = stream_digest(&path_of(i)) else {
                 continue;
             };
-            if let Some((prev, _)) = seen.iter().find(|(_, b)| *b == bytes) {
+            let twin = seen
+                .iter()
+                .find(|(j, d)| *d == digest && same_contents(&path_of(*j), &path_of(i)));
+            if let Some((prev, _)) = twin {
                 errs.push(
                     file,
                     format!("images[{i}].file"),
@@ -930,10 +936,59 @@ fn report_identical_contents(
                     ),
                 );
             } else {
-                seen.push((i, bytes));
+                seen.push((i, digest));
             }
         }
     }
+}
+
+/// A 64-bit digest of a file's contents, read in chunks (`None` when unreadable).
+fn stream_digest(path: &Path) -> Option<u64> {
+    use std::hash::Hasher;
+    use std::io::Read;
+    let mut f = std::fs::File::open(path).ok()?;
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = f.read(&mut buf).ok()?;
+        if n == 0 {
+            return Some(h.finish());
+        }
+        h.write(&buf[..n]);
+    }
+}
+
+/// Whether two files have the same bytes, compared in chunks.
+fn same_contents(a: &Path, b: &Path) -> bool {
+    let (Ok(mut fa), Ok(mut fb)) = (std::fs::File::open(a), std::fs::File::open(b)) else {
+        return false;
+    };
+    let (mut ba, mut bb) = (vec![0u8; 1 << 20], vec![0u8; 1 << 20]);
+    loop {
+        let (Ok(na), Ok(nb)) = (read_full(&mut fa, &mut ba), read_full(&mut fb, &mut bb)) else {
+            return false;
+        };
+        if na != nb || ba[..na] != bb[..nb] {
+            return false;
+        }
+        if na == 0 {
+            return true;
+        }
+    }
+}
+
+/// Fills `buf` as far as the file allows; the number of bytes read.
+fn read_full(f: &mut std::fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
+    use std::io::Read;
+    let mut n = 0;
+    while n < buf.len() {
+        let k = f.read(&mut buf[n..])?;
+        if k == 0 {
+            break;
+        }
+        n += k;
+    }
+    Ok(n)
 }
 
 /// Which optional parts of a session its planned stages need, from the quantities it already
