@@ -7,11 +7,21 @@
 //!    maximum over the 3 x 3 neighbouring tiles. Pixels whose neighbourhood contrast is below
 //!    [`DetectorConfig::min_contrast`] (relative to the image's range) are left unclassified, so
 //!    flat regions and uneven flash lighting do not produce spurious components.
-//! 2. **Dark components** (8-connected, union-find) of plausible size; the outer contour of each
-//!    is traced (Moore neighbourhood tracing).
+//! 2. **Dark components** of plausible size (union-find): first the 4-connected ones, so that a
+//!    border touching dark surroundings (a shadow, a dark band, a neighbour) only diagonally
+//!    through its thin white ring stays apart from them; then the 8-connected unions of small
+//!    4-connected components (at most [`MAX_JOIN_PX`] pixels each), so that the border of a
+//!    small blurred tag whose pixels meet only diagonally is whole. A union is not tried when
+//!    one of its parts already decoded. The outer contour of each is traced (Moore
+//!    neighbourhood tracing).
 //! 3. **Quad fit**: four corner candidates from the contour (the farthest point pair and the two
-//!    points farthest from their chord), a line fitted to the middle of each side, rejection when
-//!    the contour strays from the lines (not a quadrilateral), is not convex or too small.
+//!    points farthest from their chord, at least [`MIN_CHORD_OFFSET`] of it away, so strongly
+//!    foreshortened tags pass), a line fitted to the middle of each side and refitted without
+//!    the points beyond the side tolerance (at most [`MAX_STRAY_FRACTION`] of them: specks
+//!    touching the border); rejection when more stray (not a quadrilateral), when the quad is
+//!    not convex, has a corner sharper than [`MIN_CORNER_ANGLE_DEG`] or is too small. A quick
+//!    test of the unrefined quad (its border cells dark against its white ring) drops most
+//!    non-tags before the edge refinement.
 //! 4. **Edge refinement** on the grey image (not the binary one): along each side, the edge
 //!    position along the normal is the centroid of the squared positive (dark-to-light) gradient
 //!    in a window, re-centred over three passes so the window is symmetric about the edge (an
@@ -206,17 +216,47 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
         return (Vec::new(), stats);
     }
     let dark = threshold(img, cfg);
-    let comps = components(&dark, img.width, img.height, cfg);
-    stats.components = comps.len();
     let reference = (cfg.corner_model == CornerModel::BinaryBoundary)
         .then(|| crate::reference_quad::reference_quads(img));
     let mut out: Vec<Detection> = Vec::new();
-    for comp in &comps {
-        let contour = trace_contour(&comp.labels_view(&dark.labels), img.width, img.height, comp);
+    let (w, h) = (img.width, img.height);
+    let cc = Components::new(&dark, w, h);
+    // 4-connected components first (a border touching dark surroundings only diagonally stays
+    // apart from them), then the 8-connected groups of small ones (a small blurred border whose
+    // pixels meet only diagonally).
+    let singles = cc
+        .stats
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.plausible(w, h, cfg))
+        .map(|(k, c)| (*c, k as u32, false));
+    let groups = cc
+        .groups
+        .iter()
+        .filter(|c| c.plausible(w, h, cfg))
+        .map(|c| (*c, cc.comp_of[c.root as usize], true));
+    let candidates: Vec<(CompStats, u32, bool)> = singles.chain(groups).collect();
+    // Groups holding a component that already decoded are not tried again.
+    let mut decoded_groups: std::collections::HashSet<u32> = std::collections::HashSet::new();
+    for (comp, k, grouped) in &candidates {
+        let (comp, k) = (*comp, *k);
+        if *grouped && decoded_groups.contains(&k) {
+            continue;
+        }
+        stats.components += 1;
+        let contour = if *grouped {
+            trace_contour(|i| cc.in_group(i, k), w, h, &comp)
+        } else {
+            trace_contour(|i| cc.in_component(i, k), w, h, &comp)
+        };
         let Some(quad) = fit_quad(&contour, cfg) else {
             continue;
         };
         stats.quads += 1;
+        if !border_is_dark(img, &quad) {
+            stats.rejected_decode += 1;
+            continue;
+        }
         let Some(mut refined) = refine_quad(img, quad) else {
             stats.rejected_decode += 1;
             continue;
@@ -236,7 +276,10 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
             refined.corners = b;
         }
         match decode(img, &refined, cfg) {
-            Some(det) => out.push(det),
+            Some(det) => {
+                decoded_groups.insert(cc.group_of[k as usize]);
+                out.push(det)
+            }
             None => stats.rejected_decode += 1,
         }
     }
@@ -264,12 +307,8 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
 // ---------------------------------------------------------------------------------------------
 // Threshold and components
 
-struct Binary {
-    /// Union-find parent per pixel for dark pixels, `u32::MAX` for others.
-    labels: Vec<u32>,
-}
-
-fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
+/// Dark pixels of the adaptive threshold (step 1 of the method).
+fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Vec<bool> {
     let (w, h) = (img.width, img.height);
     let ts = cfg.tile_px.max(2);
     let (tw, th) = (w.div_ceil(ts), h.div_ceil(ts));
@@ -311,7 +350,7 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
             nmax[ty * tw + tx] = hi;
         }
     }
-    let mut labels = vec![u32::MAX; w * h];
+    let mut dark = vec![false; w * h];
     for y in 0..h {
         let ty = y / ts;
         for x in 0..w {
@@ -320,44 +359,187 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
             if hi - lo < min_diff {
                 continue;
             }
-            let v = img.data[y * w + x];
-            if v <= 0.5 * (lo + hi) {
-                labels[y * w + x] = (y * w + x) as u32;
-            }
+            dark[y * w + x] = img.data[y * w + x] <= 0.5 * (lo + hi);
         }
     }
-    // Union-find over 8-connected dark pixels.
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if labels[i] == u32::MAX {
-                continue;
-            }
-            let link = |j: usize, labels: &mut Vec<u32>| {
-                if labels[j] != u32::MAX {
-                    union(labels, i as u32, j as u32);
+    dark
+}
+
+/// Largest 4-connected component (pixels) that is joined to its diagonal neighbours: the
+/// black border of a tag with cells under 3 px (side under 24 px) holds at most
+/// `7/16 · 24² ≈ 250` px, so this leaves ample room while keeping the large dark regions of a
+/// scene (hair, shadow) out of the join.
+const MAX_JOIN_PX: usize = 2048;
+
+/// The dark pixels' components: 4-connected, and the 8-connected ones that join several of
+/// them.
+struct Components {
+    /// Per pixel, the index of its 4-connected component in `stats` (`u32::MAX` for pixels
+    /// that are not dark). Indices follow the components' first pixels in raster order.
+    comp_of: Vec<u32>,
+    /// Pixel count and bounding box of each 4-connected component.
+    stats: Vec<CompStats>,
+    /// Per 4-connected component, the first (lowest) index of the 8-connected group it is in.
+    group_of: Vec<u32>,
+    /// The 8-connected groups of more than one component.
+    groups: Vec<CompStats>,
+}
+
+impl Components {
+    /// Labels the dark pixels (union-find, 4-connected), then joins the small components that
+    /// touch diagonally.
+    fn new(dark: &[bool], w: usize, h: usize) -> Self {
+        let mut labels: Vec<u32> = dark
+            .iter()
+            .enumerate()
+            .map(|(i, &d)| if d { i as u32 } else { u32::MAX })
+            .collect();
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if labels[i] == u32::MAX {
+                    continue;
                 }
-            };
-            if x > 0 {
-                link(i - 1, &mut labels);
-            }
-            if y > 0 {
-                link(i - w, &mut labels);
-                if x > 0 {
-                    link(i - w - 1, &mut labels);
+                if x > 0 && labels[i - 1] != u32::MAX {
+                    union(&mut labels, i as u32, (i - 1) as u32);
                 }
-                if x + 1 < w {
-                    link(i - w + 1, &mut labels);
+                if y > 0 && labels[i - w] != u32::MAX {
+                    union(&mut labels, i as u32, (i - w) as u32);
                 }
             }
         }
-    }
-    for i in 0..w * h {
-        if labels[i] != u32::MAX {
-            labels[i] = find(&mut labels, i as u32);
+        for i in 0..w * h {
+            if labels[i] != u32::MAX {
+                labels[i] = find(&mut labels, i as u32);
+            }
+        }
+        // Compact indices, in place: a root is its component's first pixel in raster order, so
+        // the scan converts it (root pixel -> component index) before any other pixel of the
+        // component reads it.
+        let mut stats: Vec<CompStats> = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let r = labels[i];
+                if r == u32::MAX {
+                    continue;
+                }
+                let k = if r as usize == i {
+                    stats.push(CompStats {
+                        root: i as u32,
+                        count: 0,
+                        x0: x,
+                        x1: x,
+                        y0: y,
+                        y1: y,
+                    });
+                    stats.len() - 1
+                } else {
+                    labels[r as usize] as usize
+                };
+                labels[i] = k as u32;
+                let e = &mut stats[k];
+                e.count += 1;
+                e.x0 = e.x0.min(x);
+                e.x1 = e.x1.max(x);
+                e.y1 = y;
+            }
+        }
+        let comp_of = labels;
+        // Diagonal joins of small components (union-find over component indices).
+        let mut group_of: Vec<u32> = (0..stats.len() as u32).collect();
+        let small = |k: u32| stats[k as usize].count <= MAX_JOIN_PX;
+        let mut any = false;
+        for y in 1..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let a = comp_of[i];
+                if a == u32::MAX || !small(a) {
+                    continue;
+                }
+                for j in [x.checked_sub(1), (x + 1 < w).then_some(x + 1)]
+                    .into_iter()
+                    .flatten()
+                    .map(|xj| i - w - x + xj)
+                {
+                    let c = comp_of[j];
+                    if c != u32::MAX && c != a && small(c) {
+                        union(&mut group_of, a, c);
+                        any = true;
+                    }
+                }
+            }
+        }
+        let mut groups: Vec<CompStats> = Vec::new();
+        if any {
+            let mut slot = vec![u32::MAX; stats.len()];
+            for k in 0..stats.len() {
+                let g = find(&mut group_of, k as u32) as usize;
+                group_of[k] = g as u32;
+                if g == k {
+                    continue;
+                }
+                if slot[g] == u32::MAX {
+                    slot[g] = groups.len() as u32;
+                    groups.push(stats[g]);
+                }
+                groups[slot[g] as usize].join(&stats[k]);
+            }
+        }
+        Self {
+            comp_of,
+            stats,
+            group_of,
+            groups,
         }
     }
-    Binary { labels }
+
+    /// Whether pixel `i` belongs to the 4-connected component of index `k`.
+    fn in_component(&self, i: usize, k: u32) -> bool {
+        self.comp_of[i] == k
+    }
+
+    /// Whether pixel `i` belongs to the 8-connected group whose first component is `g`.
+    fn in_group(&self, i: usize, g: u32) -> bool {
+        let k = self.comp_of[i];
+        k != u32::MAX && self.group_of[k as usize] == g
+    }
+}
+
+/// Pixel count and bounding box of a component.
+#[derive(Debug, Clone, Copy)]
+struct CompStats {
+    /// The first pixel in raster order (where contour tracing starts).
+    root: u32,
+    count: usize,
+    x0: usize,
+    x1: usize,
+    y0: usize,
+    y1: usize,
+}
+
+impl CompStats {
+    fn join(&mut self, o: &CompStats) {
+        self.count += o.count;
+        self.x0 = self.x0.min(o.x0);
+        self.x1 = self.x1.max(o.x1);
+        self.y0 = self.y0.min(o.y0);
+        self.y1 = self.y1.max(o.y1);
+    }
+
+    /// Whether the component can be a tag's black border: a fraction of the smallest tag's
+    /// area (the border ring alone covers 7/16 of the square) and a bounding box that can hold a
+    /// tag but not the whole image.
+    fn plausible(&self, w: usize, h: usize, cfg: &DetectorConfig) -> bool {
+        let min_side = cfg.min_side_px.max(4.0);
+        let bw = (self.x1 - self.x0 + 1) as f64;
+        let bh = (self.y1 - self.y0 + 1) as f64;
+        bw.max(bh) >= min_side
+            && bw.min(bh) >= 0.25 * min_side
+            && self.count as f64 >= 0.3 * min_side * min_side
+            && bw < w as f64
+            && bh < h as f64
+    }
 }
 
 fn find(p: &mut [u32], mut i: u32) -> u32 {
@@ -384,65 +566,14 @@ fn union(p: &mut [u32], a: u32, b: u32) {
     }
 }
 
-#[derive(Debug, Clone, Copy)]
-struct Component {
-    root: u32,
-    count: usize,
-}
-
-impl Component {
-    fn labels_view<'a>(&self, labels: &'a [u32]) -> LabelView<'a> {
-        LabelView {
-            labels,
-            root: self.root,
-        }
-    }
-}
-
-struct LabelView<'a> {
-    labels: &'a [u32],
-    root: u32,
-}
-
-fn components(b: &Binary, w: usize, h: usize, cfg: &DetectorConfig) -> Vec<Component> {
-    let mut count = std::collections::HashMap::<u32, (usize, usize, usize, usize, usize)>::new();
-    for y in 0..h {
-        for x in 0..w {
-            let l = b.labels[y * w + x];
-            if l == u32::MAX {
-                continue;
-            }
-            let e = count.entry(l).or_insert((0, x, x, y, y));
-            e.0 += 1;
-            e.1 = e.1.min(x);
-            e.2 = e.2.max(x);
-            e.3 = e.3.min(y);
-            e.4 = e.4.max(y);
-        }
-    }
-    let min_side = cfg.min_side_px.max(4.0);
-    let mut comps: Vec<Component> = count
-        .into_iter()
-        .filter(|(_, (n, x0, x1, y0, y1))| {
-            let bw = (x1 - x0 + 1) as f64;
-            let bh = (y1 - y0 + 1) as f64;
-            // The border ring alone covers 7/16 of the square: require a fraction of the
-            // smallest tag's area, and a bounding box that can hold a tag.
-            bw.max(bh) >= min_side
-                && bw.min(bh) >= 0.25 * min_side
-                && *n as f64 >= 0.3 * min_side * min_side
-                && bw < w as f64
-                && bh < h as f64
-        })
-        .map(|(root, (n, ..))| Component { root, count: n })
-        .collect();
-    comps.sort_by_key(|c| c.root);
-    comps
-}
-
-/// Moore-neighbourhood tracing of the outer contour, starting at the component's first pixel in
-/// raster order (its root).
-fn trace_contour(lv: &LabelView<'_>, w: usize, h: usize, comp: &Component) -> Vec<DVec2> {
+/// Moore-neighbourhood tracing of the outer contour of the pixels for which `member` holds
+/// (by pixel index), starting at their first pixel in raster order, `comp.root`.
+fn trace_contour(
+    member: impl Fn(usize) -> bool,
+    w: usize,
+    h: usize,
+    comp: &CompStats,
+) -> Vec<DVec2> {
     const DIRS: [(i64, i64); 8] = [
         (1, 0),
         (1, 1),
@@ -458,7 +589,7 @@ fn trace_contour(lv: &LabelView<'_>, w: usize, h: usize, comp: &Component) -> Ve
             && y >= 0
             && (x as usize) < w
             && (y as usize) < h
-            && lv.labels[y as usize * w + x as usize] == lv.root
+            && member(y as usize * w + x as usize)
     };
     let start = (
         (comp.root as usize % w) as i64,
@@ -602,6 +733,25 @@ fn is_convex(q: &[DVec2; 4]) -> bool {
     true
 }
 
+/// Smallest angle between adjacent sides of a quad, degrees (the reference library's
+/// `cos_critical_rad`): a square seen at 80° from its normal along a diagonal still has 20°
+/// corners; sharper ones are slivers of other shapes.
+pub const MIN_CORNER_ANGLE_DEG: f64 = 10.0;
+
+/// Smallest distance of the two side corners from the diagonal between the two farthest
+/// contour points, as a fraction of that diagonal: a square foreshortened to a rhombus whose
+/// short diagonal is 8 % of the long one (10° corners, [`MIN_CORNER_ANGLE_DEG`]) passes.
+pub const MIN_CHORD_OFFSET: f64 = 0.04;
+
+/// How much shorter a side of the traced contour's quad can be than the tag's border, pixels:
+/// the contour runs through the centres of the outermost dark pixels, half a pixel or more
+/// (with blur) inside the edge at each end.
+pub const CONTOUR_INSET_PX: f64 = 2.0;
+
+/// Largest fraction of a side's traced contour that may lie beyond the side tolerance
+/// ([`DetectorConfig::max_side_deviation`]): specks of noise or shadow that touch the border.
+pub const MAX_STRAY_FRACTION: f64 = 0.2;
+
 /// Fits a quadrilateral to a closed contour. The result is ordered with positive signed area in
 /// image coordinates (clockwise on screen).
 fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
@@ -642,7 +792,7 @@ fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
         .iter()
         .max_by(|&&x, &&y| dist(x).abs().total_cmp(&dist(y).abs()))?;
     let diag = a.distance(b);
-    if dist(i1).abs() < 0.2 * diag || dist(i3).abs() < 0.2 * diag {
+    if dist(i1).abs() < MIN_CHORD_OFFSET * diag || dist(i3).abs() < MIN_CHORD_OFFSET * diag {
         return None;
     }
     let idx = [i0, i1, i2, i3];
@@ -661,13 +811,24 @@ fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
             .iter()
             .map(|&i| (contour[i], 1.0))
             .collect();
-        let line = fit_line(&pts)?;
         let side = contour[s].distance(contour[e]);
         let tol = 1.0 + cfg.max_side_deviation * side;
-        for &i in &seg[lo..hi.min(len)] {
-            if (contour[i].dot(line.n) - line.d).abs() > tol {
+        // A few contour points may stray (a dark speck of noise or shadow touching the border):
+        // refit on the points within the tolerance, and require most of the side to be there.
+        let mut line = fit_line(&pts)?;
+        for _ in 0..2 {
+            let inliers: Vec<(DVec2, f64)> = pts
+                .iter()
+                .copied()
+                .filter(|(p, _)| (p.dot(line.n) - line.d).abs() <= tol)
+                .collect();
+            if (inliers.len() as f64) < (1.0 - MAX_STRAY_FRACTION) * pts.len() as f64 {
                 return None;
             }
+            if inliers.len() == pts.len() {
+                break;
+            }
+            line = fit_line(&inliers)?;
         }
         lines.push(line);
     }
@@ -680,7 +841,14 @@ fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
     }
     for k in 0..4 {
         let side = q[k].distance(q[(k + 1) % 4]);
-        if side < cfg.min_side_px || q[k].distance(c) > 2.0 * diag {
+        let (u, v) = (
+            (q[(k + 1) % 4] - q[k]).normalize_or_zero(),
+            (q[(k + 3) % 4] - q[k]).normalize_or_zero(),
+        );
+        if side < cfg.min_side_px - CONTOUR_INSET_PX
+            || q[k].distance(c) > 2.0 * diag
+            || u.dot(v).abs() > MIN_CORNER_ANGLE_DEG.to_radians().cos()
+        {
             return None;
         }
     }
@@ -890,6 +1058,55 @@ fn cell_uv(row: usize, col: usize) -> (f64, f64) {
         -1.0 + (col as f64 - 0.5) * cw,
         -1.0 + (row as f64 - 0.5) * cw,
     )
+}
+
+/// Most border cells brighter than the midpoint of the black and white models on the
+/// unrefined quad (a quick test before the edge refinement; decoding allows 3 on the refined
+/// one, and the unrefined corners can be a pixel off, which puts some cell centres of a small
+/// tag onto its edges).
+const MAX_BRIGHT_BORDER_UNREFINED: usize = 8;
+
+/// Whether the black border of quad `q` (unrefined) is dark against its white ring: the cell
+/// centres of the two rings, each modelled as a plane over the tag.
+fn border_is_dark(img: &GrayF32, q: &[DVec2; 4]) -> bool {
+    let Some(h) = square_to_quad(q) else {
+        return false;
+    };
+    let mut black = Vec::with_capacity(28);
+    let mut white = Vec::with_capacity(36);
+    for r in 0..10 {
+        for c in 0..10 {
+            let ring = r.min(c).min(9 - r).min(9 - c);
+            if ring > 1 {
+                continue;
+            }
+            let Some(v) = sample_cell(img, &h, r, c, 0.0) else {
+                continue;
+            };
+            let (u, w) = cell_uv(r, c);
+            if ring == 1 {
+                black.push((u, w, v));
+            } else {
+                white.push((u, w, v));
+            }
+        }
+    }
+    if black.len() < 20 || white.len() < 18 {
+        // Too little visible to tell: leave it to the full decode.
+        return true;
+    }
+    let (Some(bp), Some(wp)) = (fit_plane(&black), fit_plane(&white)) else {
+        return false;
+    };
+    let eval = |p: &[f64; 3], u: f64, v: f64| p[0] + p[1] * u + p[2] * v;
+    let bright = black
+        .iter()
+        .filter(|&&(u, v, z)| {
+            let (lo, hi) = (eval(&bp, u, v), eval(&wp, u, v));
+            hi - lo <= 0.0 || z > 0.5 * (lo + hi)
+        })
+        .count();
+    bright <= MAX_BRIGHT_BORDER_UNREFINED
 }
 
 fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detection> {
