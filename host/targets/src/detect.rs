@@ -70,6 +70,35 @@ use serde::{Deserialize, Serialize};
 /// a per-axis sigma; the sigma reported is the worst direction's); 0.04 px brings it to ~1.1.
 pub const SIGMA_FLOOR_PX: f64 = 0.04;
 
+/// Edge samples whose contrast (Michelson, white ring against black border) is below this
+/// fraction of the tag's median are hidden (something covers the ring or the border there) and
+/// are not fitted. A shadow edge across the tag keeps the contrast (it scales both levels); the
+/// blur of small tags lowers it everywhere alike.
+pub const VISIBLE_CONTRAST: f64 = 0.5;
+
+/// Contrast samples in each corner zone of a side (the last 0.75 cell before the corner, where
+/// no edge points are fitted).
+const CORNER_ZONE_SAMPLES: usize = 3;
+
+/// A side bends at a corner when the line fitted to its half next to the corner is more than
+/// this many of its own (noise) standard deviations, and [`MIN_BEND_PX`], from the whole side's
+/// line there: part of the side is another edge (an occluder's outline). The bend is then added
+/// to the corner's variance and the corner is occluded.
+pub const BEND_SIGMAS: f64 = 4.0;
+
+/// Smallest bend that counts, pixels (below it the side is straight for any use of the
+/// corners).
+pub const MIN_BEND_PX: f64 = 0.15;
+
+/// A corner whose neighbouring side quarters are less than this fraction visible (on either
+/// side, [`VISIBLE_CONTRAST`]) is occluded.
+pub const MIN_VISIBLE_NEAR: f64 = 0.5;
+
+/// Standard deviation added to an occluded corner, in cells of the tag (side / 8): where the
+/// corner is hidden it is the intersection of lines fitted to what remains, or the quad is
+/// partly an occluder's outline.
+pub const OCCLUDED_SIGMA_CELLS: f64 = 0.25;
+
 /// Half the span of the central difference that measures the edge gradient, pixels (the
 /// reference library uses 1; wider is less sensitive to noise and JPEG ringing, narrower
 /// resolves closely spaced edges of tiny tags).
@@ -170,6 +199,13 @@ pub struct Detection {
     pub decision_margin: f64,
     /// RMS scatter of the edge points about the fitted sides, pixels.
     pub edge_rms_px: f64,
+    /// Per corner (same order), whether it is partly hidden: the edge next to it lost its
+    /// contrast on either side (something covers the ring or the border), or cells of the grid
+    /// near it disagree with a whole tag (a bright border cell, a dark white-ring cell, a
+    /// corrected bit). Its covariance includes [`OCCLUDED_SIGMA_CELLS`] cells; the pose stage
+    /// does not use it.
+    #[serde(default)]
+    pub occluded_corners: [bool; 4],
 }
 
 impl Detection {
@@ -890,10 +926,20 @@ fn matching_reference_quad(refs: &[[DVec2; 4]], q: &[DVec2; 4]) -> Option<[DVec2
 // ---------------------------------------------------------------------------------------------
 // Edge refinement
 
+/// One side's edge points (position, gradient energy, edge contrast) and its contrast samples
+/// (position along the side, contrast).
+type SideSamples = (Vec<(DVec2, f64, f64)>, Vec<(f64, f64)>);
+
 struct RefinedQuad {
     corners: [DVec2; 4],
     cov: [[f64; 3]; 4],
     edge_rms_px: f64,
+    /// Per corner, the smaller visible fraction of the quarters of its two sides next to it.
+    visible_near: [f64; 4],
+    /// Side length over 8, pixels.
+    cell_px: f64,
+    /// Per corner, whether a side next to it bends (see [`BEND_SIGMAS`]).
+    bent: [bool; 4],
 }
 
 /// Refines the sides on the grey image. `q` has positive signed area (clockwise on screen with y
@@ -913,8 +959,16 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
     } else {
         GRADIENT_HALF_SPAN_PX
     };
+    // Per side, at its start and end corner: how far the half-side's line is from the side's,
+    // and that distance's variance from noise alone.
+    let mut bend = [[(0.0f64, 0.0f64); 2]; 4];
+    // Per side, the visible fraction next to its start and end corner.
+    let mut visible_near = [[1.0f64; 2]; 4];
     for pass in 0..3 {
         lines.clear();
+        // Per side: the edge points (position, gradient energy, edge contrast) and, for every
+        // sample along the side, its position along the side and its edge contrast.
+        let mut sides: Vec<SideSamples> = Vec::with_capacity(4);
         for k in 0..4 {
             let (a, b) = (corners[k], corners[(k + 1) % 4]);
             let len = a.distance(b);
@@ -924,14 +978,25 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
             let outward = DVec2::new(dir.y, -dir.x);
             let nsamp = (len.round() as usize).clamp(6, 400);
             let mut pts = Vec::with_capacity(nsamp);
+            let mut contrast = Vec::with_capacity(nsamp);
             for s in 0..nsamp {
                 // Stay a cell away from the corners, where the other side's edge interferes.
                 let margin = (cell * 0.75).min(0.25 * len) / len;
                 let t = margin + (1.0 - 2.0 * margin) * (s as f64 + 0.5) / nsamp as f64;
                 let p = a + (b - a) * t;
                 if !img.contains(p, range + 2.0) {
+                    contrast.push((t, 0.0));
                     continue;
                 }
+                // Michelson contrast of the white ring against the black border half a cell
+                // either side of the edge: independent of the light level (a shadow), low where
+                // something covers the ring or the border.
+                let (inner, outer) = (
+                    img.bilinear(p - outward * (0.5 * cell)),
+                    img.bilinear(p + outward * (0.5 * cell)),
+                );
+                let m = (outer - inner) / (outer.abs() + inner.abs()).max(1e-9);
+                contrast.push((t, m));
                 let (mut mw, mut mn) = (0.0, 0.0);
                 let step = 0.25;
                 let mut off = -range;
@@ -949,17 +1014,92 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
                 if mw <= 0.0 {
                     continue;
                 }
-                pts.push((p + outward * (mn / mw), mw));
+                pts.push((p + outward * (mn / mw), mw, m));
             }
-            if pts.len() < 4 {
+            // The corner zones, which the edge points leave out: contrast only, so a hidden
+            // corner tip is seen.
+            let margin = (cell * 0.75).min(0.25 * len) / len;
+            for j in 0..CORNER_ZONE_SAMPLES {
+                let f = margin * (j as f64 + 0.5) / CORNER_ZONE_SAMPLES as f64;
+                for t in [f, 1.0 - f] {
+                    let p = a + (b - a) * t;
+                    let m = if img.contains(p, cell + 1.0) {
+                        let (inner, outer) = (
+                            img.bilinear(p - outward * (0.5 * cell)),
+                            img.bilinear(p + outward * (0.5 * cell)),
+                        );
+                        (outer - inner) / (outer.abs() + inner.abs()).max(1e-9)
+                    } else {
+                        0.0
+                    };
+                    contrast.push((t, m));
+                }
+            }
+            sides.push((pts, contrast));
+        }
+        // A sample is visible when its contrast is at least VISIBLE_CONTRAST of the tag's
+        // median; the sides are fitted to their visible edge points.
+        let mut all: Vec<f64> = sides.iter().flat_map(|s| s.1.iter().map(|c| c.1)).collect();
+        all.sort_by(f64::total_cmp);
+        let median = all.get(all.len() / 2).copied().unwrap_or(0.0);
+        if median <= 0.0 {
+            return None;
+        }
+        let visible_at = VISIBLE_CONTRAST * median;
+        for k in 0..4 {
+            let (pts, contrast) = &sides[k];
+            let mut used: Vec<(DVec2, f64)> = pts
+                .iter()
+                .filter(|p| p.2 >= visible_at)
+                .map(|p| (p.0, p.1))
+                .collect();
+            if used.len() < 4 {
                 return None;
             }
             // Weights by gradient energy, normalised so the covariance uses the point count.
-            let wmax = pts.iter().map(|p| p.1).fold(0.0, f64::max);
-            for p in &mut pts {
+            let wmax = used.iter().map(|p| p.1).fold(0.0, f64::max);
+            for p in &mut used {
                 p.1 = (p.1 / wmax).sqrt();
             }
-            lines.push(fit_line(&pts)?);
+            let line = fit_line(&used)?;
+            // Straightness: lines fitted to each half of the side, at the corner of that half,
+            // against the whole side's line. A side partly replaced by another edge (an
+            // occluder's outline along the border) bends; a whole side does not beyond noise.
+            let (a, b) = (corners[k], corners[(k + 1) % 4]);
+            let len = a.distance(b).max(1e-9);
+            let half = |first: bool| -> Vec<(DVec2, f64)> {
+                used.iter()
+                    .copied()
+                    .filter(|p| ((p.0 - a).dot(b - a) / (len * len) < 0.5) == first)
+                    .collect()
+            };
+            for (end, corner, pts_half) in [(0usize, a, half(true)), (1, b, half(false))] {
+                bend[k][end] = (0.0, 0.0);
+                if pts_half.len() >= 4 {
+                    if let Some(hl) = fit_line(&pts_half) {
+                        let d =
+                            (corner.dot(hl.n) - hl.d).abs() - (corner.dot(line.n) - line.d).abs();
+                        bend[k][end] = (d.abs(), hl.offset_var_at(corner));
+                    }
+                }
+            }
+            lines.push(line);
+            // Visible fraction of the quarter of the side next to each of its corners.
+            let near = |lo: f64, hi: f64| {
+                let (n, v) = contrast
+                    .iter()
+                    .filter(|c| c.0 >= lo && c.0 <= hi)
+                    .fold((0usize, 0usize), |(n, v), c| {
+                        (n + 1, v + usize::from(c.1 >= visible_at))
+                    });
+                if n == 0 {
+                    0.0
+                } else {
+                    v as f64 / n as f64
+                }
+            };
+            visible_near[k][0] = near(0.0, 0.3);
+            visible_near[k][1] = near(0.7, 1.0);
         }
         let mut next = [DVec2::ZERO; 4];
         for k in 0..4 {
@@ -979,12 +1119,23 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         };
     }
     let mut cov = [[0.0; 3]; 4];
+    let mut bent = [false; 4];
     for k in 0..4 {
         let (l1, l2) = (&lines[(k + 3) % 4], &lines[k]);
         let sin = l1.n.perp_dot(l2.n).abs().max(0.05);
         let floor2 = SIGMA_FLOOR_PX * SIGMA_FLOOR_PX;
-        let v1 = l1.offset_var_at(corners[k]) + floor2;
-        let v2 = l2.offset_var_at(corners[k]) + floor2;
+        // A bent side adds its bend at the corner to the line's offset variance.
+        let bend_var = |(d, var): (f64, f64)| {
+            if d > MIN_BEND_PX && d * d > BEND_SIGMAS * BEND_SIGMAS * (var + floor2) {
+                d * d
+            } else {
+                0.0
+            }
+        };
+        let (b1, b2) = (bend_var(bend[(k + 3) % 4][1]), bend_var(bend[k][0]));
+        bent[k] = b1 > 0.0 || b2 > 0.0;
+        let v1 = l1.offset_var_at(corners[k]) + floor2 + b1;
+        let v2 = l2.offset_var_at(corners[k]) + floor2 + b2;
         let (u1, u2) = (l1.dir(), l2.dir());
         let s2 = sin * sin;
         // A shift of line 1 moves the corner along line 2's direction, and vice versa.
@@ -995,10 +1146,16 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         ];
     }
     let edge_rms_px = (lines.iter().map(|l| l.sigma * l.sigma).sum::<f64>() / 4.0).sqrt();
+    // Corner k ends side k - 1 and starts side k.
+    let visible_near =
+        std::array::from_fn(|k| visible_near[(k + 3) % 4][1].min(visible_near[k][0]));
     Some(RefinedQuad {
         corners,
         cov,
         edge_rms_px,
+        visible_near,
+        cell_px: cell,
+        bent,
     })
 }
 
@@ -1190,6 +1347,28 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
     if bright_border > 3 {
         return None;
     }
+    // Occlusion evidence per quad corner (the quadrant of the grid nearest to it): border cells
+    // that are not dark, white-ring cells that are not light.
+    let quadrant = |r: usize, c: usize| match (c >= 5, r >= 5) {
+        (false, false) => 0,
+        (true, false) => 1,
+        (true, true) => 2,
+        (false, true) => 3,
+    };
+    let mut evidence = [0usize; 4];
+    for r in 0..10 {
+        for c in 0..10 {
+            let Some(z) = grid[r][c] else { continue };
+            let (u, v) = cell_uv(r, c);
+            let (lo, hi) = (eval(&bp, u, v), eval(&wp, u, v));
+            let mid = 0.5 * (lo + hi);
+            let bad = (ring(r, c, 1) && (hi - lo <= 0.0 || z > mid))
+                || (ring(r, c, 0) && white.len() >= 18 && z < mid);
+            if bad {
+                evidence[quadrant(r, c)] += 1;
+            }
+        }
+    }
     // Read the data bits for each of the four rotations (corner shifts).
     let mut best: Option<(u32, u32, usize, f64)> = None; // (hamming, id, shift, margin)
     for shift in 0..4 {
@@ -1242,19 +1421,57 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
     if margin < cfg.min_margin {
         return None;
     }
+    let wrong = tag36h11::CODES[id as usize];
+    let mut code = 0u64;
+    let mut cells = [(0usize, 0usize); tag36h11::NBITS];
+    for (i, cell) in cells.iter_mut().enumerate() {
+        let (mut r, mut c) = (
+            tag36h11::BIT_Y[i] as usize + 1,
+            tag36h11::BIT_X[i] as usize + 1,
+        );
+        for _ in 0..shift {
+            let (nr, nc) = (c, 9 - r);
+            r = nr;
+            c = nc;
+        }
+        *cell = (r, c);
+        let (u, w) = cell_uv(r, c);
+        let thr = 0.5 * (eval(&bp, u, w) + eval(&wp, u, w));
+        code = (code << 1) | u64::from(grid[r][c].is_some_and(|v| v > thr));
+    }
+    let diff = code ^ wrong;
+    for (i, &(r, c)) in cells.iter().enumerate() {
+        if (diff >> (tag36h11::NBITS - 1 - i)) & 1 == 1 {
+            evidence[quadrant(r, c)] += 1;
+        }
+    }
+    // A corner is occluded when the edge next to it is hidden on either side, or the cells of
+    // its quadrant disagree with a whole tag; its covariance then gets an isotropic term of
+    // OCCLUDED_SIGMA_CELLS cells.
+    let occluded_q: [bool; 4] = std::array::from_fn(|j| {
+        rq.visible_near[j] < MIN_VISIBLE_NEAR || evidence[j] > 0 || rq.bent[j]
+    });
+    let extra = (OCCLUDED_SIGMA_CELLS * rq.cell_px).powi(2);
     // Reorder corners so corner 0 is the tag's printed top-left. With the grid turned by
     // `shift` quarter turns, the tag's corner k is the quad's corner k - shift.
     let mut corners = [DVec2::ZERO; 4];
     let mut cov = [[0.0; 3]; 4];
+    let mut occluded = [false; 4];
     for k in 0..4 {
         let j = (k + shift) % 4;
         corners[k] = q[j];
         cov[k] = rq.cov[j];
+        occluded[k] = occluded_q[j];
+        if occluded[k] {
+            cov[k][0] += extra;
+            cov[k][2] += extra;
+        }
     }
     let ht = square_to_quad(&corners)?;
     // Output in the reference library's order (bottom-left, bottom-right, top-right, top-left).
     let rev = |a: [DVec2; 4]| [a[3], a[2], a[1], a[0]];
     let revc = |a: [[f64; 3]; 4]| [a[3], a[2], a[1], a[0]];
+    let revb = |a: [bool; 4]| [a[3], a[2], a[1], a[0]];
     Some(Detection {
         id,
         corners_px: rev(corners),
@@ -1263,6 +1480,7 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
         hamming,
         decision_margin: margin,
         edge_rms_px: rq.edge_rms_px,
+        occluded_corners: revb(occluded),
     })
 }
 
