@@ -965,6 +965,8 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
     // Per side, the visible fraction next to its start and end corner.
     let mut visible_near = [[1.0f64; 2]; 4];
     for pass in 0..3 {
+        // The occlusion evidence (corner zones, bends) is gathered on the last pass.
+        let last = pass == 2;
         lines.clear();
         // Per side: the edge points (position, gradient energy, edge contrast) and, for every
         // sample along the side, its position along the side and its edge contrast.
@@ -1019,7 +1021,8 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
             // The corner zones, which the edge points leave out: contrast only, so a hidden
             // corner tip is seen.
             let margin = (cell * 0.75).min(0.25 * len) / len;
-            for j in 0..CORNER_ZONE_SAMPLES {
+            let zone_samples = if last { CORNER_ZONE_SAMPLES } else { 0 };
+            for j in 0..zone_samples {
                 let f = margin * (j as f64 + 0.5) / CORNER_ZONE_SAMPLES as f64;
                 for t in [f, 1.0 - f] {
                     let p = a + (b - a) * t;
@@ -1073,6 +1076,10 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
                     .filter(|p| ((p.0 - a).dot(b - a) / (len * len) < 0.5) == first)
                     .collect()
             };
+            if !last {
+                lines.push(line);
+                continue;
+            }
             for (end, corner, pts_half) in [(0usize, a, half(true)), (1, b, half(false))] {
                 bend[k][end] = (0.0, 0.0);
                 if pts_half.len() >= 4 {
