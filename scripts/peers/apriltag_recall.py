@@ -7,7 +7,7 @@ the same pixels, not the shipped .txt).
 
     pip install pupil-apriltags numpy opencv-python-headless
     cargo build --release -p skinbrdf-targets --example detect_json
-    python3 scripts/peers/apriltag_recall.py [--images 24] [--seed 3] [--misses]
+    python3 scripts/peers/apriltag_recall.py [--images 24] [--seed 3] [--misses] [--exe BIN]
 
 Per tag-size bin (mean side of the black square in the image, px): tags in truth, found by ours,
 found by the C library, and the tags the C library finds that ours misses (listed with
@@ -204,11 +204,12 @@ def main():
     ap.add_argument("--misses", action="store_true", help="list the tags the C library finds and ours misses")
     ap.add_argument("--keep", help="write the synthetic images (PNG) and truth (JSON) here")
     ap.add_argument("--no-real", action="store_true")
+    ap.add_argument("--exe", help="our detect_json binary (default: the release example)")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     cds = codes()
     det = pupil_apriltags.Detector(families="tag36h11", quad_decimate=1.0, refine_edges=1, decode_sharpening=0.25, nthreads=1)
-    exe = exe_path()
+    exe = args.exe or exe_path()
     tmp = args.keep or tempfile.mkdtemp()
     os.makedirs(tmp, exist_ok=True)
     for kind in args.kinds:
