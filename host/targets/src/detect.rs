@@ -1056,6 +1056,12 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
                 .filter(|p| p.2 >= visible_at)
                 .map(|p| (p.0, p.1))
                 .collect();
+            // Too little of the side visible to fit: fit all its edge points and mark both its
+            // corners occluded.
+            let hidden = used.len() < 4;
+            if hidden {
+                used = pts.iter().map(|p| (p.0, p.1)).collect();
+            }
             if used.len() < 4 {
                 return None;
             }
@@ -1105,8 +1111,11 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
                     v as f64 / n as f64
                 }
             };
-            visible_near[k][0] = near(0.0, 0.3);
-            visible_near[k][1] = near(0.7, 1.0);
+            visible_near[k] = if hidden {
+                [0.0; 2]
+            } else {
+                [near(0.0, 0.3), near(0.7, 1.0)]
+            };
         }
         let mut next = [DVec2::ZERO; 4];
         for k in 0..4 {
