@@ -484,7 +484,9 @@ impl Components {
         let comp_of = labels;
         // Diagonal joins of small components (union-find over component indices).
         let mut group_of: Vec<u32> = (0..stats.len() as u32).collect();
-        let small = |k: u32| stats[k as usize].count <= MAX_JOIN_PX;
+        // One byte per component: the join pass reads it for every dark pixel.
+        let small_flag: Vec<bool> = stats.iter().map(|c| c.count <= MAX_JOIN_PX).collect();
+        let small = |k: u32| small_flag[k as usize];
         let mut any = false;
         for y in 1..h {
             for x in 0..w {
