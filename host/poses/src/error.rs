@@ -76,6 +76,15 @@ pub enum Diagnostic {
         /// The spread ratio (collinear = 0; refused below `pnp::COLLINEAR_RATIO`).
         spread_ratio: f64,
     },
+    /// A detected target is partly hidden: these corners (in the layout's corner order) were
+    /// marked occluded by the detector (`Detection::occluded_corners`) and not used; its other
+    /// corners were.
+    OccludedCorners {
+        /// Tag ID.
+        target: u32,
+        /// Indices of the corners left out (0..4).
+        corners: Vec<usize>,
+    },
     /// A stage was skipped because the session gives the quantity.
     Skipped {
         /// What was skipped and why.

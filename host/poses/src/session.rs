@@ -7,6 +7,10 @@
 //! a known `world_from_camera`/`world_from_head` per image, `known.world_from_flash` or
 //! `known.light_position_m`, `known.world_from_standard`, `known.stationary_sample`.
 //!
+//! Corners the detector marks occluded (a partly hidden tag, `Detection::occluded_corners`)
+//! are not used by any pose or the bundle adjustment; each such target is listed in its image's
+//! diagnostics ([`Diagnostic::OccludedCorners`]) with the corners left out.
+//!
 //! Composite poses (head, flash, standard in the world) combine two PnP estimates; their
 //! covariance is propagated to first order through the composition (numerical Jacobian), with
 //! the two estimates independent (they use disjoint targets). The flash position is the
@@ -157,6 +161,10 @@ pub struct DetectedTag {
     pub corners_px: [DVec2; 4],
     /// Standard deviation of each corner along its worst direction, pixels.
     pub corner_sigma_px: [f64; 4],
+    /// Per corner, whether the detector marked it occluded (partly hidden tag); such corners
+    /// are not used by the poses.
+    #[serde(default)]
+    pub occluded_corners: [bool; 4],
 }
 
 /// All poses of a session.
@@ -251,13 +259,20 @@ fn points_for(
     for d in dets {
         if let Some((l, t)) = table.get(&d.id) {
             if l.name() == which {
-                pts.extend(target_points(
+                // Corners the detector marks occluded are left out (reported per image).
+                let all = target_points(
                     d.id,
                     &t.corners_m,
                     t.outward_normal(),
                     &d.corners_px,
                     &d.corner_sigma_px(),
-                ));
+                );
+                pts.extend(
+                    all.into_iter()
+                        .zip(d.occluded_corners)
+                        .filter(|(_, hidden)| !hidden)
+                        .map(|(p, _)| p),
+                );
             }
         }
     }
@@ -423,7 +438,14 @@ pub fn estimate_session_stages(
                     layout: name.to_string(),
                     corners_px: d.corners_px,
                     corner_sigma_px: d.corner_sigma_px(),
+                    occluded_corners: d.occluded_corners,
                 });
+                if d.occluded_corners.contains(&true) {
+                    out.diagnostics.push(Diagnostic::OccludedCorners {
+                        target: d.id,
+                        corners: (0..4).filter(|&k| d.occluded_corners[k]).collect(),
+                    });
+                }
             }
             // Camera.
             if let Some(p) = entry.world_from_camera {
@@ -878,4 +900,46 @@ pub fn reproject_target(
         *o = cam.project(inv.transform_point(*c))?;
     }
     Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn occluded_corners_are_left_out_of_the_pose_points() {
+        let corners_m = [
+            DVec3::new(-0.01, 0.01, 0.0),
+            DVec3::new(0.01, 0.01, 0.0),
+            DVec3::new(0.01, -0.01, 0.0),
+            DVec3::new(-0.01, -0.01, 0.0),
+        ];
+        let target = Target {
+            id: 7,
+            size_m: 0.02,
+            corners_m,
+            centre_m: None,
+        };
+        let table = HashMap::from([(7, (Layout::Headdress, target))]);
+        let det = Detection {
+            id: 7,
+            corners_px: [
+                DVec2::new(10.0, 30.0),
+                DVec2::new(30.0, 30.0),
+                DVec2::new(30.0, 10.0),
+                DVec2::new(10.0, 10.0),
+            ],
+            corner_cov_px2: [[0.01, 0.0, 0.01]; 4],
+            center_px: DVec2::new(20.0, 20.0),
+            hamming: 0,
+            decision_margin: 0.4,
+            edge_rms_px: 0.05,
+            occluded_corners: [false, true, false, false],
+        };
+        let pts = points_for(&[det], &table, "headdress");
+        assert_eq!(pts.len(), 3);
+        assert!(pts.iter().all(|p| p.image_px != DVec2::new(30.0, 30.0)));
+        assert_eq!(pts[1].object_m, corners_m[2]);
+        assert!(points_for(&[det], &table, "reference").is_empty());
+    }
 }

@@ -7,11 +7,21 @@
 //!    maximum over the 3 x 3 neighbouring tiles. Pixels whose neighbourhood contrast is below
 //!    [`DetectorConfig::min_contrast`] (relative to the image's range) are left unclassified, so
 //!    flat regions and uneven flash lighting do not produce spurious components.
-//! 2. **Dark components** (8-connected, union-find) of plausible size; the outer contour of each
-//!    is traced (Moore neighbourhood tracing).
+//! 2. **Dark components** of plausible size (union-find): first the 4-connected ones, so that a
+//!    border touching dark surroundings (a shadow, a dark band, a neighbour) only diagonally
+//!    through its thin white ring stays apart from them; then the 8-connected unions of small
+//!    4-connected components (at most [`MAX_JOIN_PX`] pixels each), so that the border of a
+//!    small blurred tag whose pixels meet only diagonally is whole. A union is not tried when
+//!    one of its parts already decoded. The outer contour of each is traced (Moore
+//!    neighbourhood tracing).
 //! 3. **Quad fit**: four corner candidates from the contour (the farthest point pair and the two
-//!    points farthest from their chord), a line fitted to the middle of each side, rejection when
-//!    the contour strays from the lines (not a quadrilateral), is not convex or too small.
+//!    points farthest from their chord, at least [`MIN_CHORD_OFFSET`] of it away, so strongly
+//!    foreshortened tags pass), a line fitted to the middle of each side and refitted without
+//!    the points beyond the side tolerance (at most [`MAX_STRAY_FRACTION`] of them: specks
+//!    touching the border); rejection when more stray (not a quadrilateral), when the quad is
+//!    not convex, has a corner sharper than [`MIN_CORNER_ANGLE_DEG`] or is too small. A quick
+//!    test of the unrefined quad (its border cells dark against its white ring) drops most
+//!    non-tags before the edge refinement.
 //! 4. **Edge refinement** on the grey image (not the binary one): along each side, the edge
 //!    position along the normal is the centroid of the squared positive (dark-to-light) gradient
 //!    in a window, re-centred over three passes so the window is symmetric about the edge (an
@@ -59,6 +69,35 @@ use serde::{Deserialize, Serialize};
 /// times the stated sigmas (median), where honest sigmas give at most 1.18 (Rayleigh median of
 /// a per-axis sigma; the sigma reported is the worst direction's); 0.04 px brings it to ~1.1.
 pub const SIGMA_FLOOR_PX: f64 = 0.04;
+
+/// Edge samples whose contrast (Michelson, white ring against black border) is below this
+/// fraction of the tag's median are hidden (something covers the ring or the border there) and
+/// are not fitted. A shadow edge across the tag keeps the contrast (it scales both levels); the
+/// blur of small tags lowers it everywhere alike.
+pub const VISIBLE_CONTRAST: f64 = 0.5;
+
+/// Contrast samples in each corner zone of a side (the last 0.75 cell before the corner, where
+/// no edge points are fitted).
+const CORNER_ZONE_SAMPLES: usize = 3;
+
+/// A side bends at a corner when the line fitted to its half next to the corner is more than
+/// this many of its own (noise) standard deviations, and [`MIN_BEND_PX`], from the whole side's
+/// line there: part of the side is another edge (an occluder's outline). The bend is then added
+/// to the corner's variance and the corner is occluded.
+pub const BEND_SIGMAS: f64 = 4.0;
+
+/// Smallest bend that counts, pixels (below it the side is straight for any use of the
+/// corners).
+pub const MIN_BEND_PX: f64 = 0.15;
+
+/// A corner whose neighbouring side quarters are less than this fraction visible (on either
+/// side, [`VISIBLE_CONTRAST`]) is occluded.
+pub const MIN_VISIBLE_NEAR: f64 = 0.5;
+
+/// Standard deviation added to an occluded corner, in cells of the tag (side / 8): where the
+/// corner is hidden it is the intersection of lines fitted to what remains, or the quad is
+/// partly an occluder's outline.
+pub const OCCLUDED_SIGMA_CELLS: f64 = 0.25;
 
 /// Half the span of the central difference that measures the edge gradient, pixels (the
 /// reference library uses 1; wider is less sensitive to noise and JPEG ringing, narrower
@@ -160,6 +199,13 @@ pub struct Detection {
     pub decision_margin: f64,
     /// RMS scatter of the edge points about the fitted sides, pixels.
     pub edge_rms_px: f64,
+    /// Per corner (same order), whether it is partly hidden: the edge next to it lost its
+    /// contrast on either side (something covers the ring or the border), or cells of the grid
+    /// near it disagree with a whole tag (a bright border cell, a dark white-ring cell, a
+    /// corrected bit). Its covariance includes [`OCCLUDED_SIGMA_CELLS`] cells; the pose stage
+    /// does not use it.
+    #[serde(default)]
+    pub occluded_corners: [bool; 4],
 }
 
 impl Detection {
@@ -206,17 +252,47 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
         return (Vec::new(), stats);
     }
     let dark = threshold(img, cfg);
-    let comps = components(&dark, img.width, img.height, cfg);
-    stats.components = comps.len();
     let reference = (cfg.corner_model == CornerModel::BinaryBoundary)
         .then(|| crate::reference_quad::reference_quads(img));
     let mut out: Vec<Detection> = Vec::new();
-    for comp in &comps {
-        let contour = trace_contour(&comp.labels_view(&dark.labels), img.width, img.height, comp);
+    let (w, h) = (img.width, img.height);
+    let cc = Components::new(&dark, w, h);
+    // 4-connected components first (a border touching dark surroundings only diagonally stays
+    // apart from them), then the 8-connected groups of small ones (a small blurred border whose
+    // pixels meet only diagonally).
+    let singles = cc
+        .stats
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.plausible(w, h, cfg))
+        .map(|(k, c)| (*c, k as u32, false));
+    let groups = cc
+        .groups
+        .iter()
+        .filter(|c| c.plausible(w, h, cfg))
+        .map(|c| (*c, cc.comp_of[c.root as usize], true));
+    let candidates: Vec<(CompStats, u32, bool)> = singles.chain(groups).collect();
+    // Groups holding a component that already decoded are not tried again.
+    let mut decoded_groups: std::collections::HashSet<u32> = std::collections::HashSet::new();
+    for (comp, k, grouped) in &candidates {
+        let (comp, k) = (*comp, *k);
+        if *grouped && decoded_groups.contains(&k) {
+            continue;
+        }
+        stats.components += 1;
+        let contour = if *grouped {
+            trace_contour(|i| cc.in_group(i, k), w, h, &comp)
+        } else {
+            trace_contour(|i| cc.in_component(i, k), w, h, &comp)
+        };
         let Some(quad) = fit_quad(&contour, cfg) else {
             continue;
         };
         stats.quads += 1;
+        if !border_is_dark(img, &quad) {
+            stats.rejected_decode += 1;
+            continue;
+        }
         let Some(mut refined) = refine_quad(img, quad) else {
             stats.rejected_decode += 1;
             continue;
@@ -236,7 +312,10 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
             refined.corners = b;
         }
         match decode(img, &refined, cfg) {
-            Some(det) => out.push(det),
+            Some(det) => {
+                decoded_groups.insert(cc.group_of[k as usize]);
+                out.push(det)
+            }
             None => stats.rejected_decode += 1,
         }
     }
@@ -264,12 +343,8 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
 // ---------------------------------------------------------------------------------------------
 // Threshold and components
 
-struct Binary {
-    /// Union-find parent per pixel for dark pixels, `u32::MAX` for others.
-    labels: Vec<u32>,
-}
-
-fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
+/// Dark pixels of the adaptive threshold (step 1 of the method).
+fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Vec<bool> {
     let (w, h) = (img.width, img.height);
     let ts = cfg.tile_px.max(2);
     let (tw, th) = (w.div_ceil(ts), h.div_ceil(ts));
@@ -311,7 +386,7 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
             nmax[ty * tw + tx] = hi;
         }
     }
-    let mut labels = vec![u32::MAX; w * h];
+    let mut dark = vec![false; w * h];
     for y in 0..h {
         let ty = y / ts;
         for x in 0..w {
@@ -320,44 +395,189 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Binary {
             if hi - lo < min_diff {
                 continue;
             }
-            let v = img.data[y * w + x];
-            if v <= 0.5 * (lo + hi) {
-                labels[y * w + x] = (y * w + x) as u32;
-            }
+            dark[y * w + x] = img.data[y * w + x] <= 0.5 * (lo + hi);
         }
     }
-    // Union-find over 8-connected dark pixels.
-    for y in 0..h {
-        for x in 0..w {
-            let i = y * w + x;
-            if labels[i] == u32::MAX {
-                continue;
-            }
-            let link = |j: usize, labels: &mut Vec<u32>| {
-                if labels[j] != u32::MAX {
-                    union(labels, i as u32, j as u32);
+    dark
+}
+
+/// Largest 4-connected component (pixels) that is joined to its diagonal neighbours: the
+/// black border of a tag with cells under 3 px (side under 24 px) holds at most
+/// `7/16 · 24² ≈ 250` px, so this leaves ample room while keeping the large dark regions of a
+/// scene (hair, shadow) out of the join.
+const MAX_JOIN_PX: usize = 2048;
+
+/// The dark pixels' components: 4-connected, and the 8-connected ones that join several of
+/// them.
+struct Components {
+    /// Per pixel, the index of its 4-connected component in `stats` (`u32::MAX` for pixels
+    /// that are not dark). Indices follow the components' first pixels in raster order.
+    comp_of: Vec<u32>,
+    /// Pixel count and bounding box of each 4-connected component.
+    stats: Vec<CompStats>,
+    /// Per 4-connected component, the first (lowest) index of the 8-connected group it is in.
+    group_of: Vec<u32>,
+    /// The 8-connected groups of more than one component.
+    groups: Vec<CompStats>,
+}
+
+impl Components {
+    /// Labels the dark pixels (union-find, 4-connected), then joins the small components that
+    /// touch diagonally.
+    fn new(dark: &[bool], w: usize, h: usize) -> Self {
+        let mut labels: Vec<u32> = dark
+            .iter()
+            .enumerate()
+            .map(|(i, &d)| if d { i as u32 } else { u32::MAX })
+            .collect();
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                if labels[i] == u32::MAX {
+                    continue;
                 }
-            };
-            if x > 0 {
-                link(i - 1, &mut labels);
-            }
-            if y > 0 {
-                link(i - w, &mut labels);
-                if x > 0 {
-                    link(i - w - 1, &mut labels);
+                if x > 0 && labels[i - 1] != u32::MAX {
+                    union(&mut labels, i as u32, (i - 1) as u32);
                 }
-                if x + 1 < w {
-                    link(i - w + 1, &mut labels);
+                if y > 0 && labels[i - w] != u32::MAX {
+                    union(&mut labels, i as u32, (i - w) as u32);
                 }
             }
         }
-    }
-    for i in 0..w * h {
-        if labels[i] != u32::MAX {
-            labels[i] = find(&mut labels, i as u32);
+        for i in 0..w * h {
+            if labels[i] != u32::MAX {
+                labels[i] = find(&mut labels, i as u32);
+            }
+        }
+        // Compact indices, in place: a root is its component's first pixel in raster order, so
+        // the scan converts it (root pixel -> component index) before any other pixel of the
+        // component reads it.
+        let mut stats: Vec<CompStats> = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let r = labels[i];
+                if r == u32::MAX {
+                    continue;
+                }
+                let k = if r as usize == i {
+                    stats.push(CompStats {
+                        root: i as u32,
+                        count: 0,
+                        x0: x,
+                        x1: x,
+                        y0: y,
+                        y1: y,
+                    });
+                    stats.len() - 1
+                } else {
+                    labels[r as usize] as usize
+                };
+                labels[i] = k as u32;
+                let e = &mut stats[k];
+                e.count += 1;
+                e.x0 = e.x0.min(x);
+                e.x1 = e.x1.max(x);
+                e.y1 = y;
+            }
+        }
+        let comp_of = labels;
+        // Diagonal joins of small components (union-find over component indices).
+        let mut group_of: Vec<u32> = (0..stats.len() as u32).collect();
+        // One byte per component: the join pass reads it for every dark pixel.
+        let small_flag: Vec<bool> = stats.iter().map(|c| c.count <= MAX_JOIN_PX).collect();
+        let small = |k: u32| small_flag[k as usize];
+        let mut any = false;
+        for y in 1..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let a = comp_of[i];
+                if a == u32::MAX || !small(a) {
+                    continue;
+                }
+                for j in [x.checked_sub(1), (x + 1 < w).then_some(x + 1)]
+                    .into_iter()
+                    .flatten()
+                    .map(|xj| i - w - x + xj)
+                {
+                    let c = comp_of[j];
+                    if c != u32::MAX && c != a && small(c) {
+                        union(&mut group_of, a, c);
+                        any = true;
+                    }
+                }
+            }
+        }
+        let mut groups: Vec<CompStats> = Vec::new();
+        if any {
+            let mut slot = vec![u32::MAX; stats.len()];
+            for k in 0..stats.len() {
+                let g = find(&mut group_of, k as u32) as usize;
+                group_of[k] = g as u32;
+                if g == k {
+                    continue;
+                }
+                if slot[g] == u32::MAX {
+                    slot[g] = groups.len() as u32;
+                    groups.push(stats[g]);
+                }
+                groups[slot[g] as usize].join(&stats[k]);
+            }
+        }
+        Self {
+            comp_of,
+            stats,
+            group_of,
+            groups,
         }
     }
-    Binary { labels }
+
+    /// Whether pixel `i` belongs to the 4-connected component of index `k`.
+    fn in_component(&self, i: usize, k: u32) -> bool {
+        self.comp_of[i] == k
+    }
+
+    /// Whether pixel `i` belongs to the 8-connected group whose first component is `g`.
+    fn in_group(&self, i: usize, g: u32) -> bool {
+        let k = self.comp_of[i];
+        k != u32::MAX && self.group_of[k as usize] == g
+    }
+}
+
+/// Pixel count and bounding box of a component.
+#[derive(Debug, Clone, Copy)]
+struct CompStats {
+    /// The first pixel in raster order (where contour tracing starts).
+    root: u32,
+    count: usize,
+    x0: usize,
+    x1: usize,
+    y0: usize,
+    y1: usize,
+}
+
+impl CompStats {
+    fn join(&mut self, o: &CompStats) {
+        self.count += o.count;
+        self.x0 = self.x0.min(o.x0);
+        self.x1 = self.x1.max(o.x1);
+        self.y0 = self.y0.min(o.y0);
+        self.y1 = self.y1.max(o.y1);
+    }
+
+    /// Whether the component can be a tag's black border: a fraction of the smallest tag's
+    /// area (the border ring alone covers 7/16 of the square) and a bounding box that can hold a
+    /// tag but not the whole image.
+    fn plausible(&self, w: usize, h: usize, cfg: &DetectorConfig) -> bool {
+        let min_side = cfg.min_side_px.max(4.0);
+        let bw = (self.x1 - self.x0 + 1) as f64;
+        let bh = (self.y1 - self.y0 + 1) as f64;
+        bw.max(bh) >= min_side
+            && bw.min(bh) >= 0.25 * min_side
+            && self.count as f64 >= 0.3 * min_side * min_side
+            && bw < w as f64
+            && bh < h as f64
+    }
 }
 
 fn find(p: &mut [u32], mut i: u32) -> u32 {
@@ -384,65 +604,14 @@ fn union(p: &mut [u32], a: u32, b: u32) {
     }
 }
 
-#[derive(Debug, Clone, Copy)]
-struct Component {
-    root: u32,
-    count: usize,
-}
-
-impl Component {
-    fn labels_view<'a>(&self, labels: &'a [u32]) -> LabelView<'a> {
-        LabelView {
-            labels,
-            root: self.root,
-        }
-    }
-}
-
-struct LabelView<'a> {
-    labels: &'a [u32],
-    root: u32,
-}
-
-fn components(b: &Binary, w: usize, h: usize, cfg: &DetectorConfig) -> Vec<Component> {
-    let mut count = std::collections::HashMap::<u32, (usize, usize, usize, usize, usize)>::new();
-    for y in 0..h {
-        for x in 0..w {
-            let l = b.labels[y * w + x];
-            if l == u32::MAX {
-                continue;
-            }
-            let e = count.entry(l).or_insert((0, x, x, y, y));
-            e.0 += 1;
-            e.1 = e.1.min(x);
-            e.2 = e.2.max(x);
-            e.3 = e.3.min(y);
-            e.4 = e.4.max(y);
-        }
-    }
-    let min_side = cfg.min_side_px.max(4.0);
-    let mut comps: Vec<Component> = count
-        .into_iter()
-        .filter(|(_, (n, x0, x1, y0, y1))| {
-            let bw = (x1 - x0 + 1) as f64;
-            let bh = (y1 - y0 + 1) as f64;
-            // The border ring alone covers 7/16 of the square: require a fraction of the
-            // smallest tag's area, and a bounding box that can hold a tag.
-            bw.max(bh) >= min_side
-                && bw.min(bh) >= 0.25 * min_side
-                && *n as f64 >= 0.3 * min_side * min_side
-                && bw < w as f64
-                && bh < h as f64
-        })
-        .map(|(root, (n, ..))| Component { root, count: n })
-        .collect();
-    comps.sort_by_key(|c| c.root);
-    comps
-}
-
-/// Moore-neighbourhood tracing of the outer contour, starting at the component's first pixel in
-/// raster order (its root).
-fn trace_contour(lv: &LabelView<'_>, w: usize, h: usize, comp: &Component) -> Vec<DVec2> {
+/// Moore-neighbourhood tracing of the outer contour of the pixels for which `member` holds
+/// (by pixel index), starting at their first pixel in raster order, `comp.root`.
+fn trace_contour(
+    member: impl Fn(usize) -> bool,
+    w: usize,
+    h: usize,
+    comp: &CompStats,
+) -> Vec<DVec2> {
     const DIRS: [(i64, i64); 8] = [
         (1, 0),
         (1, 1),
@@ -458,7 +627,7 @@ fn trace_contour(lv: &LabelView<'_>, w: usize, h: usize, comp: &Component) -> Ve
             && y >= 0
             && (x as usize) < w
             && (y as usize) < h
-            && lv.labels[y as usize * w + x as usize] == lv.root
+            && member(y as usize * w + x as usize)
     };
     let start = (
         (comp.root as usize % w) as i64,
@@ -602,6 +771,25 @@ fn is_convex(q: &[DVec2; 4]) -> bool {
     true
 }
 
+/// Smallest angle between adjacent sides of a quad, degrees (the reference library's
+/// `cos_critical_rad`): a square seen at 80° from its normal along a diagonal still has 20°
+/// corners; sharper ones are slivers of other shapes.
+pub const MIN_CORNER_ANGLE_DEG: f64 = 10.0;
+
+/// Smallest distance of the two side corners from the diagonal between the two farthest
+/// contour points, as a fraction of that diagonal: a square foreshortened to a rhombus whose
+/// short diagonal is 8 % of the long one (10° corners, [`MIN_CORNER_ANGLE_DEG`]) passes.
+pub const MIN_CHORD_OFFSET: f64 = 0.04;
+
+/// How much shorter a side of the traced contour's quad can be than the tag's border, pixels:
+/// the contour runs through the centres of the outermost dark pixels, half a pixel or more
+/// (with blur) inside the edge at each end.
+pub const CONTOUR_INSET_PX: f64 = 2.0;
+
+/// Largest fraction of a side's traced contour that may lie beyond the side tolerance
+/// ([`DetectorConfig::max_side_deviation`]): specks of noise or shadow that touch the border.
+pub const MAX_STRAY_FRACTION: f64 = 0.2;
+
 /// Fits a quadrilateral to a closed contour. The result is ordered with positive signed area in
 /// image coordinates (clockwise on screen).
 fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
@@ -642,7 +830,7 @@ fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
         .iter()
         .max_by(|&&x, &&y| dist(x).abs().total_cmp(&dist(y).abs()))?;
     let diag = a.distance(b);
-    if dist(i1).abs() < 0.2 * diag || dist(i3).abs() < 0.2 * diag {
+    if dist(i1).abs() < MIN_CHORD_OFFSET * diag || dist(i3).abs() < MIN_CHORD_OFFSET * diag {
         return None;
     }
     let idx = [i0, i1, i2, i3];
@@ -661,13 +849,24 @@ fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
             .iter()
             .map(|&i| (contour[i], 1.0))
             .collect();
-        let line = fit_line(&pts)?;
         let side = contour[s].distance(contour[e]);
         let tol = 1.0 + cfg.max_side_deviation * side;
-        for &i in &seg[lo..hi.min(len)] {
-            if (contour[i].dot(line.n) - line.d).abs() > tol {
+        // A few contour points may stray (a dark speck of noise or shadow touching the border):
+        // refit on the points within the tolerance, and require most of the side to be there.
+        let mut line = fit_line(&pts)?;
+        for _ in 0..2 {
+            let inliers: Vec<(DVec2, f64)> = pts
+                .iter()
+                .copied()
+                .filter(|(p, _)| (p.dot(line.n) - line.d).abs() <= tol)
+                .collect();
+            if (inliers.len() as f64) < (1.0 - MAX_STRAY_FRACTION) * pts.len() as f64 {
                 return None;
             }
+            if inliers.len() == pts.len() {
+                break;
+            }
+            line = fit_line(&inliers)?;
         }
         lines.push(line);
     }
@@ -680,7 +879,14 @@ fn fit_quad(contour: &[DVec2], cfg: &DetectorConfig) -> Option<[DVec2; 4]> {
     }
     for k in 0..4 {
         let side = q[k].distance(q[(k + 1) % 4]);
-        if side < cfg.min_side_px || q[k].distance(c) > 2.0 * diag {
+        let (u, v) = (
+            (q[(k + 1) % 4] - q[k]).normalize_or_zero(),
+            (q[(k + 3) % 4] - q[k]).normalize_or_zero(),
+        );
+        if side < cfg.min_side_px - CONTOUR_INSET_PX
+            || q[k].distance(c) > 2.0 * diag
+            || u.dot(v).abs() > MIN_CORNER_ANGLE_DEG.to_radians().cos()
+        {
             return None;
         }
     }
@@ -722,10 +928,20 @@ fn matching_reference_quad(refs: &[[DVec2; 4]], q: &[DVec2; 4]) -> Option<[DVec2
 // ---------------------------------------------------------------------------------------------
 // Edge refinement
 
+/// One side's edge points (position, gradient energy, edge contrast) and its contrast samples
+/// (position along the side, contrast).
+type SideSamples = (Vec<(DVec2, f64, f64)>, Vec<(f64, f64)>);
+
 struct RefinedQuad {
     corners: [DVec2; 4],
     cov: [[f64; 3]; 4],
     edge_rms_px: f64,
+    /// Per corner, the smaller visible fraction of the quarters of its two sides next to it.
+    visible_near: [f64; 4],
+    /// Side length over 8, pixels.
+    cell_px: f64,
+    /// Per corner, whether a side next to it bends (see [`BEND_SIGMAS`]).
+    bent: [bool; 4],
 }
 
 /// Refines the sides on the grey image. `q` has positive signed area (clockwise on screen with y
@@ -745,8 +961,18 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
     } else {
         GRADIENT_HALF_SPAN_PX
     };
+    // Per side, at its start and end corner: how far the half-side's line is from the side's,
+    // and that distance's variance from noise alone.
+    let mut bend = [[(0.0f64, 0.0f64); 2]; 4];
+    // Per side, the visible fraction next to its start and end corner.
+    let mut visible_near = [[1.0f64; 2]; 4];
     for pass in 0..3 {
+        // The occlusion evidence (corner zones, bends) is gathered on the last pass.
+        let last = pass == 2;
         lines.clear();
+        // Per side: the edge points (position, gradient energy, edge contrast) and, for every
+        // sample along the side, its position along the side and its edge contrast.
+        let mut sides: Vec<SideSamples> = Vec::with_capacity(4);
         for k in 0..4 {
             let (a, b) = (corners[k], corners[(k + 1) % 4]);
             let len = a.distance(b);
@@ -756,14 +982,25 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
             let outward = DVec2::new(dir.y, -dir.x);
             let nsamp = (len.round() as usize).clamp(6, 400);
             let mut pts = Vec::with_capacity(nsamp);
+            let mut contrast = Vec::with_capacity(nsamp);
             for s in 0..nsamp {
                 // Stay a cell away from the corners, where the other side's edge interferes.
                 let margin = (cell * 0.75).min(0.25 * len) / len;
                 let t = margin + (1.0 - 2.0 * margin) * (s as f64 + 0.5) / nsamp as f64;
                 let p = a + (b - a) * t;
                 if !img.contains(p, range + 2.0) {
+                    contrast.push((t, 0.0));
                     continue;
                 }
+                // Michelson contrast of the white ring against the black border half a cell
+                // either side of the edge: independent of the light level (a shadow), low where
+                // something covers the ring or the border.
+                let (inner, outer) = (
+                    img.bilinear(p - outward * (0.5 * cell)),
+                    img.bilinear(p + outward * (0.5 * cell)),
+                );
+                let m = (outer - inner) / (outer.abs() + inner.abs()).max(1e-9);
+                contrast.push((t, m));
                 let (mut mw, mut mn) = (0.0, 0.0);
                 let step = 0.25;
                 let mut off = -range;
@@ -781,17 +1018,106 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
                 if mw <= 0.0 {
                     continue;
                 }
-                pts.push((p + outward * (mn / mw), mw));
+                pts.push((p + outward * (mn / mw), mw, m));
             }
-            if pts.len() < 4 {
+            // The corner zones, which the edge points leave out: contrast only, so a hidden
+            // corner tip is seen.
+            let margin = (cell * 0.75).min(0.25 * len) / len;
+            let zone_samples = if last { CORNER_ZONE_SAMPLES } else { 0 };
+            for j in 0..zone_samples {
+                let f = margin * (j as f64 + 0.5) / CORNER_ZONE_SAMPLES as f64;
+                for t in [f, 1.0 - f] {
+                    let p = a + (b - a) * t;
+                    let m = if img.contains(p, cell + 1.0) {
+                        let (inner, outer) = (
+                            img.bilinear(p - outward * (0.5 * cell)),
+                            img.bilinear(p + outward * (0.5 * cell)),
+                        );
+                        (outer - inner) / (outer.abs() + inner.abs()).max(1e-9)
+                    } else {
+                        0.0
+                    };
+                    contrast.push((t, m));
+                }
+            }
+            sides.push((pts, contrast));
+        }
+        // A sample is visible when its contrast is at least VISIBLE_CONTRAST of the tag's
+        // median; the sides are fitted to their visible edge points.
+        let mut all: Vec<f64> = sides.iter().flat_map(|s| s.1.iter().map(|c| c.1)).collect();
+        all.sort_by(f64::total_cmp);
+        let median = all.get(all.len() / 2).copied().unwrap_or(0.0);
+        if median <= 0.0 {
+            return None;
+        }
+        let visible_at = VISIBLE_CONTRAST * median;
+        for k in 0..4 {
+            let (pts, contrast) = &sides[k];
+            let mut used: Vec<(DVec2, f64)> = pts
+                .iter()
+                .filter(|p| p.2 >= visible_at)
+                .map(|p| (p.0, p.1))
+                .collect();
+            // Too little of the side visible to fit: fit all its edge points and mark both its
+            // corners occluded.
+            let hidden = used.len() < 4;
+            if hidden {
+                used = pts.iter().map(|p| (p.0, p.1)).collect();
+            }
+            if used.len() < 4 {
                 return None;
             }
             // Weights by gradient energy, normalised so the covariance uses the point count.
-            let wmax = pts.iter().map(|p| p.1).fold(0.0, f64::max);
-            for p in &mut pts {
+            let wmax = used.iter().map(|p| p.1).fold(0.0, f64::max);
+            for p in &mut used {
                 p.1 = (p.1 / wmax).sqrt();
             }
-            lines.push(fit_line(&pts)?);
+            let line = fit_line(&used)?;
+            // Straightness: lines fitted to each half of the side, at the corner of that half,
+            // against the whole side's line. A side partly replaced by another edge (an
+            // occluder's outline along the border) bends; a whole side does not beyond noise.
+            let (a, b) = (corners[k], corners[(k + 1) % 4]);
+            let len = a.distance(b).max(1e-9);
+            let half = |first: bool| -> Vec<(DVec2, f64)> {
+                used.iter()
+                    .copied()
+                    .filter(|p| ((p.0 - a).dot(b - a) / (len * len) < 0.5) == first)
+                    .collect()
+            };
+            if !last {
+                lines.push(line);
+                continue;
+            }
+            for (end, corner, pts_half) in [(0usize, a, half(true)), (1, b, half(false))] {
+                bend[k][end] = (0.0, 0.0);
+                if pts_half.len() >= 4 {
+                    if let Some(hl) = fit_line(&pts_half) {
+                        let d =
+                            (corner.dot(hl.n) - hl.d).abs() - (corner.dot(line.n) - line.d).abs();
+                        bend[k][end] = (d.abs(), hl.offset_var_at(corner));
+                    }
+                }
+            }
+            lines.push(line);
+            // Visible fraction of the quarter of the side next to each of its corners.
+            let near = |lo: f64, hi: f64| {
+                let (n, v) = contrast
+                    .iter()
+                    .filter(|c| c.0 >= lo && c.0 <= hi)
+                    .fold((0usize, 0usize), |(n, v), c| {
+                        (n + 1, v + usize::from(c.1 >= visible_at))
+                    });
+                if n == 0 {
+                    0.0
+                } else {
+                    v as f64 / n as f64
+                }
+            };
+            visible_near[k] = if hidden {
+                [0.0; 2]
+            } else {
+                [near(0.0, 0.3), near(0.7, 1.0)]
+            };
         }
         let mut next = [DVec2::ZERO; 4];
         for k in 0..4 {
@@ -811,12 +1137,23 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         };
     }
     let mut cov = [[0.0; 3]; 4];
+    let mut bent = [false; 4];
     for k in 0..4 {
         let (l1, l2) = (&lines[(k + 3) % 4], &lines[k]);
         let sin = l1.n.perp_dot(l2.n).abs().max(0.05);
         let floor2 = SIGMA_FLOOR_PX * SIGMA_FLOOR_PX;
-        let v1 = l1.offset_var_at(corners[k]) + floor2;
-        let v2 = l2.offset_var_at(corners[k]) + floor2;
+        // A bent side adds its bend at the corner to the line's offset variance.
+        let bend_var = |(d, var): (f64, f64)| {
+            if d > MIN_BEND_PX && d * d > BEND_SIGMAS * BEND_SIGMAS * (var + floor2) {
+                d * d
+            } else {
+                0.0
+            }
+        };
+        let (b1, b2) = (bend_var(bend[(k + 3) % 4][1]), bend_var(bend[k][0]));
+        bent[k] = b1 > 0.0 || b2 > 0.0;
+        let v1 = l1.offset_var_at(corners[k]) + floor2 + b1;
+        let v2 = l2.offset_var_at(corners[k]) + floor2 + b2;
         let (u1, u2) = (l1.dir(), l2.dir());
         let s2 = sin * sin;
         // A shift of line 1 moves the corner along line 2's direction, and vice versa.
@@ -827,10 +1164,16 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         ];
     }
     let edge_rms_px = (lines.iter().map(|l| l.sigma * l.sigma).sum::<f64>() / 4.0).sqrt();
+    // Corner k ends side k - 1 and starts side k.
+    let visible_near =
+        std::array::from_fn(|k| visible_near[(k + 3) % 4][1].min(visible_near[k][0]));
     Some(RefinedQuad {
         corners,
         cov,
         edge_rms_px,
+        visible_near,
+        cell_px: cell,
+        bent,
     })
 }
 
@@ -890,6 +1233,55 @@ fn cell_uv(row: usize, col: usize) -> (f64, f64) {
         -1.0 + (col as f64 - 0.5) * cw,
         -1.0 + (row as f64 - 0.5) * cw,
     )
+}
+
+/// Most border cells brighter than the midpoint of the black and white models on the
+/// unrefined quad (a quick test before the edge refinement; decoding allows 3 on the refined
+/// one, and the unrefined corners can be a pixel off, which puts some cell centres of a small
+/// tag onto its edges).
+const MAX_BRIGHT_BORDER_UNREFINED: usize = 8;
+
+/// Whether the black border of quad `q` (unrefined) is dark against its white ring: the cell
+/// centres of the two rings, each modelled as a plane over the tag.
+fn border_is_dark(img: &GrayF32, q: &[DVec2; 4]) -> bool {
+    let Some(h) = square_to_quad(q) else {
+        return false;
+    };
+    let mut black = Vec::with_capacity(28);
+    let mut white = Vec::with_capacity(36);
+    for r in 0..10 {
+        for c in 0..10 {
+            let ring = r.min(c).min(9 - r).min(9 - c);
+            if ring > 1 {
+                continue;
+            }
+            let Some(v) = sample_cell(img, &h, r, c, 0.0) else {
+                continue;
+            };
+            let (u, w) = cell_uv(r, c);
+            if ring == 1 {
+                black.push((u, w, v));
+            } else {
+                white.push((u, w, v));
+            }
+        }
+    }
+    if black.len() < 20 || white.len() < 18 {
+        // Too little visible to tell: leave it to the full decode.
+        return true;
+    }
+    let (Some(bp), Some(wp)) = (fit_plane(&black), fit_plane(&white)) else {
+        return false;
+    };
+    let eval = |p: &[f64; 3], u: f64, v: f64| p[0] + p[1] * u + p[2] * v;
+    let bright = black
+        .iter()
+        .filter(|&&(u, v, z)| {
+            let (lo, hi) = (eval(&bp, u, v), eval(&wp, u, v));
+            hi - lo <= 0.0 || z > 0.5 * (lo + hi)
+        })
+        .count();
+    bright <= MAX_BRIGHT_BORDER_UNREFINED
 }
 
 fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detection> {
@@ -973,6 +1365,28 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
     if bright_border > 3 {
         return None;
     }
+    // Occlusion evidence per quad corner (the quadrant of the grid nearest to it): border cells
+    // that are not dark, white-ring cells that are not light.
+    let quadrant = |r: usize, c: usize| match (c >= 5, r >= 5) {
+        (false, false) => 0,
+        (true, false) => 1,
+        (true, true) => 2,
+        (false, true) => 3,
+    };
+    let mut evidence = [0usize; 4];
+    for r in 0..10 {
+        for c in 0..10 {
+            let Some(z) = grid[r][c] else { continue };
+            let (u, v) = cell_uv(r, c);
+            let (lo, hi) = (eval(&bp, u, v), eval(&wp, u, v));
+            let mid = 0.5 * (lo + hi);
+            let bad = (ring(r, c, 1) && (hi - lo <= 0.0 || z > mid))
+                || (ring(r, c, 0) && white.len() >= 18 && z < mid);
+            if bad {
+                evidence[quadrant(r, c)] += 1;
+            }
+        }
+    }
     // Read the data bits for each of the four rotations (corner shifts).
     let mut best: Option<(u32, u32, usize, f64)> = None; // (hamming, id, shift, margin)
     for shift in 0..4 {
@@ -1025,19 +1439,57 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
     if margin < cfg.min_margin {
         return None;
     }
+    let wrong = tag36h11::CODES[id as usize];
+    let mut code = 0u64;
+    let mut cells = [(0usize, 0usize); tag36h11::NBITS];
+    for (i, cell) in cells.iter_mut().enumerate() {
+        let (mut r, mut c) = (
+            tag36h11::BIT_Y[i] as usize + 1,
+            tag36h11::BIT_X[i] as usize + 1,
+        );
+        for _ in 0..shift {
+            let (nr, nc) = (c, 9 - r);
+            r = nr;
+            c = nc;
+        }
+        *cell = (r, c);
+        let (u, w) = cell_uv(r, c);
+        let thr = 0.5 * (eval(&bp, u, w) + eval(&wp, u, w));
+        code = (code << 1) | u64::from(grid[r][c].is_some_and(|v| v > thr));
+    }
+    let diff = code ^ wrong;
+    for (i, &(r, c)) in cells.iter().enumerate() {
+        if (diff >> (tag36h11::NBITS - 1 - i)) & 1 == 1 {
+            evidence[quadrant(r, c)] += 1;
+        }
+    }
+    // A corner is occluded when the edge next to it is hidden on either side, or the cells of
+    // its quadrant disagree with a whole tag; its covariance then gets an isotropic term of
+    // OCCLUDED_SIGMA_CELLS cells.
+    let occluded_q: [bool; 4] = std::array::from_fn(|j| {
+        rq.visible_near[j] < MIN_VISIBLE_NEAR || evidence[j] > 0 || rq.bent[j]
+    });
+    let extra = (OCCLUDED_SIGMA_CELLS * rq.cell_px).powi(2);
     // Reorder corners so corner 0 is the tag's printed top-left. With the grid turned by
     // `shift` quarter turns, the tag's corner k is the quad's corner k - shift.
     let mut corners = [DVec2::ZERO; 4];
     let mut cov = [[0.0; 3]; 4];
+    let mut occluded = [false; 4];
     for k in 0..4 {
         let j = (k + shift) % 4;
         corners[k] = q[j];
         cov[k] = rq.cov[j];
+        occluded[k] = occluded_q[j];
+        if occluded[k] {
+            cov[k][0] += extra;
+            cov[k][2] += extra;
+        }
     }
     let ht = square_to_quad(&corners)?;
     // Output in the reference library's order (bottom-left, bottom-right, top-right, top-left).
     let rev = |a: [DVec2; 4]| [a[3], a[2], a[1], a[0]];
     let revc = |a: [[f64; 3]; 4]| [a[3], a[2], a[1], a[0]];
+    let revb = |a: [bool; 4]| [a[3], a[2], a[1], a[0]];
     Some(Detection {
         id,
         corners_px: rev(corners),
@@ -1046,6 +1498,7 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
         hamming,
         decision_margin: margin,
         edge_rms_px: rq.edge_rms_px,
+        occluded_corners: revb(occluded),
     })
 }
 

@@ -184,9 +184,14 @@ fn run(cfg: &DetectorConfig) -> Errors {
                 None => misses.push(format!("{stem}: tag {} at {}", r.id, centre(&r.corners))),
             }
         }
-        // Detections the reference does not list. One is known and genuine: a tag 0 on a distant
-        // cube (11 px square, Hamming 1) in the second photo at (610, 105), checked by eye; the
-        // reference library misses it. Anything more would be a false positive.
+        // Detections the reference does not list. Two are known and genuine, checked by eye:
+        // tag 0 on the faces of distant cubes in the second photo, at (610, 105) (11 px square,
+        // Hamming 1) and at (655, 111) (10 x 13 px, Hamming 0, the near cube's left face); the
+        // reference library misses both. Anything else would be a false positive.
+        const KNOWN_EXTRA: [(&str, u32, f64, f64); 2] = [
+            ("34085369442_304b6bafd9_c", 0, 610.0, 105.0),
+            ("34085369442_304b6bafd9_c", 0, 655.0, 111.0),
+        ];
         let extra: Vec<&Detection> = dets
             .iter()
             .filter(|d| {
@@ -200,8 +205,15 @@ fn run(cfg: &DetectorConfig) -> Errors {
                 "{stem}: detection not in the reference: {} at {}",
                 d.id, d.center_px
             );
+            assert!(
+                KNOWN_EXTRA.iter().any(|&(s, id, x, y)| s == stem
+                    && id == d.id
+                    && d.center_px.distance(DVec2::new(x, y)) < 3.0),
+                "{stem}: unexpected detection {} at {}",
+                d.id,
+                d.center_px
+            );
         }
-        assert!(extra.len() <= 1, "{stem}: {} extra detections", extra.len());
         for r in &parse_fixture(stem) {
             let d = find(&dets, r).expect("every refined-reference tag is found");
             e.refined

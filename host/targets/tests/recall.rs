@@ -1,0 +1,234 @@
+//! Detection recall on hard synthetic tags with known truth: small (black-square sides 13..30
+//! px), strongly foreshortened (tilts up to 78° about a diagonal), tightly packed (white rings
+//! touching) and partly shadowed tags, on dark and light surrounds, blurred and noisy. Every tag
+//! must be found with its id, near its true corners, and nothing else may be reported.
+//!
+//! These are the cases of the headdress (13..18 px tags seen obliquely, side by side on a band
+//! that may be darker than their white ring) and the ones the AprilTag C library finds
+//! (`scripts/peers/apriltag_recall.py`, docs/benchmarks-poses.md "Recall").
+
+use glam::{DMat3, DVec2, DVec3};
+use rand::{Rng, SeedableRng};
+use skinbrdf_targets::render::paint_tag;
+use skinbrdf_targets::{detect, DetectorConfig, GrayF32};
+
+/// Corner error allowed for a detection to count as the tag, pixels: recall is tested here, not
+/// accuracy, but a detection this far off would be a different quad (a cell is 1.2..4 px).
+const MATCH_PX: f64 = 1.0;
+
+/// Focal length of the virtual camera, pixels (the perspective of the tilted planes).
+const FOCAL_PX: f64 = 1500.0;
+
+/// Homography tag frame -> pixels of a square tag whose black square has half-side `half_px`
+/// when seen face-on, centred at pixel `c` of a `w` x `h` image, tilted by `tilt` about the
+/// in-plane axis at angle `tilt_dir` after turning by `spin` in its plane.
+fn plane_h(c: DVec2, half_px: f64, tilt: f64, tilt_dir: f64, spin: f64, w: f64, h: f64) -> DMat3 {
+    let z = 1.0;
+    let l = half_px * z / FOCAL_PX;
+    let axis = DVec3::new(tilt_dir.cos(), tilt_dir.sin(), 0.0);
+    let r = glam::DMat3::from_axis_angle(axis, tilt) * glam::DMat3::from_rotation_z(spin);
+    let t = DVec3::new(
+        (c.x - 0.5 * w) * z / FOCAL_PX,
+        (c.y - 0.5 * h) * z / FOCAL_PX,
+        z,
+    );
+    let k = DMat3::from_cols(
+        DVec3::new(FOCAL_PX, 0.0, 0.0),
+        DVec3::new(0.0, FOCAL_PX, 0.0),
+        DVec3::new(0.5 * w, 0.5 * h, 1.0),
+    );
+    k * DMat3::from_cols(r.x_axis * l, r.y_axis * l, t)
+}
+
+/// The tag at offset `(du, dv)` (tag units) in the plane of `g`.
+fn offset(g: &DMat3, du: f64, dv: f64) -> DMat3 {
+    *g * DMat3::from_cols(
+        DVec3::new(1.0, 0.0, 0.0),
+        DVec3::new(0.0, 1.0, 0.0),
+        DVec3::new(du, dv, 1.0),
+    )
+}
+
+fn corners(h: &DMat3) -> [DVec2; 4] {
+    [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)]
+        .map(|(x, y)| skinbrdf_targets::homography::apply_h(h, DVec2::new(x, y)))
+}
+
+/// Separable Gaussian blur of standard deviation `sigma_px`.
+fn blur(img: &mut GrayF32, sigma_px: f64) {
+    let r = (3.0 * sigma_px).ceil() as i64;
+    let k: Vec<f32> = (-r..=r)
+        .map(|i| (-0.5 * (i as f64 / sigma_px).powi(2)).exp() as f32)
+        .collect();
+    let ks: f32 = k.iter().sum();
+    let (w, h) = (img.width as i64, img.height as i64);
+    for pass in 0..2 {
+        let src = img.data.clone();
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = 0.0;
+                for (j, kv) in k.iter().enumerate() {
+                    let d = j as i64 - r;
+                    let (xx, yy) = if pass == 0 {
+                        ((x + d).clamp(0, w - 1), y)
+                    } else {
+                        (x, (y + d).clamp(0, h - 1))
+                    };
+                    acc += kv * src[(yy * w + xx) as usize];
+                }
+                img.data[(y * w + x) as usize] = acc / ks;
+            }
+        }
+    }
+}
+
+struct Scene {
+    img: GrayF32,
+    truth: Vec<(u32, [DVec2; 4])>,
+}
+
+/// The hard set: one image of 900 x 640 px.
+fn scene(background: f32, seed: u64) -> Scene {
+    let (w, h) = (900usize, 640usize);
+    let (wf, hf) = (w as f64, h as f64);
+    let mut img = GrayF32::new(w, h, vec![background; w * h]).expect("size matches");
+    let mut truth = Vec::new();
+    let mut id = 17usize;
+    let mut put = |img: &mut GrayF32, hm: DMat3| {
+        assert!(paint_tag(img, &hm, id, 0.06, 0.92, 4));
+        truth.push((id as u32, corners(&hm)));
+        id = (id + 37) % 587;
+    };
+    // Strongly foreshortened, tilted about a diagonal (the image is a thin rhombus) and about a
+    // side, 14..30 px.
+    let obl = [
+        (11.0, 60f64, 0.0f64),
+        (13.0, 70.0, 0.0),
+        (16.0, 75.0, 0.3),
+        (15.0, 72.0, 1.2),
+        (13.0, 60.0, 2.0),
+        (14.0, 78.0, 0.0),
+        (16.0, 78.0, 1.0),
+    ];
+    for (i, &(half, tilt, dir)) in obl.iter().enumerate() {
+        let c = DVec2::new(60.0 + 125.0 * i as f64, 80.0);
+        put(
+            &mut img,
+            plane_h(
+                c,
+                half,
+                tilt.to_radians(),
+                dir,
+                std::f64::consts::FRAC_PI_4,
+                wf,
+                hf,
+            ),
+        );
+    }
+    // Small tags, 10..13 px, mildly oblique.
+    for i in 0..6 {
+        let c = DVec2::new(70.0 + 130.0 * i as f64, 200.0);
+        put(
+            &mut img,
+            plane_h(
+                c,
+                7.0 + 0.4 * i as f64,
+                (20.0 + 6.0 * i as f64).to_radians(),
+                0.5 * i as f64,
+                0.4 * i as f64,
+                wf,
+                hf,
+            ),
+        );
+    }
+    // Packed: a 5 x 3 grid of 18 px tags whose white rings touch, on a plane tilted by 40°.
+    let g = plane_h(
+        DVec2::new(240.0, 420.0),
+        9.0,
+        40f64.to_radians(),
+        0.3,
+        0.2,
+        wf,
+        hf,
+    );
+    for i in 0..5 {
+        for j in 0..3 {
+            put(
+                &mut img,
+                offset(&g, 2.5 * (i as f64 - 2.0), 2.5 * (j as f64 - 1.0)),
+            );
+        }
+    }
+    // Shadowed: a 4 x 2 grid of 20 px tags crossed by a soft shadow edge.
+    let g2 = plane_h(
+        DVec2::new(680.0, 430.0),
+        10.0,
+        35f64.to_radians(),
+        1.9,
+        -0.3,
+        wf,
+        hf,
+    );
+    for i in 0..4 {
+        for j in 0..2 {
+            put(
+                &mut img,
+                offset(&g2, 2.7 * (i as f64 - 1.5), 2.7 * (j as f64 - 0.5)),
+            );
+        }
+    }
+    blur(&mut img, 0.8);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    for y in 0..h {
+        for x in 0..w {
+            // The shadow: a line through the second grid, 3 px soft, down to 50 % of the light.
+            let d = (x as f64 - 680.0) * 0.8 + (y as f64 - 430.0) * 0.6;
+            let shade = 1.0 - 0.5 / (1.0 + (-d / 3.0).exp());
+            let n: f32 = rng.random_range(-0.02..0.02);
+            let v = &mut img.data[y * w + x];
+            *v = *v * shade as f32 + n;
+        }
+    }
+    Scene { img, truth }
+}
+
+fn check(s: &Scene, what: &str) {
+    let dets = detect(&s.img, &DetectorConfig::default());
+    let mut missed = Vec::new();
+    for (id, c) in &s.truth {
+        let found = dets
+            .iter()
+            .any(|d| d.id == *id && (0..4).all(|k| d.corners_px[k].distance(c[k]) < MATCH_PX));
+        if !found {
+            missed.push((*id, 0.25 * c.iter().copied().sum::<DVec2>()));
+        }
+    }
+    let extra: Vec<_> = dets
+        .iter()
+        .filter(|d| {
+            !s.truth.iter().any(|(id, c)| {
+                *id == d.id && (0..4).all(|k| d.corners_px[k].distance(c[k]) < MATCH_PX)
+            })
+        })
+        .map(|d| (d.id, d.center_px))
+        .collect();
+    assert!(
+        missed.is_empty(),
+        "{what}: {} of {} tags missed: {missed:?}",
+        missed.len(),
+        s.truth.len()
+    );
+    assert!(extra.is_empty(), "{what}: false positives {extra:?}");
+}
+
+#[test]
+fn every_small_oblique_packed_or_shadowed_tag_is_found_on_a_light_surround() {
+    check(&scene(0.75, 1), "light surround");
+}
+
+#[test]
+fn every_small_oblique_packed_or_shadowed_tag_is_found_on_a_dark_surround() {
+    // A surround darker than the white ring (a dark band, hair): the ring is the only light
+    // between the border and the surround, and blur joins them diagonally.
+    check(&scene(0.3, 2), "dark surround");
+}
