@@ -117,6 +117,33 @@ pub(crate) fn loader() -> &'static RawLoader {
     LOADER.get_or_init(RawLoader::new)
 }
 
+/// Runs rawler on a file and turns a panic inside it into [`RawError::Decode`]: rawler reaches
+/// `todo!()` and `expect` on some malformed or unusual files (an unknown photometric
+/// interpretation in a DNG, a missing compression tag), and one bad photograph must be an
+/// error naming the file, not the end of the program.
+pub(crate) fn guarded<T>(
+    path: &Path,
+    f: impl FnOnce() -> Result<T, rawler::RawlerError>,
+) -> Result<T, RawError> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(r) => r.map_err(|e| RawError::Decode {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        }),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unsupported structure".into());
+            Err(RawError::Decode {
+                path: path.to_path_buf(),
+                reason: format!("the raw decoder gave up ({what})"),
+            })
+        }
+    }
+}
+
 /// Photometric interpretation of a colour filter array (TIFF/EP).
 const PHOTOMETRIC_CFA: u16 = 32803;
 /// Photometric interpretation of DNG linear raw data.
@@ -203,12 +230,9 @@ fn open_raw(path: &Path) -> Result<(FileKind, RawSource), RawError> {
 /// Decodes a Bayer raw file to superpixels (see the module and crate docs).
 pub fn decode_superpixel(path: &Path, opts: &RawOptions) -> Result<RawFrame, RawError> {
     let (kind, src) = open_raw(path)?;
-    let image = loader()
-        .decode(&src, &RawDecodeParams::default(), false)
-        .map_err(|e| RawError::Decode {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
+    let image = guarded(path, || {
+        loader().decode(&src, &RawDecodeParams::default(), false)
+    })?;
     superpixel(path, kind, &image, opts)
 }
 
@@ -236,12 +260,9 @@ pub fn read_raw_header(path: &Path) -> Result<RawHeader, RawError> {
             return Ok(h);
         }
     }
-    let image = loader()
-        .decode(&src, &RawDecodeParams::default(), true)
-        .map_err(|e| RawError::Decode {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
+    let image = guarded(path, || {
+        loader().decode(&src, &RawDecodeParams::default(), true)
+    })?;
     let g = geometry(path, &image)?;
     let to_u32 = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
     Ok(RawHeader {
@@ -568,5 +589,17 @@ mod tests {
                 )
             );
         }
+    }
+
+    #[test]
+    fn a_panic_inside_the_decoder_is_an_error_naming_the_file() {
+        let path = Path::new("card/SKB_0001.DNG");
+        let err = guarded::<()>(path, || panic!("not yet implemented")).expect_err("caught");
+        let msg = err.to_string();
+        assert!(matches!(err, RawError::Decode { .. }), "{msg}");
+        assert!(
+            msg.contains("SKB_0001.DNG") && msg.contains("gave up"),
+            "{msg}"
+        );
     }
 }

@@ -220,14 +220,10 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
             })
         }
         _ => {
-            let decode_err = |e: rawler::RawlerError| RawError::Decode {
-                path: path.to_path_buf(),
-                reason: e.to_string(),
-            };
-            let decoder = loader().get_decoder(&src).map_err(decode_err)?;
-            let md = decoder
-                .raw_metadata(&src, &RawDecodeParams::default())
-                .map_err(decode_err)?;
+            let decoder = crate::decode::guarded(path, || loader().get_decoder(&src))?;
+            let md = crate::decode::guarded(path, || {
+                decoder.raw_metadata(&src, &RawDecodeParams::default())
+            })?;
             let root = decoder
                 .ifd(WellKnownIFD::Root)
                 .ok()
