@@ -287,6 +287,40 @@ fn damaged_and_misnamed_raw_files_are_refused_by_name() {
     assert_nothing_written(&out);
     std::fs::remove_file(&other_path).expect("remove");
 
+    // An X-Trans (6x6 CFA) raw file in the session's place: the layout is refused by name.
+    let meta = skinbrdf_raw::read_metadata(&files[3]).expect("metadata");
+    let mut xt = skinbrdf_raw::dng::DngImage::new(
+        12,
+        12,
+        skinbrdf_raw::BayerPhase::Rggb,
+        16,
+        vec![900; 144],
+    );
+    xt.body_serial = meta.body_serial.clone();
+    xt.make = meta.camera_make.clone().unwrap_or_default();
+    xt.model = meta.camera_model.clone().unwrap_or_default();
+    xt.lens_model = meta.lens_model.clone();
+    xt.focal_length_mm = meta.focal_length_mm;
+    xt.exposure_time_s = meta.exposure_time_s;
+    xt.f_number = meta.f_number;
+    xt.iso = meta.iso;
+    xt.capture_time = meta.capture_time.clone();
+    xt.image_number = meta.image_number;
+    let mut d = skinbrdf_raw::dng::directory(&files[3], &xt).expect("directory");
+    let xtrans = b"GGRGGBGGBGGRBRGRBGGGBGGRGGRGGBRBGBRG".map(|c| match c {
+        b'R' => 0u8,
+        b'G' => 1,
+        _ => 2,
+    });
+    d.set(33421, skinbrdf_raw::tiff::TagValue::Short(vec![6, 6]));
+    d.set(33422, skinbrdf_raw::tiff::TagValue::Byte(xtrans.to_vec()));
+    std::fs::write(&files[3], skinbrdf_raw::tiff::encode(&d)).expect("write");
+    let err = ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect_err("X-Trans");
+    let msg = err.to_string();
+    assert!(msg.contains(&name) && msg.contains("X-Trans"), "{msg}");
+    assert_nothing_written(&out);
+    std::fs::write(&files[3], &bytes).expect("restore");
+
     // The ingest then succeeds, and a rig without placements gives a session that says so.
     let r = ingest(&ingest_config(&s, &out, "rig.toml")).expect("ingest");
     assert!(r.unplaced_targets > 0 && r.placed_targets == 0);

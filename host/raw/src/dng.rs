@@ -263,8 +263,9 @@ fn pack(data: &[u16], bits: u32) -> Vec<u8> {
     out
 }
 
-/// The DNG's directory tree (exposed to the crate's tests, which alter it).
-pub(crate) fn directory(path: &Path, img: &DngImage) -> Result<Directory, RawError> {
+/// The DNG's directory tree before encoding ([`crate::tiff::encode`]): tests alter it to build
+/// files this writer never writes (another CFA layout, a damaged tag).
+pub fn directory(path: &Path, img: &DngImage) -> Result<Directory, RawError> {
     let p = problems(img);
     if !p.is_empty() {
         return Err(RawError::BadDngImage {
