@@ -150,6 +150,16 @@ const PHOTOMETRIC_CFA: u16 = 32803;
 const PHOTOMETRIC_LINEAR_RAW: u16 = 34892;
 
 /// Checks that every strip and tile of a TIFF-based file's raw images lies inside the file.
+/// Every directory of a TIFF file: each of the chain and their sub-directories.
+fn all_ifds(tiff: &GenericTiffReader) -> Vec<&IFD> {
+    let mut ifds: Vec<&IFD> = Vec::new();
+    for ifd in tiff.chains() {
+        ifds.push(ifd);
+        ifds.extend(ifd.sub_ifds().values().flatten());
+    }
+    ifds
+}
+
 fn check_tiff_extents(path: &Path, file_len: u64) -> Result<(), RawError> {
     let io = |source| RawError::Io {
         path: path.to_path_buf(),
@@ -172,12 +182,7 @@ fn check_tiff_extents(path: &Path, file_len: u64) -> Result<(), RawError> {
             .map(|e| e.force_u16(0))
             .is_some_and(|p| p == PHOTOMETRIC_CFA || p == PHOTOMETRIC_LINEAR_RAW)
     };
-    let mut ifds: Vec<&IFD> = Vec::new();
-    for ifd in tiff.chains() {
-        ifds.push(ifd);
-        ifds.extend(ifd.sub_ifds().values().flatten());
-    }
-    for ifd in ifds.into_iter().filter(|i| is_raw(i)) {
+    for ifd in all_ifds(&tiff).into_iter().filter(|i| is_raw(i)) {
         for (offsets, counts, what) in [
             (
                 TiffCommonTag::StripOffsets,
@@ -282,12 +287,7 @@ pub fn read_raw_header(path: &Path) -> Result<RawHeader, RawError> {
 fn dng_header(path: &Path) -> Option<RawHeader> {
     let mut reader = std::io::BufReader::new(std::fs::File::open(path).ok()?);
     let tiff = GenericTiffReader::new(&mut reader, 0, 0, None, &[]).ok()?;
-    let mut ifds: Vec<&IFD> = Vec::new();
-    for ifd in tiff.chains() {
-        ifds.push(ifd);
-        ifds.extend(ifd.sub_ifds().values().flatten());
-    }
-    let raw = ifds.into_iter().find(|ifd| {
+    let raw = all_ifds(&tiff).into_iter().find(|ifd| {
         let cfa = ifd
             .get_entry(TiffCommonTag::PhotometricInt)
             .is_some_and(|e| e.force_u16(0) == PHOTOMETRIC_CFA);

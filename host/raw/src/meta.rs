@@ -101,6 +101,29 @@ impl LocalDateTime {
             + i64::from(self.minute) * 60
             + i64::from(self.second)
     }
+    /// The date-time `s` seconds after 1970-01-01 00:00:00 on the same clock: the inverse of
+    /// [`Self::naive_seconds`] (proleptic Gregorian calendar, H. Hinnant's algorithm).
+    pub fn from_naive_seconds(s: i64) -> Self {
+        let days = s.div_euclid(86_400);
+        let secs = s.rem_euclid(86_400);
+        let z = days + 719_468;
+        let era = z.div_euclid(146_097);
+        let doe = z - era * 146_097;
+        let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+        let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+        let mp = (5 * doy + 2) / 153;
+        let day = (doy - (153 * mp + 2) / 5 + 1) as u8;
+        let month = if mp < 10 { mp + 3 } else { mp - 9 } as u8;
+        let year = (yoe + era * 400 + i64::from(month <= 2)) as i32;
+        Self {
+            year,
+            month,
+            day,
+            hour: (secs / 3600) as u8,
+            minute: ((secs % 3600) / 60) as u8,
+            second: (secs % 60) as u8,
+        }
+    }
 }
 
 /// Days from 1970-01-01 to a proleptic Gregorian date (H. Hinnant's algorithm).
@@ -436,6 +459,19 @@ mod tests {
             ..t
         };
         assert_eq!(naive.seconds(), 3600.045);
+    }
+
+    #[test]
+    fn civil_dates_invert_naive_seconds() {
+        for s in [0i64, 951_782_400, 1_795_168_800, 4_102_444_799, -86_401] {
+            assert_eq!(
+                LocalDateTime::from_naive_seconds(s).naive_seconds(),
+                s,
+                "{s}"
+            );
+        }
+        let d = LocalDateTime::from_naive_seconds(951_782_400); // 2000-02-29
+        assert_eq!((d.year, d.month, d.day), (2000, 2, 29));
     }
 
     proptest! {

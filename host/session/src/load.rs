@@ -359,20 +359,37 @@ fn check_relative_file(
     true
 }
 
-fn check_target(t: &Target, file: &Path, field: &str, errs: &mut SessionErrors) {
-    if t.id >= TAG36H11_CODES {
+/// A target's id (a tag36h11 code) and printed size (positive); false when the size is not
+/// (nothing geometric can be checked then).
+pub(crate) fn check_id_and_size(
+    id: u32,
+    size_m: f64,
+    file: &Path,
+    field: &str,
+    errs: &mut SessionErrors,
+) -> bool {
+    if id >= TAG36H11_CODES {
         errs.push(
             file,
             format!("{field}.id"),
-            format!("{} is not a tag36h11 id (0..{TAG36H11_CODES})", t.id),
+            format!("{id} is not a tag36h11 id (0..{TAG36H11_CODES})"),
         );
     }
-    if !positive(t.size_m) {
+    if !positive(size_m) {
         errs.push(
             file,
             format!("{field}.size_m"),
-            format!("must be positive, got {}", t.size_m),
+            format!("must be positive, got {size_m}"),
         );
+        return false;
+    }
+    true
+}
+
+/// A placed target: id, size, finite corners forming a square of its size (edges within
+/// [`TARGET_SIZE_REL_TOL`]), coplanar, its centre at their mean.
+pub(crate) fn check_target(t: &Target, file: &Path, field: &str, errs: &mut SessionErrors) {
+    if !check_id_and_size(t.id, t.size_m, file, field, errs) {
         return;
     }
     if !t.corners_m.iter().all(|c| c.is_finite()) || !t.centre_m.is_none_or(|c| c.is_finite()) {
@@ -674,20 +691,7 @@ fn validate(
     }
     for (i, t) in s.targets.unplaced.iter().enumerate() {
         let field = format!("targets.unplaced[{i}]");
-        if t.id >= TAG36H11_CODES {
-            errs.push(
-                file,
-                format!("{field}.id"),
-                format!("{} is not a tag36h11 id (0..{TAG36H11_CODES})", t.id),
-            );
-        }
-        if !positive(t.size_m) {
-            errs.push(
-                file,
-                format!("{field}.size_m"),
-                format!("must be positive, got {}", t.size_m),
-            );
-        }
+        check_id_and_size(t.id, t.size_m, file, &field, errs);
         if let Some(prev) = ids.insert(t.id, field.clone()) {
             errs.push(
                 file,

@@ -60,7 +60,7 @@ use crate::format::{
     FlashSpec, RegionOfInterest, StandardSpec, Target, TargetGroup, TargetLayouts, UnplacedTarget,
     TAG_FAMILY,
 };
-use crate::load::{TAG36H11_CODES, TARGET_SIZE_REL_TOL};
+use crate::load::{check_id_and_size, check_target};
 
 /// Current `rig.toml` format version.
 pub const RIG_FORMAT_VERSION: u32 = 1;
@@ -389,14 +389,9 @@ fn validate(
         }
     }
     let mut ids: HashMap<u32, String> = HashMap::new();
+    // Ids are checked against the family (and sizes) by `check_target` / `check_id_and_size`;
+    // here only that no two targets share one.
     let mut claim = |id: u32, field: String, errs: &mut SessionErrors| {
-        if id >= TAG36H11_CODES {
-            errs.push(
-                path,
-                format!("{field}.id"),
-                format!("{id} is not a tag36h11 id (0..{TAG36H11_CODES})"),
-            );
-        }
         if let Some(prev) = ids.insert(id, field.clone()) {
             errs.push(
                 path,
@@ -457,7 +452,7 @@ fn validate(
             Ok(l) => {
                 for (k, t) in l.targets.iter().enumerate() {
                     claim(t.id, format!("{field}.layout.targets[{k}]"), errs);
-                    check_square(t, path, &format!("{field}.layout.targets[{k}]"), errs);
+                    check_target(t, path, &format!("{field}.layout.targets[{k}]"), errs);
                 }
                 layouts.insert(s.name.clone(), l.targets);
             }
@@ -467,12 +462,8 @@ fn validate(
     for (i, t) in f.targets.iter().enumerate() {
         let field = format!("targets[{i}]");
         claim(t.id, field.clone(), errs);
-        if !positive(t.size_m) {
-            errs.push(
-                path,
-                format!("{field}.size_m"),
-                format!("must be positive, got {}", t.size_m),
-            );
+        if t.corners_m.is_none() {
+            check_id_and_size(t.id, t.size_m, path, &field, errs);
         }
         if let Some(name) = &t.sheet {
             match sheet_names.get(name.as_str()).map(|&k| &f.sheets[k]) {
@@ -501,7 +492,7 @@ fn validate(
             }
         }
         if let Some(corners_m) = t.corners_m {
-            check_square(
+            check_target(
                 &Target {
                     id: t.id,
                     size_m: t.size_m,
@@ -515,30 +506,6 @@ fn validate(
         }
     }
     layouts
-}
-
-/// A placed target's corners: finite, and its four edges within [`TARGET_SIZE_REL_TOL`] of
-/// its size.
-fn check_square(t: &Target, path: &Path, field: &str, errs: &mut SessionErrors) {
-    if !t.corners_m.iter().all(|c| c.is_finite()) {
-        errs.push(path, format!("{field}.corners_m"), "non-finite coordinate");
-        return;
-    }
-    for k in 0..4 {
-        let edge = t.corners_m[k].distance(t.corners_m[(k + 1) % 4]);
-        if (edge - t.size_m).abs() > TARGET_SIZE_REL_TOL * t.size_m {
-            errs.push(
-                path,
-                format!("{field}.corners_m"),
-                format!(
-                    "edge {k} is {edge:.5} m, but size_m is {} m (tolerance {:.0} %)",
-                    t.size_m,
-                    TARGET_SIZE_REL_TOL * 100.0
-                ),
-            );
-            return;
-        }
-    }
 }
 
 #[cfg(test)]

@@ -357,7 +357,7 @@ pub fn card_files(scene: &Scene, rec: &CaptureRecord, shots: &[Shot]) -> Vec<Car
             format!("{frac:0width$}", width = digits as usize)
         });
         CaptureTime {
-            local: local_date_time(whole as i64),
+            local: LocalDateTime::from_naive_seconds(whole as i64),
             subsec_digits,
             utc_offset_min: st.write_utc_offset.then_some(st.utc_offset_min),
         }
@@ -394,31 +394,6 @@ pub fn card_files(scene: &Scene, rec: &CaptureRecord, shots: &[Shot]) -> Vec<Car
         push(None, last_shot, camera_time(h, &mut rng), true);
     }
     out
-}
-
-/// Civil date-time of `s` seconds since the Unix epoch (proleptic Gregorian calendar; the
-/// inverse of `LocalDateTime::naive_seconds`).
-pub fn local_date_time(s: i64) -> LocalDateTime {
-    let days = s.div_euclid(86_400);
-    let secs = s.rem_euclid(86_400);
-    // Days to civil date (H. Hinnant's algorithm).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = (doy - (153 * mp + 2) / 5 + 1) as u8;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u8;
-    let year = (yoe + era * 400 + i64::from(month <= 2)) as i32;
-    LocalDateTime {
-        year,
-        month,
-        day,
-        hour: (secs / 3600) as u8,
-        minute: ((secs % 3600) / 60) as u8,
-        second: (secs % 60) as u8,
-    }
 }
 
 /// The mosaicked sensor image of a render (see the module docs), with the studio's metadata.
@@ -581,15 +556,6 @@ pub fn write_card_file(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn civil_dates_invert_naive_seconds() {
-        for s in [0i64, 951_782_400, 1_795_168_800, 4_102_444_799, -86_401] {
-            assert_eq!(local_date_time(s).naive_seconds(), s, "{s}");
-        }
-        let d = local_date_time(951_782_400); // 2000-02-29
-        assert_eq!((d.year, d.month, d.day), (2000, 2, 29));
-    }
 
     #[test]
     fn the_card_numbers_every_actuation_and_keeps_deleted_numbers() {
