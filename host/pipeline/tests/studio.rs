@@ -321,11 +321,20 @@ fn damaged_and_misnamed_raw_files_are_refused_by_name() {
     assert_nothing_written(&out);
     std::fs::write(&files[3], &bytes).expect("restore");
 
-    // The ingest then succeeds, and a rig without placements gives a session that says so.
-    let r = ingest(&ingest_config(&s, &out, "rig.toml")).expect("ingest");
+    // The ingest then succeeds. A rig that states no placement at all gives a session that
+    // says the survey has no world origin.
+    let studio = s.join(STUDIO_DIR);
+    let measured = skinbrdf_session::Rig::load(&studio.join("rig-measured.toml")).expect("rig");
+    skinbrdf_session::Rig::write_file(
+        &studio.join("rig-bare.toml"),
+        &skinbrdf_session::Rig::without_placements(&measured.file),
+    )
+    .expect("bare rig");
+    let r = ingest(&ingest_config(&s, &out, "rig-bare.toml")).expect("ingest");
     assert!(r.unplaced_targets > 0 && r.placed_targets == 0);
-    let err = Session::load(&out).expect_err("placements needed");
+    let err = Session::load(&out).expect_err("an origin needed");
     assert!(err.has_field("targets.unplaced"), "{err}");
+    assert!(err.to_string().contains("world's origin"), "{err}");
 }
 
 #[test]

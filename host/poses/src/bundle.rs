@@ -6,6 +6,10 @@
 //! posed, the head pose (`world_from_head`); for the session, the flash pose
 //! (`world_from_flash`), the standard's pose (`world_from_standard`) and optionally the camera
 //! intrinsics (`fx, fy, cx, cy, k1, k2, k3, p1, p2`). Poses given in `session.toml` stay fixed.
+//! For the placement survey ([`crate::survey`]) the problem also has **bodies**: a target or a
+//! printed sheet whose placement in its group's frame (world or head) is unknown, with its pose
+//! `group_from_body` (6 parameters) and optionally a print-scale factor `k` (1 parameter); a
+//! corner given in the body's frame as `p` is at `group_from_body · (k p)`.
 //! Every detected corner of every target of a known layout is one observation: its layout
 //! point, moved to the world by the layout's pose (identity for the reference structure),
 //! projected through the image's camera. Residuals are whitened by the corner's standard
@@ -22,10 +26,13 @@
 //!
 //! Levenberg-Marquardt with Marquardt scaling. The normal matrix is block-sparse: each image's
 //! own parameters (camera and head, at most 12) couple only to the session parameters (flash,
-//! standard, intrinsics, at most 21), never to another image's. The session parameters are
-//! solved on the Schur complement `S = H_gg − Σ H_gl H_ll⁻¹ H_lg` and the image blocks
-//! back-substituted, so an iteration costs `O(images · 12³ + 21³)` plus the Jacobian: per
-//! corner, central differences over the at most 21 parameters it depends on. A step is accepted
+//! standard, intrinsics and the `7 b` parameters of `b` bodies: `g ≤ 21 + 7 b`), never to another
+//! image's. The session parameters are solved on the Schur complement
+//! `S = H_gg − Σ H_gl H_ll⁻¹ H_lg` and the image blocks back-substituted, so an iteration costs
+//! `O(images · (12³ + 12 g²) + g³)` plus the Jacobian: per corner, central differences over the
+//! at most 28 parameters it depends on (camera, head, one body, intrinsics). With the default
+//! scene's 75 bodies `g ≈ 470`: the `g³/3 ≈ 35 M` flops of the Cholesky and the
+//! `images · 12 g²` of the Schur products stay far below the Jacobian's cost. A step is accepted
 //! only when the robust cost decreases, so the result is never worse than its input (in that
 //! cost); the report gives both costs.
 //!
@@ -121,6 +128,38 @@ pub enum Frame {
     Flash,
     /// The standard.
     Standard,
+    /// A body (index into [`BundleProblem::bodies`]) placed in the world.
+    WorldBody(usize),
+    /// A body placed in the image's head frame.
+    HeadBody(usize),
+}
+
+impl Frame {
+    /// The body the point belongs to, if any.
+    pub const fn body(self) -> Option<usize> {
+        match self {
+            Self::WorldBody(b) | Self::HeadBody(b) => Some(b),
+            _ => None,
+        }
+    }
+
+    /// Whether the point moves with the image's head.
+    pub const fn on_head(self) -> bool {
+        matches!(self, Self::Head | Self::HeadBody(_))
+    }
+}
+
+/// A body of the survey: a target or a printed sheet whose placement is a parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BundleBody {
+    /// Starting `group_from_body`.
+    pub group_from_body: Pose,
+    /// Starting print-scale factor (1: as printed at nominal size).
+    pub scale: f64,
+    /// Whether the pose is a parameter (false: it fixes the group's gauge).
+    pub free: bool,
+    /// Whether the scale is a parameter.
+    pub scale_free: bool,
 }
 
 /// The observations and the starting poses of one image.
@@ -149,6 +188,8 @@ pub struct BundleProblem {
     pub world_from_flash: Option<(Pose, bool)>,
     /// Starting `world_from_standard` and whether it is a parameter.
     pub world_from_standard: Option<(Pose, bool)>,
+    /// Bodies whose placement is adjusted (the survey's targets and sheets).
+    pub bodies: Vec<BundleBody>,
 }
 
 /// What the adjustment did and what it cost.
@@ -200,6 +241,9 @@ pub struct BundleResult {
     pub world_from_flash: Option<PoseCov>,
     /// Standard pose and covariance.
     pub world_from_standard: Option<PoseCov>,
+    /// Per body: `group_from_body` with its covariance, and the scale with its variance
+    /// (0 when fixed).
+    pub bodies: Vec<(PoseCov, f64, f64)>,
     /// The report.
     pub report: BundleReport,
 }
@@ -214,6 +258,7 @@ struct State {
     heads: Vec<Option<Pose>>,
     flash: Option<Pose>,
     standard: Option<Pose>,
+    bodies: Vec<(Pose, f64)>,
 }
 
 fn intr_get(c: &CameraModel) -> [f64; N_INTR] {
@@ -251,10 +296,11 @@ struct Layout {
     /// Per image: offset of the camera block and of the head block within the image's local
     /// vector, and the local size.
     local: Vec<(Option<usize>, Option<usize>, usize)>,
-    /// Global offsets: flash, standard, intrinsics; and the global size.
+    /// Global offsets: flash, standard, intrinsics, per body (pose, scale); and the global size.
     flash: Option<usize>,
     standard: Option<usize>,
     intr: Option<usize>,
+    bodies: Vec<(Option<usize>, Option<usize>)>,
     n_global: usize,
 }
 
@@ -287,11 +333,17 @@ fn layout(p: &BundleProblem, refine_intr: bool) -> Layout {
     let flash = take(matches!(p.world_from_flash, Some((_, true))), 6);
     let standard = take(matches!(p.world_from_standard, Some((_, true))), 6);
     let intr = take(refine_intr, N_INTR);
+    let bodies = p
+        .bodies
+        .iter()
+        .map(|b| (take(b.free, 6), take(b.scale_free, 1)))
+        .collect();
     Layout {
         local,
         flash,
         standard,
         intr,
+        bodies,
         n_global: g,
     }
 }
@@ -303,6 +355,14 @@ fn project(st: &State, i: usize, frame: Frame, obj: DVec3) -> Option<DVec2> {
         Frame::Head => st.heads[i]?.transform_point(obj),
         Frame::Flash => st.flash?.transform_point(obj),
         Frame::Standard => st.standard?.transform_point(obj),
+        Frame::WorldBody(b) => {
+            let (p, k) = st.bodies.get(b)?;
+            p.transform_point(obj * *k)
+        }
+        Frame::HeadBody(b) => {
+            let (p, k) = st.bodies.get(b)?;
+            st.heads[i]?.transform_point(p.transform_point(obj * *k))
+        }
     };
     let c = &st.cams[i];
     st.camera
@@ -318,6 +378,18 @@ enum Block {
     Flash,
     Standard,
     Intrinsics,
+    Body(usize),
+    Scale(usize),
+}
+
+impl Block {
+    const fn size(self) -> usize {
+        match self {
+            Self::Intrinsics => N_INTR,
+            Self::Scale(_) => 1,
+            _ => 6,
+        }
+    }
 }
 
 fn perturbed(st: &State, i: usize, b: Block, k: usize, h: f64) -> State {
@@ -345,6 +417,11 @@ fn perturbed(st: &State, i: usize, b: Block, k: usize, h: f64) -> State {
             v[k] += h;
             s.camera = intr_set(&st.camera, &v);
         }
+        Block::Body(b) => {
+            d[k] = h;
+            s.bodies[b].0 = apply(&st.bodies[b].0, &d);
+        }
+        Block::Scale(b) => s.bodies[b].1 += h,
     }
     s
 }
@@ -385,7 +462,7 @@ fn evaluate(p: &BundleProblem, st: &State, cfg: &BundleConfig) -> Option<Eval> {
     };
     for (i, im) in p.images.iter().enumerate() {
         for (f, o) in &im.points {
-            if *f == Frame::Head && st.heads[i].is_none() {
+            if f.on_head() && st.heads[i].is_none() {
                 continue;
             }
             let q = project(st, i, *f, o.object_m)?;
@@ -428,6 +505,21 @@ fn blocks_of(lay: &Layout, i: usize, f: Frame) -> Vec<(Block, Option<usize>, Opt
             }
         }
         Frame::World => {}
+        Frame::WorldBody(b) | Frame::HeadBody(b) => {
+            if f.on_head() {
+                if let Some(o) = h {
+                    v.push((Block::Head, Some(o), None));
+                }
+            }
+            if let Some((po, so)) = lay.bodies.get(b) {
+                if let Some(o) = po {
+                    v.push((Block::Body(b), None, Some(*o)));
+                }
+                if let Some(o) = so {
+                    v.push((Block::Scale(b), None, Some(*o)));
+                }
+            }
+        }
     }
     if let Some(o) = lay.intr {
         v.push((Block::Intrinsics, None, Some(o)));
@@ -452,7 +544,7 @@ fn image_normal(
         b_g: DVector::zeros(ng),
     };
     for (f, o) in &p.images[i].points {
-        if *f == Frame::Head && st.heads[i].is_none() {
+        if f.on_head() && st.heads[i].is_none() {
             continue;
         }
         let q0 = project(st, i, *f, o.object_m)?;
@@ -462,12 +554,7 @@ fn image_normal(
         // Jacobian columns: (local index or global index, d r / d param).
         let mut cols: Vec<(bool, usize, DVec2)> = Vec::new();
         for (b, lo, go) in blocks_of(lay, i, *f) {
-            let n = if matches!(b, Block::Intrinsics) {
-                N_INTR
-            } else {
-                6
-            };
-            for k in 0..n {
+            for k in 0..b.size() {
                 let hstep = step(b, k);
                 let qp = project(&perturbed(st, i, b, k, hstep), i, *f, o.object_m)?;
                 let qm = project(&perturbed(st, i, b, k, -hstep), i, *f, o.object_m)?;
@@ -522,6 +609,14 @@ fn apply_step(st: &State, lay: &Layout, dl: &[DVector<f64>], dg: &DVector<f64>) 
             *x += dg[o + k];
         }
         s.camera = intr_set(&st.camera, &v);
+    }
+    for (b, (po, so)) in lay.bodies.iter().enumerate() {
+        if let Some(o) = po {
+            s.bodies[b].0 = apply(&st.bodies[b].0, &dg.as_slice()[*o..*o + 6]);
+        }
+        if let Some(o) = so {
+            s.bodies[b].1 += dg[*o];
+        }
     }
     s
 }
@@ -628,6 +723,7 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
             heads: p.images.iter().map(|im| im.world_from_head).collect(),
             flash: p.world_from_flash.map(|f| f.0),
             standard: p.world_from_standard.map(|f| f.0),
+            bodies: p.bodies.iter().map(|b| (b.group_from_body, b.scale)).collect(),
         };
         for (i, im) in gated.images.iter_mut().enumerate() {
             let mut bad: Vec<(Frame, u32)> = Vec::new();
@@ -641,6 +737,14 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
             }
             gated_targets += bad.len();
             im.points.retain(|(f, o)| !bad.contains(&(*f, o.target)));
+            // A pose whose every observation was gated is held at its input (it would make
+            // the normal matrix singular).
+            if !im.points.iter().any(|(f, _)| f.on_head()) {
+                im.head_free = false;
+            }
+            if im.points.is_empty() {
+                im.camera_free = false;
+            }
         }
     }
     let p = &gated;
@@ -655,8 +759,13 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
         heads: p.images.iter().map(|im| im.world_from_head).collect(),
         flash: p.world_from_flash.map(|f| f.0),
         standard: p.world_from_standard.map(|f| f.0),
+        bodies: p.bodies.iter().map(|b| (b.group_from_body, b.scale)).collect(),
     };
-    let e0 = evaluate(p, &st, cfg)?;
+    let dbg = std::env::var_os("SKINBRDF_SURVEY_DEBUG").is_some();
+    let Some(e0) = evaluate(p, &st, cfg) else {
+        if dbg { eprintln!("bundle: evaluate at the start failed"); }
+        return None;
+    };
     if e0.count == 0 {
         return None;
     }
@@ -669,7 +778,10 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
             .map(|i| image_normal(p, st, &lay, cfg, i))
             .collect()
     };
-    let mut normals = normals_at(&st)?;
+    let Some(mut normals) = normals_at(&st) else {
+        if dbg { eprintln!("bundle: normals at the start failed"); }
+        return None;
+    };
     for _ in 0..cfg.max_iterations {
         let mut accepted = false;
         for _ in 0..10 {
@@ -701,7 +813,23 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
     }
     let e1 = evaluate(p, &st, cfg)?;
     // Covariance at the solution (undamped).
-    let (_, _, cov_l, cov_g) = solve(&normals, &lay, 0.0)?;
+    let Some((_, _, cov_l, cov_g)) = solve(&normals, &lay, 0.0) else {
+        if dbg {
+            eprintln!("bundle: undamped solve failed after {iterations} iterations, cost {} -> {}", e0.cost, e1.cost);
+            let mut sg = DMatrix::<f64>::zeros(lay.n_global, lay.n_global);
+            for n in &normals { sg += &n.h_gg; }
+            for k in 0..lay.n_global { if sg[(k,k)] < 1e-6 { eprintln!("  global {k} diag {}", sg[(k,k)]); } }
+            for (i, n) in normals.iter().enumerate() {
+                for k in 0..n.h_ll.nrows() { if n.h_ll[(k,k)] < 1e-6 { eprintln!("  image {i} local {k} diag {}", n.h_ll[(k,k)]); } }
+                if n.h_ll.nrows() > 0 && n.h_ll.clone().cholesky().is_none() { eprintln!("  image {i} local block not PD ({} params, {} points) layout {:?} frames {:?}", n.h_ll.nrows(), p.images[i].points.len(), lay.local[i], p.images[i].points.iter().map(|(f,o)| (*f, o.target)).collect::<Vec<_>>()); }
+            }
+            let ev = sg.clone().symmetric_eigenvalues();
+            let mut evs: Vec<f64> = ev.iter().copied().collect(); evs.sort_by(f64::total_cmp);
+            eprintln!("  global H_gg eigen smallest {:?}", &evs[..evs.len().min(8)]);
+            eprintln!("  body offsets {:?}", lay.bodies);
+        }
+        return None;
+    };
     let dof = (2 * e1.count).saturating_sub(n_params).max(1);
     let vf = e1.weighted_sq / dof as f64;
     let images = p
@@ -746,6 +874,16 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
         images,
         world_from_flash: global(lay.flash, st.flash),
         world_from_standard: global(lay.standard, st.standard),
+        bodies: st
+            .bodies
+            .iter()
+            .zip(&lay.bodies)
+            .map(|((pose, k), (po, so))| {
+                let cov = po.map_or_else(Vec::new, |o| row_major(&cov_g, o, 6, vf));
+                let var = so.map_or(0.0, |o| cov_g[(o, o)] * vf);
+                ((*pose, cov), *k, var)
+            })
+            .collect(),
         report,
     })
 }
@@ -885,6 +1023,7 @@ mod tests {
                 images,
                 world_from_flash: None,
                 world_from_standard: None,
+                bodies: Vec::new(),
             },
             cams,
             heads,

@@ -35,6 +35,35 @@ pub enum PoseError {
         /// Targets tried.
         targets: usize,
     },
+    /// The survey has unplaced reference targets but no placed one to fix the world frame.
+    #[error(
+        "the placement survey needs the world's origin: give the corners of at least one \
+         reference target (or a reference sheet's placement) in the rig"
+    )]
+    SurveyGauge,
+    /// The survey places reference and headdress targets only.
+    #[error(
+        "target {id} of the {group} group has no placement: flash and standard targets are \
+         placed by their printed layouts (give their corners in the rig)"
+    )]
+    SurveyUnsupported {
+        /// The target.
+        id: u32,
+        /// Its group's name.
+        group: &'static str,
+    },
+    /// The session still has unplaced reference or headdress targets.
+    #[error(
+        "{targets} reference or headdress target(s) have no placement: run the placement \
+         survey first (`skinbrdf survey SESSION`, or `skinbrdf process`, which plans it)"
+    )]
+    Unsurveyed {
+        /// How many.
+        targets: usize,
+    },
+    /// The survey's adjustment had nothing to adjust or a singular normal matrix.
+    #[error("the placement survey's adjustment is singular (too few images see the targets)")]
+    SurveySingular,
     /// An image could not be read.
     #[error("image {file}: {problem}")]
     Image {

@@ -8,6 +8,8 @@
 //! * [`lm`]: the dense robust Levenberg-Marquardt solver they share.
 //! * [`bundle::bundle_adjust`]: the joint, block-sparse, robust bundle adjustment over the
 //!   whole session that [`session::estimate_session`] ends with.
+//! * [`survey::survey`]: the placements of targets nobody measured, estimated with every pose
+//!   by the same adjustment.
 
 pub mod bundle;
 pub mod calib;
@@ -16,8 +18,10 @@ pub mod geometry;
 pub mod lm;
 pub mod pnp;
 pub mod session;
+pub mod survey;
 
 pub use bundle::{BundleConfig, BundleReport, RobustLoss};
 pub use error::{Diagnostic, PoseError};
 pub use pnp::{estimate_pose, PnpConfig, PointObs, PoseEstimate};
 pub use session::{estimate_session, PoseConfig, SessionPoses};
+pub use survey::{survey, HeadGauge, Survey, SurveyConfig, SurveyIssue};

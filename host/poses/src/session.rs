@@ -31,7 +31,7 @@ use nalgebra::{DMatrix, Matrix3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use skinbrdf_core::{CameraModel, Pose};
-use skinbrdf_session::{CameraSpec, ImageRole, Session, Target, Truth};
+use skinbrdf_session::{CameraSpec, ImageRole, Session, Target, TargetGroup, Truth};
 use skinbrdf_targets::{detect::detect_with_stats, Detection, DetectorConfig, GrayF32};
 use std::collections::HashMap;
 use std::time::Instant;
@@ -332,10 +332,36 @@ fn compose(cam: &PoseWithCov, frame: &PoseEstimate) -> PoseWithCov {
     }
 }
 
-struct Detected {
-    dets: Vec<Detection>,
-    detect_ms: f64,
-    error: Option<String>,
+/// The tags found in one image.
+pub(crate) struct Detected {
+    pub(crate) dets: Vec<Detection>,
+    pub(crate) detect_ms: f64,
+    pub(crate) error: Option<String>,
+}
+
+/// Detects the tags of every image (parallel over images).
+pub(crate) fn detect_all(session: &Session, detector: &DetectorConfig) -> Vec<Detected> {
+    (0..session.file.images.len())
+        .into_par_iter()
+        .map(|i| {
+            let t = Instant::now();
+            match load_grey(session, i) {
+                Ok(img) => {
+                    let (dets, _) = detect_with_stats(&img, detector);
+                    Detected {
+                        dets,
+                        detect_ms: t.elapsed().as_secs_f64() * 1e3,
+                        error: None,
+                    }
+                }
+                Err(e) => Detected {
+                    dets: Vec::new(),
+                    detect_ms: t.elapsed().as_secs_f64() * 1e3,
+                    error: Some(e.to_string()),
+                },
+            }
+        })
+        .collect()
 }
 
 /// Estimates every pose of the session from its images.
@@ -352,30 +378,21 @@ pub fn estimate_session_stages(
 ) -> Result<(SessionPoses, SessionPoses), PoseError> {
     let t0 = Instant::now();
     let file = &session.file;
+    let unsurveyed = file
+        .targets
+        .unplaced
+        .iter()
+        .filter(|t| matches!(t.group, TargetGroup::Reference | TargetGroup::Headdress))
+        .count();
+    if unsurveyed > 0 {
+        return Err(PoseError::Unsurveyed {
+            targets: unsurveyed,
+        });
+    }
     let table = layout_table(session);
     let mut skipped = Vec::new();
     // 1. Detection in every image (parallel).
-    let detected: Vec<Detected> = (0..file.images.len())
-        .into_par_iter()
-        .map(|i| {
-            let t = Instant::now();
-            match load_grey(session, i) {
-                Ok(img) => {
-                    let (dets, _) = detect_with_stats(&img, &cfg.detector);
-                    Detected {
-                        dets,
-                        detect_ms: t.elapsed().as_secs_f64() * 1e3,
-                        error: None,
-                    }
-                }
-                Err(e) => Detected {
-                    dets: Vec::new(),
-                    detect_ms: t.elapsed().as_secs_f64() * 1e3,
-                    error: Some(e.to_string()),
-                },
-            }
-        })
-        .collect();
+    let detected = detect_all(session, &cfg.detector);
     // 2. The camera: given, or calibrated from the reference field.
     let (camera, calibration) = match (&file.camera, cfg.recalibrate) {
         (CameraSpec::Calibrated(m), false) => {
@@ -668,6 +685,7 @@ fn run_bundle(
         images,
         world_from_flash: flash,
         world_from_standard: standard,
+        bodies: Vec::new(),
     };
     let Some(r) = bundle_adjust(&problem, cfg) else {
         out.skipped.push(

@@ -272,6 +272,10 @@ pub struct UnplacedTarget {
     /// rigid and coplanar relative to each other).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sheet: Option<String>,
+    /// Its corners in the sheet's own frame (from the sheet's layout file, times the rig's
+    /// stated print scale), when the sheet has a layout: the survey then places the sheet as one rigid body.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sheet_corners_m: Option<[DVec3; 4]>,
 }
 
 impl Default for TargetLayouts {

@@ -692,6 +692,22 @@ fn validate(
     for (i, t) in s.targets.unplaced.iter().enumerate() {
         let field = format!("targets.unplaced[{i}]");
         check_id_and_size(t.id, t.size_m, file, &field, errs);
+        if let Some(corners_m) = t.sheet_corners_m {
+            let as_target = Target {
+                id: t.id,
+                size_m: t.size_m,
+                corners_m,
+                centre_m: None,
+            };
+            check_target(&as_target, file, &format!("{field}.sheet"), errs);
+            if t.sheet.is_none() {
+                errs.push(
+                    file,
+                    format!("{field}.sheet_corners_m"),
+                    "corners in a sheet's frame need the sheet's name (`sheet`)",
+                );
+            }
+        }
         if let Some(prev) = ids.insert(t.id, field.clone()) {
             errs.push(
                 file,
@@ -831,15 +847,37 @@ fn validate(
 
     // What the stages need when nothing known lets them skip.
     let needs = SectionNeeds::of(&s.images, k, Some(&s.camera));
+    // Unplaced reference and headdress targets are the placement survey's to place; it needs
+    // the world's origin (a placed reference target). Flash and standard targets are placed by
+    // their printed layouts: unplaced ones are an error where a stage needs them.
     let mut unplaced_needed = |group: TargetGroup, why: &Option<String>| -> bool {
         let ids = s.targets.unplaced_ids(group);
-        match (why, ids.is_empty()) {
-            (Some(why), false) => {
-                errs.push(file, "targets.unplaced", unplaced_problem(group, &ids, why));
-                true
-            }
-            _ => false,
+        if ids.is_empty() || why.is_none() {
+            return false;
         }
+        let problem = match group {
+            TargetGroup::Reference if s.targets.reference.is_empty() => Some(unplaced_problem(
+                group,
+                &ids,
+                "no reference target has a placement to fix the world's origin: the rig must \
+                 state the corners of at least one (or a reference sheet's placement)",
+            )),
+            TargetGroup::Reference | TargetGroup::Headdress => None,
+            TargetGroup::Flash | TargetGroup::Standard => why.as_deref().map(|why| {
+                unplaced_problem(
+                    group,
+                    &ids,
+                    &format!(
+                        "{why}; the survey places reference and headdress targets only, flash \
+                         and standard targets are placed by their printed layouts"
+                    ),
+                )
+            }),
+        };
+        if let Some(p) = problem {
+            errs.push(file, "targets.unplaced", p);
+        }
+        true
     };
     let reference_unplaced = unplaced_needed(TargetGroup::Reference, &needs.reference_targets);
     let headdress_unplaced = unplaced_needed(TargetGroup::Headdress, &needs.headdress_targets);
@@ -890,9 +928,7 @@ fn unplaced_problem(group: TargetGroup, ids: &[u32], why: &str) -> String {
     let shown: Vec<String> = ids.iter().take(8).map(u32::to_string).collect();
     let more = if ids.len() > 8 { ", ..." } else { "" };
     format!(
-        "{} {} target(s) have no placement in the {} frame (ids {}{more}), but {why}: the rig's \
-         placements must be surveyed first; a session ingested with a surveyed rig file (one \
-         that gives every target's corners, like a synthetic studio's `rig-measured.toml`) has them",
+        "{} {} target(s) have no placement in the {} frame (ids {}{more}), but {why}",
         ids.len(),
         group.name(),
         group.frame(),

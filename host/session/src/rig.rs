@@ -286,6 +286,7 @@ impl Rig {
                         size_m: t.size_m * scale,
                         group: sheet.group,
                         sheet: Some(sheet.name.clone()),
+                        sheet_corners_m: Some(t.corners_m.map(|c| c * scale)),
                     }),
                 }
             }
@@ -306,6 +307,7 @@ impl Rig {
                     size_m: t.size_m,
                     group: t.group,
                     sheet: t.sheet.clone(),
+                    sheet_corners_m: None,
                 }),
             }
         }

@@ -19,7 +19,7 @@ use skinbrdf_session::{
     TRUTH_FORMAT_VERSION,
 };
 
-use crate::layout::{build_rig, plan_shots, shots_from_capture, Rig, Shot};
+use crate::layout::{build_rig, plan_shots, shots_from_capture, Layout, Rig, Shot};
 use crate::render::{Rendered, Renderer};
 use crate::scene::{CurveScene, Encoding, GeometryKind, Scene};
 use crate::shape::Shape;
@@ -399,7 +399,30 @@ fn generate_into(
     };
     let studio = match (capture, opts.studio) {
         (Some(rec), true) => Some((
-            crate::studio::write_studio_files(dir, &scene, &rig, rec)?,
+            crate::studio::write_studio_files(
+                dir,
+                &scene,
+                &rig,
+                rec,
+                &[
+                    crate::studio::most_seen(
+                        &renderer,
+                        &rig,
+                        &shots,
+                        Layout::Reference,
+                        scene.studio.origin_targets as usize,
+                    ),
+                    crate::studio::flash_panel_ids(&rig),
+                ]
+                .concat(),
+                &crate::studio::most_seen(
+                    &renderer,
+                    &rig,
+                    &shots,
+                    Layout::Headdress,
+                    scene.studio.declared_headdress_targets as usize,
+                ),
+            )?,
             crate::studio::card_files(&scene, rec, &shots),
         )),
         _ => None,

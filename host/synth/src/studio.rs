@@ -93,6 +93,12 @@ pub struct StudioScene {
     pub bayer: String,
     /// Per-channel gains (R, G, B) of the sensor relative to the renderer's linear values.
     pub channel_gains: [f64; 3],
+    /// Reference targets whose corners `rig.toml` states: the studio's declared world origin
+    /// (the ones seen in the most images). Every other reference target is left to the survey.
+    pub origin_targets: u32,
+    /// Headdress targets whose corners (in the scan's frame) `rig.toml` states; 0: the head
+    /// frame comes from registering the survey to the head scan.
+    pub declared_headdress_targets: u32,
     /// Test shots the photographer took before the session (files with no exposure).
     pub test_shots_before: u32,
     /// Test shots after the session.
@@ -188,6 +194,9 @@ impl StudioScene {
         }
         if self.iso == 0 {
             out.push("`studio.iso` must be positive".into());
+        }
+        if self.origin_targets == 0 {
+            out.push("`studio.origin_targets` must be at least 1 (the world's origin)".into());
         }
         out
     }
@@ -508,13 +517,73 @@ pub fn rig_file(scene: &Scene, rig: &Rig) -> RigFile {
     }
 }
 
+/// The rig as a studio that measured nothing holds it: every placement removed except what
+/// the studio defines rather than measures: the world origin (the `origin` reference targets),
+/// the `declared_head` headdress targets, and the flash ring and the standard's frame (their
+/// printed layouts define their frames).
+pub fn unmeasured_rig(measured: &RigFile, origin: &[u32], declared_head: &[u32]) -> RigFile {
+    let mut f = RigIo::without_placements(measured);
+    for (t, m) in f.targets.iter_mut().zip(&measured.targets) {
+        let keep = match t.group {
+            TargetGroup::Reference => origin.contains(&t.id),
+            TargetGroup::Headdress => declared_head.contains(&t.id),
+            TargetGroup::Flash | TargetGroup::Standard => true,
+        };
+        if keep {
+            t.corners_m = m.corners_m;
+        }
+    }
+    f
+}
+
+/// The reference targets on the flash stand (the panel the light-position images see): the
+/// light-position images see no other reference target, so no image links the panel to the
+/// rest of the reference structure, and the studio states its placement (measured with the
+/// stand) instead of surveying it.
+pub fn flash_panel_ids(rig: &Rig) -> Vec<u32> {
+    let flash = rig.world_from_flash.translation_m;
+    rig.reference
+        .iter()
+        .filter(|t| t.centre().distance(flash) < FLASH_PANEL_RADIUS_M)
+        .map(|t| t.id)
+        .collect()
+}
+
+/// Reference targets this close to the flash are its stand's panel, metres (the panel spans
+/// about 0.2 m; the head's cage is 1.5 m away).
+const FLASH_PANEL_RADIUS_M: f64 = 0.4;
+
+/// The `n` targets of a group seen (usable) in the most shots, most-seen first (ties: lower id).
+pub fn most_seen(
+    renderer: &crate::render::Renderer,
+    rig: &Rig,
+    shots: &[Shot],
+    layout: crate::layout::Layout,
+    n: usize,
+) -> Vec<u32> {
+    let mut count: std::collections::BTreeMap<u32, usize> = std::collections::BTreeMap::new();
+    for shot in shots {
+        for (l, id, _) in crate::visibility::usable_targets(renderer, rig, shot) {
+            if l == layout {
+                *count.entry(id).or_insert(0) += 1;
+            }
+        }
+    }
+    let mut v: Vec<(u32, usize)> = count.into_iter().collect();
+    v.sort_by_key(|(id, c)| (std::cmp::Reverse(*c), *id));
+    v.into_iter().take(n).map(|(id, _)| id).collect()
+}
+
 /// Writes the studio's files other than the raw images: the capture record (without image
-/// names), both rig files and the scan (copied from the session).
+/// names), both rig files and the scan (copied from the session). `origin` and
+/// `declared_head` are the targets `rig.toml` keeps placed ([`unmeasured_rig`]).
 pub fn write_studio_files(
     session_dir: &Path,
     scene: &Scene,
     rig: &Rig,
     rec: &CaptureRecord,
+    origin: &[u32],
+    declared_head: &[u32],
 ) -> Result<PathBuf, SynthError> {
     let dir = session_dir.join(STUDIO_DIR);
     let io = |path: &Path, source| skinbrdf_session::FileError::Io {
@@ -529,7 +598,10 @@ pub fn write_studio_files(
     skinbrdf_session::write_json_atomic(&dir.join("capture.json"), &rec)?;
     let measured = rig_file(scene, rig);
     RigIo::write_file(&dir.join("rig-measured.toml"), &measured)?;
-    RigIo::write_file(&dir.join("rig.toml"), &RigIo::without_placements(&measured))?;
+    RigIo::write_file(
+        &dir.join("rig.toml"),
+        &unmeasured_rig(&measured, origin, declared_head),
+    )?;
     let scan = session_dir.join("scan.ply");
     let bytes = std::fs::read(&scan).map_err(|e| io(&scan, e))?;
     skinbrdf_session::write_atomic(&dir.join("scan.ply"), &bytes)?;
