@@ -102,6 +102,8 @@ impl FingerprintBuilder {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Unit {
+    /// The placement survey (`survey.json`).
+    Survey,
     /// Photogrammetry: calibration, camera and head poses, flash, the standard's pose
     /// (`poses.json`).
     Poses,

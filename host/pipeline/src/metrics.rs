@@ -12,6 +12,10 @@ use crate::report::{Metric, MetricKind};
 
 /// Accuracy bounds stated for the default scene (reported, not asserted, by the pipeline).
 pub mod bounds {
+    /// Surveyed reference targets against their true corners, RMS over targets, mm.
+    pub const SURVEY_REFERENCE_RMS_MM: f64 = 0.3;
+    /// Surveyed headdress targets, RMS over targets, mm.
+    pub const SURVEY_HEADDRESS_RMS_MM: f64 = 0.5;
     /// Camera position, median, mm.
     pub const CAMERA_POSITION_MM: f64 = 1.0;
     /// Camera orientation, median, degrees.
@@ -22,6 +26,25 @@ pub mod bounds {
     pub const FLASH_POSITION_MM: f64 = 2.0;
     /// Derendered samples' median relative error against the true BRDF, percent.
     pub const SAMPLE_MEDIAN_REL_ERROR_PCT: f64 = 3.0;
+}
+
+/// The placement survey.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SurveyMetrics {
+    /// Targets surveyed.
+    pub targets_surveyed: usize,
+    /// Targets the survey could not place or left out (moved, duplicated, unseen).
+    pub targets_left_out: usize,
+    /// Median of the surveyed targets' centre sigmas, mm.
+    pub position_sigma_median_mm: f64,
+    /// RMS reprojection error of the adjustment, px.
+    pub reprojection_rms_px: f64,
+    /// Parameters of the adjustment.
+    pub parameters: usize,
+    /// Reference targets against their true corners, RMS over targets, mm.
+    pub reference_rms_error_mm: Option<f64>,
+    /// Headdress targets against their true corners, RMS over targets, mm.
+    pub headdress_rms_error_mm: Option<f64>,
 }
 
 /// Camera calibration.
@@ -188,6 +211,8 @@ pub enum StageMetrics {
     /// A stage with no figures (skipped).
     #[default]
     None,
+    /// The placement survey.
+    Survey(SurveyMetrics),
     /// Camera calibration.
     Calibration(CalibrationMetrics),
     /// Camera poses.
@@ -233,6 +258,47 @@ impl StageMetrics {
         let mut r = Vec::new();
         match self {
             StageMetrics::None => {}
+            StageMetrics::Survey(m) => {
+                r.push(Metric::new(
+                    "targets_surveyed",
+                    m.targets_surveyed as f64,
+                    "",
+                    Count,
+                ));
+                r.push(Metric::new(
+                    "targets_left_out",
+                    m.targets_left_out as f64,
+                    "",
+                    Count,
+                ));
+                r.push(Metric::new(
+                    "position_sigma_median",
+                    m.position_sigma_median_mm,
+                    "mm",
+                    Quality,
+                ));
+                r.push(Metric::new(
+                    "reprojection_rms",
+                    m.reprojection_rms_px,
+                    "px",
+                    Quality,
+                ));
+                r.push(Metric::new("parameters", m.parameters as f64, "", Count));
+                bounded(
+                    &mut r,
+                    "reference_rms_error",
+                    m.reference_rms_error_mm,
+                    "mm",
+                    bounds::SURVEY_REFERENCE_RMS_MM,
+                );
+                bounded(
+                    &mut r,
+                    "headdress_rms_error",
+                    m.headdress_rms_error_mm,
+                    "mm",
+                    bounds::SURVEY_HEADDRESS_RMS_MM,
+                );
+            }
             StageMetrics::Calibration(m) => {
                 opt(
                     &mut r,

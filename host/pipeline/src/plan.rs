@@ -4,6 +4,7 @@
 //!
 //! | stage | skipped when |
 //! |---|---|
+//! | placement survey | every target's placement is given |
 //! | camera calibration | the session states the intrinsics |
 //! | camera poses | the session gives every camera pose |
 //! | head tracking | head poses are given, or the sample is stationary |
@@ -21,6 +22,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Stage {
+    /// Placements of the targets nobody measured, from the images.
+    PlacementSurvey,
     /// Camera intrinsics and distortion from the reference field.
     CameraCalibration,
     /// Camera pose per image from the reference targets.
@@ -49,7 +52,8 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage in execution order.
-    pub const ALL: [Stage; 12] = [
+    pub const ALL: [Stage; 13] = [
+        Stage::PlacementSurvey,
         Stage::CameraCalibration,
         Stage::CameraPoses,
         Stage::HeadTracking,
@@ -67,6 +71,7 @@ impl Stage {
     /// Short human-readable name.
     pub const fn name(self) -> &'static str {
         match self {
+            Stage::PlacementSurvey => "placement survey",
             Stage::CameraCalibration => "camera calibration",
             Stage::CameraPoses => "camera poses",
             Stage::HeadTracking => "head tracking",
@@ -98,6 +103,9 @@ pub enum Geometry {
 /// What a scene already has: derived from the session by the caller.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SceneFacts {
+    /// Every reference and headdress target has a placement (nothing to survey).
+    #[serde(default = "yes")]
+    pub placements_known: bool,
     /// The session states the camera intrinsics and distortion.
     pub intrinsics_known: bool,
     /// The session gives a camera pose for every image.
@@ -207,8 +215,15 @@ impl Plan {
     }
 }
 
+fn yes() -> bool {
+    true
+}
+
 fn skip_reason(stage: Stage, f: &SceneFacts, o: &PlanOptions) -> Option<&'static str> {
     match stage {
+        Stage::PlacementSurvey if f.placements_known => {
+            Some("every target's placement is given")
+        }
         Stage::CameraCalibration if f.intrinsics_known => {
             Some("the session states the camera intrinsics")
         }
@@ -245,6 +260,7 @@ mod tests {
 
     fn full() -> SceneFacts {
         SceneFacts {
+            placements_known: false,
             intrinsics_known: false,
             camera_poses_known: false,
             head_poses_known: false,
@@ -269,7 +285,8 @@ mod tests {
     #[test]
     fn each_known_quantity_skips_exactly_its_stage() {
         type Case = (fn(&mut SceneFacts), Stage);
-        let cases: [Case; 7] = [
+        let cases: [Case; 8] = [
+            (|f| f.placements_known = true, Stage::PlacementSurvey),
             (|f| f.intrinsics_known = true, Stage::CameraCalibration),
             (|f| f.camera_poses_known = true, Stage::CameraPoses),
             (|f| f.head_poses_known = true, Stage::HeadTracking),

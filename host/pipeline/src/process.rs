@@ -22,12 +22,12 @@ use skinbrdf_derender::DerenderConfig;
 use skinbrdf_fit::report::{FitReport, ReportOptions};
 use skinbrdf_fit::FitConfig;
 use skinbrdf_poses::PoseConfig;
-use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, Session};
+use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, Session, TargetGroup};
 
 use crate::ledger::{write_atomic, Ledger, RunLock};
 use crate::plan::{Geometry, Plan, PlanOptions, SceneFacts, Stage};
 use crate::report::{Metric, MetricKind, RunReport, StageReport};
-use crate::stages::{Ctx, DerenderUnit, FitUnit, PoseUnit, RenderUnit, StageUnit};
+use crate::stages::{Ctx, DerenderUnit, FitUnit, PoseUnit, RenderUnit, StageUnit, SurveyUnit};
 
 pub use crate::metrics::bounds;
 pub use crate::stages::RENDER_FIGURE;
@@ -99,6 +99,16 @@ pub enum ProcessError {
         /// The pose stage's output it looked for.
         poses: PathBuf,
     },
+    /// The surveyed headdress is in a provisional frame and nothing relates it to the scan.
+    #[error(
+        "the placement survey placed the headdress in the frame of target {anchor}, but nothing \
+         relates it to the head scan: state one headdress target's corners (scan frame) in the \
+         rig, or give a textured scan or a points file to register it"
+    )]
+    HeadFrame {
+        /// The survey's anchor target.
+        anchor: u32,
+    },
     /// No samples survived derendering.
     #[error("no BRDF samples survived derendering (see the derender stage's drop counts); nothing to fit")]
     NoSamples,
@@ -109,6 +119,8 @@ pub enum ProcessError {
 pub struct ProcessConfig {
     /// What the user asked the plan for.
     pub plan: PlanOptions,
+    /// Placement survey settings.
+    pub survey: skinbrdf_poses::SurveyConfig,
     /// Photogrammetry settings.
     pub poses: PoseConfig,
     /// Derendering settings.
@@ -131,6 +143,7 @@ impl ProcessConfig {
     pub fn new() -> Self {
         Self {
             plan: PlanOptions::default(),
+            survey: skinbrdf_poses::SurveyConfig::DEFAULT,
             poses: PoseConfig::DEFAULT,
             derender: DerenderConfig::DEFAULT,
             fit: ReportOptions {
@@ -189,6 +202,11 @@ pub fn scene_facts(session: &Session) -> SceneFacts {
         GeometrySpec::Cylinder { .. } => (Geometry::Cylinder, Some(true)),
     };
     SceneFacts {
+        placements_known: !f
+            .targets
+            .unplaced
+            .iter()
+            .any(|t| matches!(t.group, TargetGroup::Reference | TargetGroup::Headdress)),
         intrinsics_known: f.camera.model().is_some(),
         camera_poses_known: !f.images.is_empty()
             && f.images.iter().all(|i| i.world_from_camera.is_some()),
@@ -248,19 +266,51 @@ pub fn process(
     let facts = scene_facts(&session);
     let plan = Plan::derive(&facts, &cfg.plan);
     on_event(Event::Plan(&plan));
-    let mut ctx = Ctx {
+    // The placement survey first: the other units work on the surveyed session.
+    let mut survey_ctx = Ctx {
         session: &session,
         truth: truth.as_ref(),
         cfg,
         out_dir: out_dir.clone(),
         facts,
-        plan,
+        plan: plan.clone(),
+        survey: None,
         poses: None,
         samples: None,
         fit: None,
     };
-    let units: [&dyn StageUnit; 4] = [&PoseUnit, &DerenderUnit, &FitUnit, &RenderUnit];
     let mut reports: Vec<StageReport> = Vec::new();
+    let survey_reports = run_unit(&SurveyUnit, &mut survey_ctx, &mut ledger, cfg.force, on_event)?;
+    let surveyed = match survey_ctx.survey.take() {
+        Some(s) => {
+            if let skinbrdf_poses::HeadGauge::Provisional { anchor } = s.head_gauge {
+                return Err(ProcessError::HeadFrame { anchor });
+            }
+            let mut surveyed = session.clone();
+            s.apply_to(&mut surveyed.file);
+            Some(surveyed)
+        }
+        None => None,
+    };
+    let mut ctx = Ctx {
+        session: surveyed.as_ref().unwrap_or(&session),
+        truth: truth.as_ref(),
+        cfg,
+        out_dir: out_dir.clone(),
+        facts: survey_ctx.facts,
+        plan,
+        survey: None,
+        poses: None,
+        samples: None,
+        fit: None,
+    };
+    for mut r in survey_reports {
+        r.metrics.insert(0, input_metric.clone());
+        r.notes.extend(input_notes.iter().cloned());
+        on_event(Event::Finished(&r));
+        reports.push(r);
+    }
+    let units: [&dyn StageUnit; 4] = [&PoseUnit, &DerenderUnit, &FitUnit, &RenderUnit];
     for unit in units {
         for mut r in run_unit(unit, &mut ctx, &mut ledger, cfg.force, on_event)? {
             if reports.is_empty() {

@@ -189,6 +189,14 @@ impl RunReport {
         }
     }
 
+    /// The placement survey's figures.
+    pub fn survey(&self) -> Option<&crate::metrics::SurveyMetrics> {
+        match self.figures(Stage::PlacementSurvey) {
+            StageMetrics::Survey(m) => Some(m),
+            _ => None,
+        }
+    }
+
     /// The fit's figures.
     pub fn fit(&self) -> Option<&crate::metrics::FitMetrics> {
         match self.figures(Stage::Fit) {
@@ -422,6 +430,7 @@ mod tests {
     #[test]
     fn violations_catch_exceeded_and_non_finite_figures() {
         let facts = SceneFacts {
+            placements_known: true,
             intrinsics_known: true,
             camera_poses_known: true,
             head_poses_known: true,

@@ -5,6 +5,7 @@
 //!
 //! | unit | stages | reads | writes |
 //! |---|---|---|---|
+//! | [`SurveyUnit`] | placement survey | session files | `survey.json` |
 //! | [`PoseUnit`] | calibration, camera poses, head tracking, flash, standard | session files | `poses.json` |
 //! | [`DerenderUnit`] | scan preparation, shadow rays, derender | session files, `poses.json` | `samples.skbs` |
 //! | [`FitUnit`] | smoothing (plane, hemisphere), fit | `samples.skbs`, truth | `fit/*` |
@@ -29,7 +30,7 @@ use crate::ledger::{write_atomic, Fingerprint, FingerprintBuilder, Unit};
 use crate::metrics::{
     CalibrationMetrics, CameraPoseMetrics, DerenderMetrics, DropCounts, FitMetrics, FlashMetrics,
     HeadTrackingMetrics, ReportMetrics, ScanMetrics, ShadowMetrics, SmoothMetrics, StageMetrics,
-    StandardMetrics,
+    StandardMetrics, SurveyMetrics,
 };
 use crate::plan::{Plan, PlanOptions, SceneFacts, Stage};
 use crate::process::{ProcessConfig, ProcessError};
@@ -37,6 +38,8 @@ use crate::report::{RunReport, StageReport, StageStatus};
 
 /// The pose stage's output file, relative to the output directory.
 pub const POSES_FILE: &str = "poses.json";
+/// The placement survey's output file, relative to the output directory.
+pub const SURVEY_FILE: &str = "survey.json";
 /// The derender stage's output file, relative to the output directory.
 pub const SAMPLES_FILE: &str = "samples.skbs";
 /// The fit's parameter file, relative to the output directory.
@@ -61,6 +64,8 @@ pub struct Ctx<'a> {
     pub facts: SceneFacts,
     /// The plan.
     pub plan: Plan,
+    /// The placement survey's result, when it ran or was reused.
+    pub survey: Option<skinbrdf_poses::Survey>,
     /// The pose stage's result, when it ran or was reused.
     pub poses: Option<SessionPoses>,
     /// The derendered samples.
@@ -133,6 +138,107 @@ fn json_bytes<T: serde::Serialize>(path: &Path, v: &T) -> Result<Vec<u8>, Proces
         path: path.to_path_buf(),
         source,
     })
+}
+
+// --- placement survey ------------------------------------------------------------------------
+
+/// The placement survey (see [`skinbrdf_poses::survey`]).
+#[derive(Debug)]
+pub struct SurveyUnit;
+
+impl StageUnit for SurveyUnit {
+    fn unit(&self) -> Unit {
+        Unit::Survey
+    }
+    fn first_stage(&self) -> Stage {
+        Stage::PlacementSurvey
+    }
+    fn planned(&self, ctx: &Ctx<'_>) -> bool {
+        ctx.plan.runs(Stage::PlacementSurvey)
+    }
+    fn skipped(&self, ctx: &Ctx<'_>) -> Vec<StageReport> {
+        vec![skipped(&ctx.plan, Stage::PlacementSurvey)]
+    }
+    fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
+        Ok(session_fingerprint(ctx.session)?
+            .value("survey", &ctx.cfg.survey)
+            .finish())
+    }
+    fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
+        let t = Instant::now();
+        let survey = skinbrdf_poses::survey(ctx.session, &ctx.cfg.survey)?;
+        let run_time_s = t.elapsed().as_secs_f64();
+        let path = ctx.out_dir.join(SURVEY_FILE);
+        write_atomic(&path, &json_bytes(&path, &survey)?)?;
+        let report = survey_report(&survey, ctx.truth, run_time_s);
+        ctx.survey = Some(survey);
+        Ok((vec![report], vec![SURVEY_FILE.into()]))
+    }
+    fn load(&self, ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
+        let path = ctx.out_dir.join(SURVEY_FILE);
+        let bytes = std::fs::read(&path).map_err(|source| ProcessError::Read {
+            path: path.clone(),
+            source,
+        })?;
+        ctx.survey = Some(
+            serde_json::from_slice(&bytes).map_err(|source| ProcessError::Json { path, source })?,
+        );
+        Ok(())
+    }
+}
+
+/// RMS over a group's surveyed targets of the mean corner distance to the truth, mm (`None`
+/// without truth placements).
+pub fn survey_rms_error_mm(
+    survey: &skinbrdf_poses::Survey,
+    truth: &Truth,
+    group: skinbrdf_session::TargetGroup,
+) -> Option<f64> {
+    let errs: Vec<f64> = survey
+        .targets
+        .iter()
+        .filter(|t| t.group == group)
+        .filter_map(|t| {
+            let p = truth
+                .placements
+                .iter()
+                .find(|p| p.id == t.id && p.group == group)?;
+            Some((0..4).map(|k| t.corners_m[k].distance(p.corners_m[k])).sum::<f64>() * 250.0)
+        })
+        .collect();
+    (!errs.is_empty()).then(|| (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt())
+}
+
+/// The survey's report: typed figures and, with truth placements, its errors.
+pub fn survey_report(
+    survey: &skinbrdf_poses::Survey,
+    truth: Option<&Truth>,
+    run_time_s: f64,
+) -> StageReport {
+    use skinbrdf_session::TargetGroup;
+    let err = |g| truth.and_then(|t| survey_rms_error_mm(survey, t, g));
+    let mut r = StageReport::ran(Stage::PlacementSurvey, run_time_s).with_figures(
+        StageMetrics::Survey(SurveyMetrics {
+            targets_surveyed: survey.targets.len(),
+            targets_left_out: survey.issues.len(),
+            position_sigma_median_mm: median(
+                &survey
+                    .targets
+                    .iter()
+                    .map(|t| t.position_sigma_mm)
+                    .collect::<Vec<_>>(),
+            ),
+            reprojection_rms_px: survey.bundle.final_rms_px,
+            parameters: survey.bundle.parameters,
+            reference_rms_error_mm: err(TargetGroup::Reference),
+            headdress_rms_error_mm: err(TargetGroup::Headdress),
+        }),
+    );
+    r.notes.push(format!("head frame: {:?}", survey.head_gauge));
+    for i in &survey.issues {
+        r.notes.push(format!("left out: {i:?}"));
+    }
+    r
 }
 
 // --- photogrammetry --------------------------------------------------------------------------

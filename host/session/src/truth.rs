@@ -44,6 +44,21 @@ pub struct Truth {
     pub images: Vec<ImageTruth>,
     /// Generator settings that matter for scoring (noise levels, samples per pixel, ...).
     pub render: RenderTruth,
+    /// Every target's true placement in its group's frame (scores the placement survey; older
+    /// truth files have none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub placements: Vec<PlacementTruth>,
+}
+
+/// A target's true placement.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlacementTruth {
+    /// tag36h11 id.
+    pub id: u32,
+    /// Its group (the frame of `corners_m`).
+    pub group: crate::format::TargetGroup,
+    /// Corners in the group's frame, session corner order.
+    pub corners_m: [DVec3; 4],
 }
 
 /// The true surface and how the scan was derived from it.

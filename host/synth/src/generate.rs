@@ -594,6 +594,21 @@ fn generate_into(
             full_well_e: scene.sensor.full_well_e,
             render_seconds: render_s,
         },
+        placements: [
+            (skinbrdf_session::TargetGroup::Reference, &rig.reference),
+            (skinbrdf_session::TargetGroup::Headdress, &rig.headdress),
+            (skinbrdf_session::TargetGroup::Flash, &rig.flash_targets),
+            (skinbrdf_session::TargetGroup::Standard, &rig.standard_targets),
+        ]
+        .into_iter()
+        .flat_map(|(group, list)| {
+            list.iter().map(move |t| skinbrdf_session::PlacementTruth {
+                id: t.id,
+                group,
+                corners_m: t.corners_m,
+            })
+        })
+        .collect(),
     };
     truth.write(&dir.join(TRUTH_FILE))?;
     write_s += t2.elapsed().as_secs_f64();
