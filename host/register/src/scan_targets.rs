@@ -17,11 +17,11 @@
 //!    normal and [`ScanTargetConfig::detail_ring`] tilted by [`ScanTargetConfig::detail_tilt_deg`]
 //!    around it, at a distance that gives [`ScanTargetConfig::detail_mm_per_px`] on the
 //!    paper (finer than the texture, so the detector sees the print's own edges). Only the
-//!    aimed target is taken from each, and only its corners the detector does not flag as
-//!    occluded.
+//!    aimed target is taken from each, and preferably only its corners the detector does not
+//!    flag as occluded ([`MIN_CLEAN_SAMPLES`]).
 //! 4. **Merge.** Each corner's back-projected points over the detail views (the overview's
 //!    when no detail view saw it) are merged robustly: the component-wise median `m`, then the
-//!    mean of the points within `max(MERGE_SIGMAS × 1.4826 × median |p - m|, MERGE_FLOOR_M)`
+//!    mean of the points within `max(MERGE_RADIUS_FACTOR × median |p - m|, MERGE_FLOOR_M)`
 //!    of it. Their RMS distance from the mean is the corner's spread.
 //! 5. **Square fit.** The printed black square is a square of known edge `s` on a flat paper:
 //!    the ideal corners `(-s/2, s/2, 0)`, `(s/2, s/2, 0)`, `(s/2, -s/2, 0)`, `(-s/2, -s/2, 0)`
@@ -43,12 +43,19 @@ use skinbrdf_targets::{detect, DetectorConfig, GrayF32};
 use crate::align::{umeyama, AlignKind, Correspondence};
 use crate::RegisterError;
 
-/// A corner's points within this many robust standard deviations (1.4826 × median absolute
-/// distance) of their median are averaged.
-pub const MERGE_SIGMAS: f64 = 3.0;
+/// A corner's points within this many times their median distance from their median are
+/// averaged (for 3-D Gaussian scatter the median distance is 1.54 σ, so the cut is at ~4.6 σ:
+/// it removes a view whose detection slipped, never the scatter itself).
+pub const MERGE_RADIUS_FACTOR: f64 = 3.0;
 /// ... or within this distance, metres (0.05 mm: below the scan's own noise, so a tight
 /// cluster is not cut down to its median).
 pub const MERGE_FLOOR_M: f64 = 5e-5;
+/// A corner's detail-view points the detector does not flag as occluded are merged alone when
+/// there are at least this many; otherwise all its detail-view points are. The detector flags
+/// a corner whose side bends by [`skinbrdf_targets::detect::MIN_BEND_PX`] (0.15 px): on a
+/// scan's slightly uneven paper seen at a tilt, that is the scan's depth noise, not an
+/// occluder, and the robust merge removes a corner that really slipped.
+pub const MIN_CLEAN_SAMPLES: usize = 2;
 /// Grey level of a ray that misses the scan (a dark background: the paper's white ring stands
 /// out from it as from the skin).
 pub const BACKGROUND_GREY: f32 = 0.1;
@@ -110,6 +117,8 @@ pub struct ScanTarget {
     pub fit_residual_mm: f64,
     /// Per corner, the RMS spread of its points over the views, millimetres.
     pub corner_spread_mm: [f64; 4],
+    /// Per corner, the points merged (after the robust cut) and the points available.
+    pub corner_samples: [(usize, usize); 4],
     /// Mean side of the measured corners, metres.
     pub measured_size_m: f64,
 }
@@ -263,8 +272,9 @@ fn sphere_directions(n: usize) -> Vec<DVec3> {
         .collect()
 }
 
-/// Robust mean of points (see the module docs): the mean and the RMS spread, metres.
-fn robust_mean(points: &[DVec3]) -> Option<(DVec3, f64)> {
+/// Robust mean of points (see the module docs): the mean, the RMS spread (metres) and the
+/// number of points kept.
+fn robust_mean(points: &[DVec3]) -> Option<(DVec3, f64, usize)> {
     if points.is_empty() {
         return None;
     }
@@ -280,7 +290,7 @@ fn robust_mean(points: &[DVec3]) -> Option<(DVec3, f64)> {
     };
     let m = DVec3::new(med(&|p| p.x), med(&|p| p.y), med(&|p| p.z));
     let mad = med(&|p| p.distance(m));
-    let radius = (MERGE_SIGMAS * 1.4826 * mad).max(MERGE_FLOOR_M);
+    let radius = (MERGE_RADIUS_FACTOR * mad).max(MERGE_FLOOR_M);
     let kept: Vec<DVec3> = points
         .iter()
         .copied()
@@ -290,7 +300,7 @@ fn robust_mean(points: &[DVec3]) -> Option<(DVec3, f64)> {
     let mean = kept.iter().copied().sum::<DVec3>() / kept.len() as f64;
     let spread =
         (kept.iter().map(|p| p.distance_squared(mean)).sum::<f64>() / kept.len() as f64).sqrt();
-    Some((mean, spread))
+    Some((mean, spread, kept.len()))
 }
 
 /// Fits the ideal square of edge `size_m` to four corners (Kabsch): the fitted corners and the
@@ -397,7 +407,7 @@ pub fn find_scan_targets(
             .iter()
             .map(|s| s.corners_m.iter().copied().sum::<DVec3>() * 0.25)
             .collect();
-        let Some((centre, _)) = robust_mean(&centres) else {
+        let Some((centre, _, _)) = robust_mean(&centres) else {
             continue;
         };
         let normal = obs
@@ -448,6 +458,7 @@ pub fn find_scan_targets(
         let coarse: Vec<&Seen> = seen.iter().flatten().filter(|s| s.id == id).collect();
         let mut merged = [DVec3::ZERO; 4];
         let mut spread = [0.0; 4];
+        let mut samples = [(0, 0); 4];
         let mut ok = true;
         for k in 0..4 {
             let pick = |set: &[&Seen]| -> Vec<DVec3> {
@@ -456,17 +467,23 @@ pub fn find_scan_targets(
                     .map(|s| s.corners_m[k])
                     .collect()
             };
+            let all =
+                |set: &[&Seen]| -> Vec<DVec3> { set.iter().map(|s| s.corners_m[k]).collect() };
             let mut pts = pick(&fine);
+            if pts.len() < MIN_CLEAN_SAMPLES {
+                pts = all(&fine);
+            }
             if pts.is_empty() {
                 pts = pick(&coarse);
             }
             if pts.is_empty() {
-                pts = coarse.iter().map(|s| s.corners_m[k]).collect();
+                pts = all(&coarse);
             }
             match robust_mean(&pts) {
-                Some((m, s)) => {
+                Some((m, s, n)) => {
                     merged[k] = m;
                     spread[k] = s * 1e3;
+                    samples[k] = (n, pts.len());
                 }
                 None => ok = false,
             }
@@ -491,6 +508,7 @@ pub fn find_scan_targets(
             },
             fit_residual_mm: rms * 1e3,
             corner_spread_mm: spread,
+            corner_samples: samples,
             measured_size_m,
         });
     }
@@ -555,7 +573,8 @@ mod tests {
     fn robust_mean_ignores_an_outlier() {
         let mut pts: Vec<DVec3> = (0..6).map(|i| DVec3::X * (f64::from(i) * 1e-5)).collect();
         pts.push(DVec3::Y * 0.01);
-        let (m, s) = robust_mean(&pts).expect("mean");
+        let (m, s, n) = robust_mean(&pts).expect("mean");
+        assert_eq!(n, 6);
         assert!((m.x - 2.5e-5).abs() < 1e-9 && m.y.abs() < 1e-12, "{m:?}");
         assert!(s < 3e-5);
     }

@@ -116,8 +116,24 @@ fn every_visible_target_is_found_within_half_a_millimetre() {
     );
     for t in &f.found.targets {
         eprintln!(
-            "  {}: views {}, fit {:.3} mm, spread {:?} mm",
-            t.id, t.views, t.fit_residual_mm, t.corner_spread_mm
+            "  {}: views {}, fit {:.3} mm, spread {:.3?} mm, samples {:?}, errors {:.3?} mm",
+            t.id,
+            t.views,
+            t.fit_residual_mm,
+            t.corner_spread_mm,
+            t.corner_samples,
+            {
+                let truth = f
+                    .truth
+                    .targets
+                    .iter()
+                    .find(|x| x.id == t.id)
+                    .expect("truth");
+                let e: Vec<f64> = (0..4)
+                    .map(|k| t.corners_m[k].distance(truth.corners_m[k]) * 1e3)
+                    .collect();
+                e
+            }
         );
     }
 }

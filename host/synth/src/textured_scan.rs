@@ -8,9 +8,12 @@
 //!   [`crate::generate::make_scan`]), a plain skin colour;
 //! * every **headdress target's paper**: the true target plane ([`Rig::headdress`]), a square
 //!   [`PAPER_HALF_EXTENT`] tag half-edges wide, tessellated [`PAPER_CELLS`] x [`PAPER_CELLS`]
-//!   with the same vertex noise, textured with the printed tag36h11 pattern (black border,
-//!   data cells, white ring and paper) at about [`TEXEL_M`] per texel, each texel the
-//!   [`SUPERSAMPLE`]² box-filtered print (a scanner's camera averages over its pixel).
+//!   with noise of the same size along the paper's normal only, textured with the printed
+//!   tag36h11 pattern (black border, data cells, white ring and paper) at about [`TEXEL_M`] per
+//!   texel, each texel the [`SUPERSAMPLE`]² box-filtered print (a scanner's camera averages
+//!   over its pixel). A scanner projects its colour images onto the measured surface, so its
+//!   error moves the print with the surface along the viewing direction (depth, here the
+//!   paper's normal), not sideways across the paper.
 //!
 //! Everything is in the **scanner frame**: `scanner_from_head` ([`scanner_from_head`]) is a
 //! rotation of tens of degrees and a translation of tens of centimetres drawn from the scene's
@@ -162,6 +165,7 @@ pub fn write_textured_scan(
         let n: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(&mut rng));
         pose.transform_point(p) + DVec3::from_array(n) * noise_m
     };
+    let mut paper_rng = ChaCha8Rng::seed_from_u64(scene.seed ^ SEED_SALT ^ 0x0b2);
     let scale = 1.0 / g.scan_units.to_m();
 
     // Atlas layout: one tile per paper, then a small skin tile.
@@ -275,6 +279,7 @@ pub fn write_textured_scan(
         let [c0, c1, _, c3] = t.corners_m;
         let x = (c1 - c0).normalize_or(DVec3::X);
         let y = (c0 - c3).normalize_or(DVec3::Y);
+        let out = -(x.cross(y));
         let centre = t.centre();
         let half = 0.5 * t.size_m;
         let tl = tile(k);
@@ -283,7 +288,9 @@ pub fn write_textured_scan(
             for i in 0..n {
                 let (fx, fy) = (i as f64 / PAPER_CELLS as f64, j as f64 / PAPER_CELLS as f64);
                 let (u, v) = ((2.0 * fx - 1.0) * e, (2.0 * fy - 1.0) * e);
-                let q = noisy(centre + x * (u * half) + y * (v * half)) * scale;
+                let depth: f64 = StandardNormal.sample(&mut paper_rng);
+                let p = centre + x * (u * half) + y * (v * half) + out * (depth * noise_m);
+                let q = pose.transform_point(p) * scale;
                 let _ = writeln!(obj, "v {:.5} {:.5} {:.5}", q.x, q.y, q.z);
                 let uv = uv_of(tl, fx, fy);
                 let _ = writeln!(vt_lines, "vt {:.7} {:.7}", uv.x, uv.y);
