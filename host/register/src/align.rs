@@ -20,15 +20,25 @@
 //! # Rejection
 //!
 //! Every target contributes its four corners. After a fit, a target's residual is the RMS over
-//! its corners of `|y_i - (s R x_i + t)|`. The worst target is dropped and the fit repeated
-//! while its residual exceeds `max(max_target_residual_mm, reject_factor × median)` of the
-//! targets' residuals ([`AlignConfig`]) and more than `min_targets` targets remain. The
-//! absolute floor ([`MAX_TARGET_RESIDUAL_MM`], 1 mm) is several times what a good target shows
-//! (scan corners ~0.1 mm, a survey's ~0.1..0.3 mm), far below what a bad one shows (a tag
-//! detected on a creased or partly scanned paper, a target moved between survey and scan: mm);
-//! the relative part keeps a survey that is coarse everywhere from losing all its targets.
-//! One at a time, worst first, because a gross error spreads into every other target's
-//! residual through the fit.
+//! its corners of `|y_i - (s R x_i + t)|`. The threshold is
+//!
+//! ```text
+//! threshold = max(max_target_residual_mm, reject_factor × robust_median_mm)
+//! ```
+//!
+//! ([`AlignConfig`]), where `robust_median_mm` is the least median of the targets' residuals
+//! over the fits to every pair of targets (least median of squares over pairs: a fit to two
+//! good targets sees the bad ones as what they are, while the fit to all of them spreads a
+//! gross error into every residual and inflates their median). The worst target is then
+//! dropped and the fit to the rest repeated while its residual exceeds the threshold and more
+//! than `min_targets` targets remain: one at a time, worst first, because a gross error also
+//! raises the good targets' residuals until it is gone.
+//!
+//! The absolute floor ([`MAX_TARGET_RESIDUAL_MM`], 1 mm) is several times what a good target
+//! shows (scan corners ~0.1 mm, a survey's ~0.1..0.3 mm) and far below what a bad one shows (a
+//! tag detected on a creased or partly scanned paper, a target moved between survey and scan:
+//! millimetres); the relative part keeps a survey that is coarse everywhere from losing all
+//! its targets.
 //!
 //! # Uncertainty
 //!
@@ -131,6 +141,10 @@ pub struct Alignment {
     pub rms_mm: f64,
     /// Targets left out, in the order they were dropped.
     pub dropped: Vec<DroppedTarget>,
+    /// The rejection threshold used, millimetres (see the module docs).
+    pub threshold_mm: f64,
+    /// The least median target residual over the fits to pairs of targets, millimetres.
+    pub robust_median_mm: f64,
     /// Targets in only one of the two sets (not used).
     pub unmatched: Vec<u32>,
     /// Points (corners) in the final fit.
@@ -280,11 +294,13 @@ pub fn fit_correspondences(
     }
     let mut kept: Vec<Correspondence> = pairs.to_vec();
     let mut dropped = Vec::new();
+    let robust_median_mm = robust_median_mm(pairs, kind)?;
+    let threshold_mm = cfg
+        .max_target_residual_mm
+        .max(cfg.reject_factor * robust_median_mm);
     loop {
         let (r, t, s) = umeyama(&kept, kind)?;
         let res = target_residuals(&kept, &r, t, s);
-        let med = median(res.iter().map(|x| x.residual_mm).collect());
-        let threshold_mm = cfg.max_target_residual_mm.max(cfg.reject_factor * med);
         let worst = res
             .iter()
             .copied()
@@ -298,8 +314,65 @@ pub fn fit_correspondences(
                 });
                 kept.retain(|p| p.id != w.id);
             }
-            _ => return Ok(finish(&kept, kind, r, t, s, res, dropped)),
+            _ => {
+                let mut a = finish(&kept, kind, r, t, s, res, dropped);
+                a.threshold_mm = threshold_mm;
+                a.robust_median_mm = robust_median_mm;
+                return Ok(a);
+            }
         }
+    }
+}
+
+/// Pairs of targets tried at most for the robust scale (all pairs of up to 25 targets).
+const MAX_PAIR_FITS: usize = 300;
+
+/// The least median of the targets' residuals over the fits to pairs of targets (or the fit to
+/// all when there are fewer than three targets, or a pair's points are degenerate), mm.
+fn robust_median_mm(pairs: &[Correspondence], kind: AlignKind) -> Result<f64, RegisterError> {
+    let mut ids: Vec<u32> = pairs.iter().map(|p| p.id).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let all = |pairs: &[Correspondence]| -> Result<f64, RegisterError> {
+        let (r, t, s) = umeyama(pairs, kind)?;
+        Ok(median(
+            target_residuals(pairs, &r, t, s)
+                .iter()
+                .map(|x| x.residual_mm)
+                .collect(),
+        ))
+    };
+    if ids.len() < 3 {
+        return all(pairs);
+    }
+    let combos: Vec<(u32, u32)> = ids
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &a)| ids[i + 1..].iter().map(move |&b| (a, b)))
+        .collect();
+    let stride = combos.len().div_ceil(MAX_PAIR_FITS).max(1);
+    let mut best = f64::INFINITY;
+    for &(a, b) in combos.iter().step_by(stride) {
+        let sub: Vec<Correspondence> = pairs
+            .iter()
+            .copied()
+            .filter(|p| p.id == a || p.id == b)
+            .collect();
+        let Ok((r, t, s)) = umeyama(&sub, kind) else {
+            continue;
+        };
+        let m = median(
+            target_residuals(pairs, &r, t, s)
+                .iter()
+                .map(|x| x.residual_mm)
+                .collect(),
+        );
+        best = best.min(m);
+    }
+    if best.is_finite() {
+        Ok(best)
+    } else {
+        all(pairs)
     }
 }
 
@@ -376,6 +449,8 @@ fn finish(
         rms_mm: (sse / n.max(1) as f64).sqrt() * 1e3,
         residuals,
         dropped,
+        threshold_mm: f64::NAN,
+        robust_median_mm: f64::NAN,
         unmatched: Vec::new(),
         points_used: n,
         rotation_sd_deg: rot_var.max(0.0).sqrt().to_degrees(),
