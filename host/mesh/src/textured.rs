@@ -314,16 +314,31 @@ pub(crate) fn read_obj_data(path: &Path) -> Result<ObjData, MeshError> {
 }
 
 /// The texture file a material names: the `map_Kd` string as a path relative to `dir`; when
-/// that does not exist and the string has options before the name (`-s 1 1 1 skin.png`), its
-/// last word.
+/// that does not exist and the string has options before the name (`-bm 1.0 skin tone.png`),
+/// the first tail of it after a space that names an existing file (names may hold spaces),
+/// else its last word.
 fn texture_file(dir: &Path, map_kd: &str) -> PathBuf {
-    let whole = dir.join(map_kd.trim());
-    if whole.exists() {
+    let map_kd = map_kd.trim();
+    let whole = dir.join(map_kd);
+    if whole.exists() || !map_kd.starts_with('-') {
         return whole;
     }
+    let tails = map_kd
+        .char_indices()
+        .filter(|&(_, c)| c == ' ' || c == '\t')
+        .map(|(i, _)| map_kd[i + 1..].trim_start())
+        .filter(|t| !t.is_empty() && !t.starts_with('-'));
+    let mut last = None;
+    for t in tails {
+        let p = dir.join(t);
+        if p.is_file() {
+            return p;
+        }
+        last = Some(p);
+    }
     match map_kd.split_whitespace().last() {
-        Some(last) if map_kd.trim().starts_with('-') => dir.join(last),
-        _ => whole,
+        Some(w) => dir.join(w),
+        None => last.unwrap_or(whole),
     }
 }
 
@@ -513,6 +528,30 @@ mod tests {
     }
 
     #[test]
+    fn a_jpeg_texture_loads() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let obj = quad_obj(dir.path(), false);
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            "newmtl paper\nmap_Kd -bm 1.0 skin tone.jpg\n",
+        )
+        .expect("mtl");
+        let img = image::RgbImage::from_pixel(16, 16, image::Rgb([200, 150, 100]));
+        img.save(dir.path().join("skin tone.jpg")).expect("jpeg");
+        let t = load_textured(&obj, &LoadOptions::default()).expect("load");
+        let hit = Hit {
+            t_m: 1.0,
+            triangle: 1,
+            u: 0.3,
+            v: 0.3,
+        };
+        let c = t.colour_at(&hit);
+        for (got, want) in c.iter().zip([200.0f32, 150.0, 100.0]) {
+            assert!((got * 255.0 - want).abs() < 4.0, "{c:?}");
+        }
+    }
+
+    #[test]
     fn a_material_without_texture_shows_its_kd() {
         let dir = tempfile::tempdir().expect("tempdir");
         let obj = quad_obj(dir.path(), false);
@@ -543,6 +582,7 @@ mod tests {
         std::fs::remove_file(dir.path().join("quad.mtl")).expect("rm");
         let e = load_textured(&obj, &LoadOptions::default()).expect_err("no mtl");
         assert!(e.to_string().contains("quad.mtl"), "{e}");
+        assert!(crate::load_mesh(&obj, &LoadOptions::default()).is_ok());
 
         let bad = dir.path().join("bad.obj");
         std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/7\n").expect("w");
