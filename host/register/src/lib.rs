@@ -5,9 +5,9 @@
 //! give. The targets' placements in the head frame are what this crate produces: the
 //! photogrammetric survey estimates the headdress targets' corners in a provisional frame of
 //! its own, and the scan, which shows the band and its printed targets, says where the same
-//! corners are on the scan. A least-squares fit of one set to the other (
-//! [`align`]) maps the survey's frame onto the scan's, so the placements can be stated in the
-//! scan's frame.
+//! corners are on the scan. A least-squares fit of one set to the other ([`align()`]) maps the
+//! survey's frame onto the scan's, so the placements can be stated in the scan's frame
+//! ([`RegistrationReport::survey_in_scan`]).
 //!
 //! Two ways to find the corners on the scan ([`RegistrationMethod`]):
 //!

@@ -56,6 +56,9 @@ pub const MERGE_FLOOR_M: f64 = 5e-5;
 /// scan's slightly uneven paper seen at a tilt, that is the scan's depth noise, not an
 /// occluder, and the robust merge removes a corner that really slipped.
 pub const MIN_CLEAN_SAMPLES: usize = 2;
+/// Horizontal field of view of the detail cameras, degrees (their distance follows from
+/// [`ScanTargetConfig::detail_mm_per_px`]; a narrow view keeps the tilt across the tag small).
+pub const DETAIL_HFOV_DEG: f64 = 30.0;
 /// Grey level of a ray that misses the scan (a dark background: the paper's white ring stands
 /// out from it as from the skin).
 pub const BACKGROUND_GREY: f32 = 0.1;
@@ -399,7 +402,7 @@ pub fn find_scan_targets(
     let mut ids: Vec<u32> = seen.iter().flatten().map(|s| s.id).collect();
     ids.sort_unstable();
     ids.dedup();
-    let detail_hfov = 30f64.to_radians();
+    let detail_hfov = DETAIL_HFOV_DEG.to_radians();
     let mut detail_jobs: Vec<(u32, View)> = Vec::new();
     for &id in &ids {
         let obs: Vec<&Seen> = seen.iter().flatten().filter(|s| s.id == id).collect();
