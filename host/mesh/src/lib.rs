@@ -8,6 +8,8 @@
 //! * [`normals`]: shading normals by a local planar fit over a radius (given or estimated from
 //!   the scan's noise) or vertex normals; interpolated at ray hits.
 //! * [`shapes`]: tessellated spheres and cylinders.
+//! * [`textured`]: [`load_textured`], scans with their colours (OBJ + MTL + PNG/JPEG texture,
+//!   PLY vertex colours) and [`TexturedMesh::colour_at`] at a ray hit.
 //! * [`bvh`]: [`MeshBvh`], build once and trace many (closest hit, occlusion, batched rays),
 //!   build presets [`BuildQuality`].
 //! * [`camera_rays`]: [`CameraRays`], per-pixel camera rays from a coarse exact undistortion
@@ -23,6 +25,7 @@ pub mod normals;
 pub mod ply;
 pub mod shadow;
 pub mod shapes;
+pub mod textured;
 pub mod validate;
 
 pub use bvh::{BuildQuality, Hit, MeshBvh, MeshRay};
@@ -30,9 +33,10 @@ pub use camera_rays::CameraRays;
 pub use coherent::TraceScratch;
 pub use load::{load_mesh, LengthUnit, LoadOptions, LoadedMesh};
 pub use normals::{estimate_noise, NoiseEstimate, NormalMethod, SurfaceNormals};
-pub use ply::{read_ply, write_ply_binary, write_ply_binary_in};
+pub use ply::{read_ply, read_ply_coloured, write_ply_binary, write_ply_binary_in};
 pub use shadow::{shadow_ray, ShadowScratch};
-pub use validate::{inspect, repair, MeshReport, RepairPolicy};
+pub use textured::{load_textured, Appearance, Material, TextureImage, TexturedMesh};
+pub use validate::{inspect, repair, repair_tracked, MeshReport, RepairMap, RepairPolicy};
 
 use std::path::PathBuf;
 
@@ -77,6 +81,40 @@ pub enum MeshError {
         /// Which parameter.
         field: &'static str,
         /// What is wrong.
+        reason: String,
+    },
+    /// An OBJ's material names a texture file that does not exist.
+    #[error("{path}: material `{material}` names the texture {texture}, which does not exist")]
+    MissingTexture {
+        /// The OBJ file.
+        path: PathBuf,
+        /// The material.
+        material: String,
+        /// The texture file looked for.
+        texture: PathBuf,
+    },
+    /// An OBJ's `mtllib` file could not be read.
+    #[error("{path}: cannot read its material library {}", libraries.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "))]
+    MissingMaterialLibrary {
+        /// The OBJ file.
+        path: PathBuf,
+        /// The MTL files that failed.
+        libraries: Vec<PathBuf>,
+    },
+    /// A texture image could not be decoded.
+    #[error("texture {path}: {reason}")]
+    Texture {
+        /// The image file.
+        path: PathBuf,
+        /// The decoder's complaint.
+        reason: String,
+    },
+    /// Texture coordinates that do not fit the faces.
+    #[error("{path}: bad texture coordinates: {reason}")]
+    BadUv {
+        /// The OBJ file.
+        path: PathBuf,
+        /// What is wrong, with the object and face.
         reason: String,
     },
     /// A file is malformed.

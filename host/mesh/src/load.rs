@@ -125,8 +125,15 @@ pub fn load_mesh(path: &Path, opts: &LoadOptions) -> Result<LoadedMesh, MeshErro
             })
         }
     };
-    let unit = match opts.unit {
-        LengthUnit::Auto => guess_unit(&mesh),
+    let unit = scale_to_metres(&mut mesh, opts.unit);
+    let (mesh, report) = repair(&mesh, opts.policy, &path.display().to_string())?;
+    Ok(LoadedMesh { mesh, unit, report })
+}
+
+/// Scales a mesh read in `unit` (guessed when `Auto`) to metres; returns the unit used.
+pub(crate) fn scale_to_metres(mesh: &mut TriMesh, unit: LengthUnit) -> LengthUnit {
+    let unit = match unit {
+        LengthUnit::Auto => guess_unit(mesh),
         u => u,
     };
     let scale = unit.metres_per_unit().unwrap_or(1.0) as f32;
@@ -135,43 +142,15 @@ pub fn load_mesh(path: &Path, opts: &LoadOptions) -> Result<LoadedMesh, MeshErro
             *p *= scale;
         }
     }
-    let (mesh, report) = repair(&mesh, opts.policy, &path.display().to_string())?;
-    Ok(LoadedMesh { mesh, unit, report })
+    unit
 }
 
 /// Reads an OBJ file (all objects merged, polygons triangulated, normals dropped: OBJ normals
-/// are indexed separately from positions and the scan's normals are refitted anyway).
+/// are indexed separately from positions and the scan's normals are refitted anyway). Texture
+/// coordinates and materials are ignored here (see [`crate::textured::load_textured`]), and a
+/// missing MTL file is no error for the geometry.
 pub fn read_obj(path: &Path) -> Result<TriMesh, MeshError> {
-    let opts = tobj::LoadOptions {
-        triangulate: true,
-        single_index: false,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let (models, _materials) = tobj::load_obj(path, &opts).map_err(|e| MeshError::Parse {
-        path: path.to_path_buf(),
-        reason: format!("OBJ: {e}"),
-    })?;
-    let mut out = TriMesh::default();
-    for m in models {
-        let base = out.positions.len() as u32;
-        let p = &m.mesh.positions;
-        out.positions
-            .extend(p.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])));
-        out.indices.extend(
-            m.mesh
-                .indices
-                .chunks_exact(3)
-                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
-        );
-    }
-    if out.indices.is_empty() {
-        return Err(MeshError::Parse {
-            path: path.to_path_buf(),
-            reason: "OBJ has no faces".into(),
-        });
-    }
-    Ok(out)
+    Ok(crate::textured::read_obj_data(path)?.mesh)
 }
 
 #[cfg(test)]

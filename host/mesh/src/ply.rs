@@ -322,7 +322,32 @@ pub fn read_ply(path: &Path) -> Result<(TriMesh, PlyInfo), MeshError> {
 }
 
 /// Reads PLY from any buffered reader; `path` names the source in errors.
-pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyInfo), MeshError> {
+pub fn read_ply_from<R: BufRead>(r: R, path: &Path) -> Result<(TriMesh, PlyInfo), MeshError> {
+    read_ply_coloured_from(r, path).map(|(m, i, _)| (m, i))
+}
+
+/// Per-vertex colours of a PLY file, `[r, g, b]` scaled to 0..1 as stored (integer types by
+/// their maximum: `uchar` by 255, `ushort` by 65535; floating-point values as they are). No
+/// gamma conversion: scanners store display (sRGB-encoded) values.
+pub type VertexColours = Vec<[f32; 3]>;
+
+/// [`read_ply`], also returning the vertex colours when the `vertex` element has `red`,
+/// `green` and `blue` (or `r`, `g`, `b`) properties.
+pub fn read_ply_coloured(
+    path: &Path,
+) -> Result<(TriMesh, PlyInfo, Option<VertexColours>), MeshError> {
+    let file = std::fs::File::open(path).map_err(|source| MeshError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    read_ply_coloured_from(BufReader::with_capacity(1 << 20, file), path)
+}
+
+/// [`read_ply_coloured`] from any buffered reader; `path` names the source in errors.
+pub fn read_ply_coloured_from<R: BufRead>(
+    mut r: R,
+    path: &Path,
+) -> Result<(TriMesh, PlyInfo, Option<VertexColours>), MeshError> {
     let (format, elements, comments) = parse_header(&mut r, path)?;
     let mut rd = Reader {
         r,
@@ -340,6 +365,8 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
         comments,
     };
     let mut normals: Vec<Vec3> = Vec::new();
+    let mut colours: VertexColours = Vec::new();
+    let mut have_colours = false;
     let mut have_normals = false;
     let mut saw_vertex = false;
     let mut saw_face = false;
@@ -358,6 +385,26 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
                 };
                 let nrm = [prop_index("nx"), prop_index("ny"), prop_index("nz")];
                 have_normals = nrm.iter().all(Option::is_some);
+                let colour_prop = |long: &str, short: &str| {
+                    el.properties.iter().position(|p| {
+                        matches!(p, Property::Scalar { name, .. } if name == long || name == short)
+                    })
+                };
+                let rgb = [
+                    colour_prop("red", "r"),
+                    colour_prop("green", "g"),
+                    colour_prop("blue", "b"),
+                ];
+                let rgb_scale = rgb.map(|k| match k.map(|k| &el.properties[k]) {
+                    Some(Property::Scalar { ty, .. }) => match ty {
+                        Scalar::U8 | Scalar::I8 => 1.0 / 255.0,
+                        Scalar::U16 | Scalar::I16 => 1.0 / 65535.0,
+                        Scalar::U32 | Scalar::I32 => 1.0 / f64::from(u32::MAX),
+                        Scalar::F32 | Scalar::F64 => 1.0,
+                    },
+                    _ => 1.0,
+                });
+                have_colours = rgb.iter().all(Option::is_some);
                 mesh.positions.reserve(el.count);
                 let mut vals = vec![0.0f64; el.properties.len()];
                 for i in 0..el.count {
@@ -381,6 +428,13 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
                     ));
                     if let [Some(a), Some(b), Some(c)] = nrm {
                         normals.push(Vec3::new(vals[a] as f32, vals[b] as f32, vals[c] as f32));
+                    }
+                    if let [Some(a), Some(b), Some(c)] = rgb {
+                        colours.push([
+                            (vals[a] * rgb_scale[0]) as f32,
+                            (vals[b] * rgb_scale[1]) as f32,
+                            (vals[c] * rgb_scale[2]) as f32,
+                        ]);
                     }
                 }
             }
@@ -478,7 +532,7 @@ pub fn read_ply_from<R: BufRead>(mut r: R, path: &Path) -> Result<(TriMesh, PlyI
     if have_normals {
         mesh.normals = Some(normals);
     }
-    Ok((mesh, info))
+    Ok((mesh, info, have_colours.then_some(colours)))
 }
 
 /// Writes the mesh as binary little-endian PLY, atomically (temporary file + rename).

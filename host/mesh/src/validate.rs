@@ -207,7 +207,7 @@ fn is_degenerate(a: Vec3, b: Vec3, c: Vec3) -> bool {
 
 /// Counts the problems of a mesh without changing it.
 pub fn inspect(mesh: &TriMesh) -> MeshReport {
-    let (_, mut report) = repair_impl(mesh, true);
+    let (_, mut report, _) = repair_impl(mesh, true);
     report.triangles_out = mesh.indices.len();
     report.flipped = Problem::default();
     report
@@ -219,7 +219,38 @@ pub fn repair(
     policy: RepairPolicy,
     source: &str,
 ) -> Result<(TriMesh, MeshReport), MeshError> {
-    let (out, report) = repair_impl(mesh, policy.weld);
+    repair_tracked(mesh, policy, source).map(|(m, r, _)| (m, r))
+}
+
+/// Where each output element of [`repair_tracked`] came from, so that per-vertex and
+/// per-corner attributes (colours, texture coordinates) follow the repair.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RepairMap {
+    /// Per output vertex, its input vertex.
+    pub vertices: Vec<u32>,
+    /// Per output triangle, its input triangle and whether its winding was flipped (corners 1
+    /// and 2 swapped: output corner `k` is input corner `[0, 2, 1][k]`).
+    pub triangles: Vec<(u32, bool)>,
+}
+
+impl RepairMap {
+    /// The input corner (0..3) of output corner `k` of a triangle flipped or not.
+    pub const fn input_corner(flipped: bool, k: usize) -> usize {
+        if flipped {
+            [0, 2, 1][k]
+        } else {
+            k
+        }
+    }
+}
+
+/// [`repair`], also returning where each output vertex and triangle came from.
+pub fn repair_tracked(
+    mesh: &TriMesh,
+    policy: RepairPolicy,
+    source: &str,
+) -> Result<(TriMesh, MeshReport, RepairMap), MeshError> {
+    let (out, report, map) = repair_impl(mesh, policy.weld);
     if !policy.repair && !report.is_clean() {
         return Err(MeshError::Defects {
             source_name: source.to_string(),
@@ -239,10 +270,10 @@ pub fn repair(
             report: Box::new(report),
         });
     }
-    Ok((out, report))
+    Ok((out, report, map))
 }
 
-fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport) {
+fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport, RepairMap) {
     let mut r = MeshReport {
         triangles_in: mesh.indices.len(),
         ..Default::default()
@@ -384,10 +415,12 @@ fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport) {
     }
     let mut remap: Vec<u32> = vec![u32::MAX; nv];
     let mut out = TriMesh::default();
+    let mut map = RepairMap::default();
     let mut normals_out = Vec::new();
     let normals = mesh.normals.as_ref().filter(|n| n.len() == nv);
     for v in (0..nv).filter(|&v| used[v]) {
         remap[v] = out.positions.len() as u32;
+        map.vertices.push(v as u32);
         out.positions.push(mesh.positions[v]);
         if let Some(n) = normals {
             normals_out.push(n[v]);
@@ -395,17 +428,19 @@ fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport) {
     }
     for (k, (t, w)) in kept.iter().enumerate() {
         let mut w = *w;
-        if flip[k] == Some(true) {
+        let flipped = flip[k] == Some(true);
+        if flipped {
             w.swap(1, 2);
             r.flipped.add(*t);
         }
         out.indices.push(w.map(|v| remap[v as usize]));
+        map.triangles.push((*t as u32, flipped));
     }
     if normals.is_some() {
         out.normals = Some(normals_out);
     }
     r.triangles_out = out.indices.len();
-    (out, r)
+    (out, r, map)
 }
 
 #[cfg(test)]

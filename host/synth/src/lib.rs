@@ -12,6 +12,8 @@
 //!   with `truth.json` and truth masks. Entry point: [`generate::generate`].
 //! * [`studio`]: with `--studio`, what a studio holds after the capture: the camera's raw
 //!   files (DNG), the controller's record, the rig files and the scan.
+//! * [`textured_scan`]: the head scan as a textured OBJ in a scanner frame, headdress papers
+//!   included, with its truth (`studio/scan/`).
 //!
 //! The radiometric convention (what `C` means) is in `docs/session-format.md`: a skin point
 //! renders to `V = rho cos(theta_i) / (C D²)`, so the method's equation 2 inverts the renderer
@@ -23,6 +25,7 @@ pub mod render;
 pub mod scene;
 pub mod shape;
 pub mod studio;
+pub mod textured_scan;
 pub mod visibility;
 
 pub use generate::{generate, SynthError, SynthOptions, SynthSummary};

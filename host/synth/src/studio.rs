@@ -10,6 +10,8 @@
 //!   rig-measured.toml                 the rig with its true placements (a surveyed rig)
 //!   rig.toml                          the same rig without placements
 //!   scan.ply                          the head scan
+//!   scan/head.obj, head.mtl, head.png the textured scan in the scanner's frame, headdress
+//!                                     included (crate::textured_scan), scan-truth.json
 //! ```
 //!
 //! # Raw image formation
@@ -605,6 +607,7 @@ pub fn write_studio_files(
     let scan = session_dir.join("scan.ply");
     let bytes = std::fs::read(&scan).map_err(|e| io(&scan, e))?;
     skinbrdf_session::write_atomic(&dir.join("scan.ply"), &bytes)?;
+    crate::textured_scan::write_textured_scan(&dir.join("scan"), scene, rig)?;
     Ok(dir)
 }
 

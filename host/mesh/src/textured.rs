@@ -1,0 +1,623 @@
+//! Textured head scans: the mesh with its colours, for finding printed targets on the scan.
+//!
+//! [`load_textured`] reads
+//!
+//! * **OBJ + MTL + texture**: `v`, `vt`, `f v/vt[/vn]`, `mtllib`, `usemtl` and the material's
+//!   `map_Kd` image (PNG or JPEG, resolved against the MTL file's folder). Texture
+//!   coordinates are kept per triangle corner (OBJ indexes them separately from the positions,
+//!   so one vertex can have different coordinates in different triangles, at atlas seams);
+//!   a face without `vt` shows its material's `Kd` colour.
+//! * **PLY with vertex colours** (`red green blue`, any scalar type, see
+//!   [`crate::ply::read_ply_coloured`]): colours interpolated barycentrically.
+//!
+//! The geometry goes through exactly the path of [`crate::load_mesh`] (same reader, unit
+//! conversion and repair), so the mesh of a [`TexturedMesh`] equals the mesh `load_mesh` gives
+//! for the same file; [`crate::validate::repair_tracked`] says where each repaired triangle
+//! and vertex came from, so the colours follow dropped, welded and re-wound triangles.
+//!
+//! # Lookup
+//!
+//! [`TexturedMesh::colour_at`] takes a [`Hit`] (triangle and barycentrics `u`, `v` of its
+//! second and third corner): the texture coordinate is `uv = (1-u-v) uv0 + u uv1 + v uv2` and
+//! the texture is sampled bilinearly between the four nearest texel centres. OBJ puts `v = 0`
+//! at the bottom of the image, texel `(i, j)` (column, row from the top) has its centre at
+//! `((i + 0.5) / W, 1 - (j + 0.5) / H)`, and coordinates outside `[0, 1]` repeat (the OBJ
+//! default). Colours are the stored values scaled to 0..1 (no gamma conversion).
+
+use std::cell::RefCell;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+
+use glam::{Vec2, Vec3};
+use skinbrdf_core::TriMesh;
+
+use crate::bvh::Hit;
+use crate::load::{scale_to_metres, LengthUnit, LoadOptions};
+use crate::validate::{repair_tracked, MeshReport, RepairMap};
+use crate::MeshError;
+
+/// Colour of a surface with no appearance (no texture, no vertex colours): a mid grey.
+pub const UNTEXTURED_COLOUR: [f32; 3] = [0.5, 0.5, 0.5];
+
+/// An RGB texture, row-major from the top row, values 0..1 as stored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TextureImage {
+    /// Width, texels.
+    pub width: u32,
+    /// Height, texels.
+    pub height: u32,
+    /// Texels, row-major from the top.
+    pub rgb: Vec<[f32; 3]>,
+}
+
+impl TextureImage {
+    /// Loads a PNG or JPEG (any pixel type; alpha is dropped).
+    pub fn load(path: &Path) -> Result<Self, MeshError> {
+        let img = image::open(path).map_err(|e| MeshError::Texture {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+        let rgb = img.to_rgb32f();
+        let (width, height) = rgb.dimensions();
+        if width == 0 || height == 0 {
+            return Err(MeshError::Texture {
+                path: path.to_path_buf(),
+                reason: "the image is empty".into(),
+            });
+        }
+        Ok(Self {
+            width,
+            height,
+            rgb: rgb.pixels().map(|p| p.0).collect(),
+        })
+    }
+
+    /// Bilinear lookup at an OBJ texture coordinate (`v = 0` at the bottom, repeating outside
+    /// `[0, 1]`; see the module docs). A non-finite coordinate gives texel `(0, 0)`.
+    pub fn bilinear(&self, uv: Vec2) -> [f32; 3] {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let x = f64::from(uv.x) * w as f64 - 0.5;
+        let y = (1.0 - f64::from(uv.y)) * h as f64 - 0.5;
+        if !(x.is_finite() && y.is_finite()) {
+            return self.rgb[0];
+        }
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let at = |i: i64, j: i64| self.rgb[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
+        let (a, b, c, d) = (
+            at(x0, y0),
+            at(x0 + 1, y0),
+            at(x0, y0 + 1),
+            at(x0 + 1, y0 + 1),
+        );
+        std::array::from_fn(|k| {
+            (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
+        })
+    }
+}
+
+/// One OBJ material: its flat colour and optional texture.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Material {
+    /// Name (`newmtl`).
+    pub name: String,
+    /// `Kd`, or [`UNTEXTURED_COLOUR`] when absent.
+    pub diffuse: [f32; 3],
+    /// The `map_Kd` image.
+    pub texture: Option<TextureImage>,
+    /// Where the texture was read from.
+    pub texture_path: Option<PathBuf>,
+}
+
+/// How a scan's surface is coloured.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Appearance {
+    /// Texture-mapped (OBJ): per triangle its material and, when it has `vt`, the texture
+    /// coordinates of its three corners (in the order of the mesh's triangle).
+    Texture {
+        /// Texture coordinates per triangle corner (`None`: the face has no `vt`).
+        uv: Vec<Option<[Vec2; 3]>>,
+        /// Material index per triangle (`None`: no `usemtl`).
+        material: Vec<Option<u32>>,
+        /// The materials.
+        materials: Vec<Material>,
+    },
+    /// A colour per vertex (PLY `red green blue`).
+    VertexColours(Vec<[f32; 3]>),
+    /// No colour information.
+    None,
+}
+
+/// A loaded scan in metres with its appearance.
+#[derive(Debug, Clone)]
+pub struct TexturedMesh {
+    /// The mesh, metres (as [`crate::load_mesh`] loads it).
+    pub mesh: TriMesh,
+    /// Its colours.
+    pub appearance: Appearance,
+    /// The unit the file was read in.
+    pub unit: LengthUnit,
+    /// Validation and repair.
+    pub report: MeshReport,
+}
+
+impl TexturedMesh {
+    /// The surface colour at a ray hit (see the module docs). A hit on a triangle the mesh
+    /// does not have gives [`UNTEXTURED_COLOUR`].
+    pub fn colour_at(&self, hit: &Hit) -> [f32; 3] {
+        let t = hit.triangle as usize;
+        let w = [1.0 - hit.u - hit.v, hit.u, hit.v];
+        match &self.appearance {
+            Appearance::Texture {
+                uv,
+                material,
+                materials,
+            } => {
+                let mat = material
+                    .get(t)
+                    .copied()
+                    .flatten()
+                    .and_then(|m| materials.get(m as usize));
+                let Some(mat) = mat else {
+                    return UNTEXTURED_COLOUR;
+                };
+                match (&mat.texture, uv.get(t).copied().flatten()) {
+                    (Some(tex), Some(c)) => tex.bilinear(c[0] * w[0] + c[1] * w[1] + c[2] * w[2]),
+                    _ => mat.diffuse,
+                }
+            }
+            Appearance::VertexColours(colours) => {
+                let Some(tri) = self.mesh.indices.get(t) else {
+                    return UNTEXTURED_COLOUR;
+                };
+                let mut out = [0.0f32; 3];
+                for (k, &v) in tri.iter().enumerate() {
+                    let c = colours
+                        .get(v as usize)
+                        .copied()
+                        .unwrap_or(UNTEXTURED_COLOUR);
+                    for (o, ci) in out.iter_mut().zip(c) {
+                        *o += w[k] * ci;
+                    }
+                }
+                out
+            }
+            Appearance::None => UNTEXTURED_COLOUR,
+        }
+    }
+
+    /// The luma (Rec. 709 weights) of [`Self::colour_at`].
+    pub fn grey_at(&self, hit: &Hit) -> f32 {
+        let [r, g, b] = self.colour_at(hit);
+        0.2126 * r + 0.7152 * g + 0.0722 * b
+    }
+}
+
+/// An OBJ file's geometry with its per-corner texture coordinates and per-triangle materials,
+/// before units and repair.
+#[derive(Debug, Clone)]
+pub(crate) struct ObjData {
+    pub(crate) mesh: TriMesh,
+    pub(crate) uv: Vec<Option<[Vec2; 3]>>,
+    pub(crate) material: Vec<Option<u32>>,
+    /// The materials, or the MTL files that could not be read.
+    pub(crate) materials: Result<Vec<tobj::Material>, Vec<PathBuf>>,
+}
+
+/// Reads an OBJ file: every object merged in file order, polygons triangulated.
+pub(crate) fn read_obj_data(path: &Path) -> Result<ObjData, MeshError> {
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let file = std::fs::File::open(path).map_err(|source| MeshError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let failed: RefCell<Vec<PathBuf>> = RefCell::new(Vec::new());
+    let (models, materials) = tobj::load_obj_buf(&mut BufReader::new(file), &opts, |mtl: &Path| {
+        let full = dir.join(mtl);
+        let r = tobj::load_mtl(&full);
+        if r.is_err() {
+            failed.borrow_mut().push(full);
+        }
+        r
+    })
+    .map_err(|e| MeshError::Parse {
+        path: path.to_path_buf(),
+        reason: format!("OBJ: {e}"),
+    })?;
+    let failed = failed.into_inner();
+    let materials = match materials {
+        Ok(m) if failed.is_empty() => Ok(m),
+        _ => Err(failed),
+    };
+    let mut out = ObjData {
+        mesh: TriMesh::default(),
+        uv: Vec::new(),
+        material: Vec::new(),
+        materials,
+    };
+    for m in models {
+        let base = out.mesh.positions.len() as u32;
+        let mm = &m.mesh;
+        out.mesh.positions.extend(
+            mm.positions
+                .chunks_exact(3)
+                .map(|c| Vec3::new(c[0], c[1], c[2])),
+        );
+        out.mesh.indices.extend(
+            mm.indices
+                .chunks_exact(3)
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
+        let n_tris = mm.indices.len() / 3;
+        let material = mm.material_id.map(|i| i as u32);
+        out.material.extend(std::iter::repeat_n(material, n_tris));
+        if mm.texcoord_indices.is_empty() {
+            out.uv.extend(std::iter::repeat_n(None, n_tris));
+            continue;
+        }
+        if mm.texcoord_indices.len() != mm.indices.len() {
+            return Err(MeshError::BadUv {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "object `{}`: {} texture-coordinate indices for {} face corners (some faces \
+                     have `vt` indices, some not)",
+                    m.name,
+                    mm.texcoord_indices.len(),
+                    mm.indices.len()
+                ),
+            });
+        }
+        let n_vt = mm.texcoords.len() / 2;
+        for (f, t) in mm.texcoord_indices.chunks_exact(3).enumerate() {
+            let mut c = [Vec2::ZERO; 3];
+            for (k, &i) in t.iter().enumerate() {
+                if i as usize >= n_vt {
+                    return Err(MeshError::BadUv {
+                        path: path.to_path_buf(),
+                        reason: format!(
+                            "object `{}`, triangle {f}: texture-coordinate index {} but the \
+                             file has {n_vt} `vt` lines",
+                            m.name,
+                            i + 1
+                        ),
+                    });
+                }
+                let (u, v) = (
+                    mm.texcoords[2 * i as usize],
+                    mm.texcoords[2 * i as usize + 1],
+                );
+                if !(u.is_finite() && v.is_finite()) {
+                    return Err(MeshError::BadUv {
+                        path: path.to_path_buf(),
+                        reason: format!("`vt` {} is not finite", i + 1),
+                    });
+                }
+                c[k] = Vec2::new(u, v);
+            }
+            out.uv.push(Some(c));
+        }
+    }
+    if out.mesh.indices.is_empty() {
+        return Err(MeshError::Parse {
+            path: path.to_path_buf(),
+            reason: "OBJ has no faces".into(),
+        });
+    }
+    Ok(out)
+}
+
+/// The texture file a material names: the `map_Kd` string as a path relative to `dir`; when
+/// that does not exist and the string has options before the name (`-bm 1.0 skin tone.png`),
+/// the first tail of it after a space that names an existing file (names may hold spaces),
+/// else its last word.
+fn texture_file(dir: &Path, map_kd: &str) -> PathBuf {
+    let map_kd = map_kd.trim();
+    let whole = dir.join(map_kd);
+    if whole.exists() || !map_kd.starts_with('-') {
+        return whole;
+    }
+    let tails = map_kd
+        .char_indices()
+        .filter(|&(_, c)| c == ' ' || c == '\t')
+        .map(|(i, _)| map_kd[i + 1..].trim_start())
+        .filter(|t| !t.is_empty() && !t.starts_with('-'));
+    let mut last = None;
+    for t in tails {
+        let p = dir.join(t);
+        if p.is_file() {
+            return p;
+        }
+        last = Some(p);
+    }
+    match map_kd.split_whitespace().last() {
+        Some(w) => dir.join(w),
+        None => last.unwrap_or(whole),
+    }
+}
+
+/// Loads a scan with its colours: `.obj` (with its MTL and textures) or `.ply` (with vertex
+/// colours when it has them), in metres, repaired per `opts` exactly as [`crate::load_mesh`].
+pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, MeshError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let source = path.display().to_string();
+    match ext.as_deref() {
+        Some("ply") => {
+            let (mut mesh, _, colours) = crate::ply::read_ply_coloured(path)?;
+            let unit = scale_to_metres(&mut mesh, opts.unit);
+            let (mesh, report, map) = repair_tracked(&mesh, opts.policy, &source)?;
+            let appearance = match colours {
+                Some(c) => Appearance::VertexColours(
+                    map.vertices
+                        .iter()
+                        .map(|&v| c.get(v as usize).copied().unwrap_or(UNTEXTURED_COLOUR))
+                        .collect(),
+                ),
+                None => Appearance::None,
+            };
+            Ok(TexturedMesh {
+                mesh,
+                appearance,
+                unit,
+                report,
+            })
+        }
+        Some("obj") => {
+            let mut data = read_obj_data(path)?;
+            let materials = match std::mem::replace(&mut data.materials, Ok(Vec::new())) {
+                Ok(m) => m,
+                Err(files) => {
+                    return Err(MeshError::MissingMaterialLibrary {
+                        path: path.to_path_buf(),
+                        libraries: files,
+                    })
+                }
+            };
+            let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+            let mut mats = Vec::with_capacity(materials.len());
+            for m in materials {
+                let (texture, texture_path) = match &m.diffuse_texture {
+                    Some(t) if !t.trim().is_empty() => {
+                        let file = texture_file(&dir, t);
+                        if !file.is_file() {
+                            return Err(MeshError::MissingTexture {
+                                path: path.to_path_buf(),
+                                material: m.name.clone(),
+                                texture: file,
+                            });
+                        }
+                        (Some(TextureImage::load(&file)?), Some(file))
+                    }
+                    _ => (None, None),
+                };
+                mats.push(Material {
+                    name: m.name.clone(),
+                    diffuse: m.diffuse.unwrap_or(UNTEXTURED_COLOUR),
+                    texture,
+                    texture_path,
+                });
+            }
+            if let Some(t) = data
+                .material
+                .iter()
+                .position(|m| m.is_some_and(|m| m as usize >= mats.len()))
+            {
+                return Err(MeshError::Parse {
+                    path: path.to_path_buf(),
+                    reason: format!("triangle {t} uses a material the MTL files do not define"),
+                });
+            }
+            let unit = scale_to_metres(&mut data.mesh, opts.unit);
+            let (mesh, report, map) = repair_tracked(&data.mesh, opts.policy, &source)?;
+            let (uv, material) = follow_repair(&map, &data.uv, &data.material);
+            let appearance = if mats.is_empty() && uv.iter().all(Option::is_none) {
+                Appearance::None
+            } else {
+                Appearance::Texture {
+                    uv,
+                    material,
+                    materials: mats,
+                }
+            };
+            Ok(TexturedMesh {
+                mesh,
+                appearance,
+                unit,
+                report,
+            })
+        }
+        _ => Err(MeshError::Parse {
+            path: path.to_path_buf(),
+            reason: "unknown mesh format (expected .ply or .obj)".into(),
+        }),
+    }
+}
+
+/// Per-triangle attributes of the input carried to the repaired mesh.
+#[allow(clippy::type_complexity)]
+fn follow_repair(
+    map: &RepairMap,
+    uv: &[Option<[Vec2; 3]>],
+    material: &[Option<u32>],
+) -> (Vec<Option<[Vec2; 3]>>, Vec<Option<u32>>) {
+    map.triangles
+        .iter()
+        .map(|&(t, flipped)| {
+            let t = t as usize;
+            let c = uv
+                .get(t)
+                .copied()
+                .flatten()
+                .map(|c| std::array::from_fn(|k| c[RepairMap::input_corner(flipped, k)]));
+            (c, material.get(t).copied().flatten())
+        })
+        .unzip()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad_obj(dir: &Path, with_texture: bool) -> PathBuf {
+        let obj = dir.join("quad.obj");
+        std::fs::write(
+            &obj,
+            "mtllib quad.mtl\nv 0 0 0\nv 0.1 0 0\nv 0.1 0.1 0\nv 0 0.1 0\n\
+             vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl paper\nf 1/1 2/2 3/3\nf 1/1 3/3 4/4\n",
+        )
+        .expect("write obj");
+        let map = if with_texture {
+            "map_Kd quad.png\n"
+        } else {
+            ""
+        };
+        std::fs::write(
+            dir.join("quad.mtl"),
+            format!("newmtl paper\nKd 0.2 0.4 0.6\n{map}"),
+        )
+        .expect("write mtl");
+        obj
+    }
+
+    #[test]
+    fn obj_texture_is_sampled_bilinearly_with_v_up() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let obj = quad_obj(dir.path(), true);
+        // 2 x 2 texels: top row black, white; bottom row red, blue.
+        let mut img = image::RgbImage::new(2, 2);
+        img.put_pixel(0, 0, image::Rgb([0, 0, 0]));
+        img.put_pixel(1, 0, image::Rgb([255, 255, 255]));
+        img.put_pixel(0, 1, image::Rgb([255, 0, 0]));
+        img.put_pixel(1, 1, image::Rgb([0, 0, 255]));
+        img.save(dir.path().join("quad.png")).expect("png");
+        let t = load_textured(&obj, &LoadOptions::default()).expect("load");
+        let plain = crate::load_mesh(&obj, &LoadOptions::default()).expect("load_mesh");
+        assert_eq!(t.mesh, plain.mesh);
+        let bvh = crate::MeshBvh::build(&t.mesh, crate::BuildQuality::Fast).expect("bvh");
+        let at = |x: f32, y: f32| {
+            let hit = bvh
+                .intersect(Vec3::new(x, y, 1.0), -Vec3::Z, 10.0)
+                .expect("hit");
+            t.colour_at(&hit)
+        };
+        // Texel centres: (0.25, 0.75) is the top-left texel (black), (0.25, 0.25) the
+        // bottom-left (red).
+        let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
+        assert!(
+            close(at(0.025, 0.075), [0.0, 0.0, 0.0]),
+            "{:?}",
+            at(0.025, 0.075)
+        );
+        assert!(close(at(0.025, 0.025), [1.0, 0.0, 0.0]));
+        assert!(close(at(0.075, 0.025), [0.0, 0.0, 1.0]));
+        // Half-way between red and blue.
+        assert!(
+            close(at(0.05, 0.025), [0.5, 0.0, 0.5]),
+            "{:?}",
+            at(0.05, 0.025)
+        );
+    }
+
+    #[test]
+    fn a_jpeg_texture_loads() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let obj = quad_obj(dir.path(), false);
+        std::fs::write(
+            dir.path().join("quad.mtl"),
+            "newmtl paper\nmap_Kd -bm 1.0 skin tone.jpg\n",
+        )
+        .expect("mtl");
+        let img = image::RgbImage::from_pixel(16, 16, image::Rgb([200, 150, 100]));
+        img.save(dir.path().join("skin tone.jpg")).expect("jpeg");
+        let t = load_textured(&obj, &LoadOptions::default()).expect("load");
+        let hit = Hit {
+            t_m: 1.0,
+            triangle: 1,
+            u: 0.3,
+            v: 0.3,
+        };
+        let c = t.colour_at(&hit);
+        for (got, want) in c.iter().zip([200.0f32, 150.0, 100.0]) {
+            assert!((got * 255.0 - want).abs() < 4.0, "{c:?}");
+        }
+    }
+
+    #[test]
+    fn a_material_without_texture_shows_its_kd() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let obj = quad_obj(dir.path(), false);
+        let t = load_textured(&obj, &LoadOptions::default()).expect("load");
+        let hit = Hit {
+            t_m: 1.0,
+            triangle: 0,
+            u: 0.2,
+            v: 0.2,
+        };
+        assert_eq!(t.colour_at(&hit), [0.2, 0.4, 0.6]);
+    }
+
+    #[test]
+    fn missing_texture_and_library_and_bad_uv_name_the_file() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let obj = quad_obj(dir.path(), true);
+        let e = load_textured(&obj, &LoadOptions::default()).expect_err("no png");
+        assert!(matches!(e, MeshError::MissingTexture { .. }), "{e}");
+        let s = e.to_string();
+        assert!(
+            s.contains("quad.obj") && s.contains("quad.png") && s.contains("paper"),
+            "{s}"
+        );
+        // The geometry alone still loads.
+        assert!(crate::load_mesh(&obj, &LoadOptions::default()).is_ok());
+
+        std::fs::remove_file(dir.path().join("quad.mtl")).expect("rm");
+        let e = load_textured(&obj, &LoadOptions::default()).expect_err("no mtl");
+        assert!(e.to_string().contains("quad.mtl"), "{e}");
+        assert!(crate::load_mesh(&obj, &LoadOptions::default()).is_ok());
+
+        let bad = dir.path().join("bad.obj");
+        std::fs::write(&bad, "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/7\n").expect("w");
+        let e = load_textured(&bad, &LoadOptions::default()).expect_err("bad vt");
+        let s = e.to_string();
+        assert!(
+            matches!(e, MeshError::BadUv { .. }) || s.contains("bad.obj"),
+            "{s}"
+        );
+        assert!(s.contains("bad.obj"), "{s}");
+    }
+
+    #[test]
+    fn ply_vertex_colours_are_interpolated() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let p = dir.path().join("c.ply");
+        std::fs::write(
+            &p,
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+             property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
+             element face 1\nproperty list uchar int vertex_indices\nend_header\n\
+             0 0 0 255 0 0\n0.1 0 0 0 255 0\n0 0.1 0 0 0 255\n3 0 1 2\n",
+        )
+        .expect("write");
+        let t = load_textured(&p, &LoadOptions::default()).expect("load");
+        assert!(matches!(t.appearance, Appearance::VertexColours(_)));
+        let hit = Hit {
+            t_m: 1.0,
+            triangle: 0,
+            u: 0.25,
+            v: 0.5,
+        };
+        let c = t.colour_at(&hit);
+        assert!((c[0] - 0.25).abs() < 1e-6 && (c[1] - 0.25).abs() < 1e-6);
+        assert!((c[2] - 0.5).abs() < 1e-6, "{c:?}");
+        assert!((t.grey_at(&hit) - (0.2126 * 0.25 + 0.7152 * 0.25 + 0.0722 * 0.5)).abs() < 1e-6);
+    }
+}
