@@ -221,9 +221,7 @@ fn yes() -> bool {
 
 fn skip_reason(stage: Stage, f: &SceneFacts, o: &PlanOptions) -> Option<&'static str> {
     match stage {
-        Stage::PlacementSurvey if f.placements_known => {
-            Some("every target's placement is given")
-        }
+        Stage::PlacementSurvey if f.placements_known => Some("every target's placement is given"),
         Stage::CameraCalibration if f.intrinsics_known => {
             Some("the session states the camera intrinsics")
         }

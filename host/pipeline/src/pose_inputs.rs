@@ -550,6 +550,7 @@ mod tests {
                 out_dir: dir.path().join("out"),
                 facts,
                 plan: crate::plan::Plan::derive(&facts, &cfg.plan),
+                survey: None,
                 poses: None,
                 samples: None,
                 fit: None,

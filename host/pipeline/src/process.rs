@@ -109,6 +109,18 @@ pub enum ProcessError {
         /// The survey's anchor target.
         anchor: u32,
     },
+    /// The survey could not be registered to the head scan.
+    #[error("scan registration: {source}")]
+    Registration {
+        /// Why.
+        source: skinbrdf_register::RegisterError,
+    },
+    /// The scan could not be loaded for the registration.
+    #[error("scan registration: {source}")]
+    RegistrationScan {
+        /// Why (names the file).
+        source: skinbrdf_mesh::MeshError,
+    },
     /// No samples survived derendering.
     #[error("no BRDF samples survived derendering (see the derender stage's drop counts); nothing to fit")]
     NoSamples,
@@ -280,7 +292,13 @@ pub fn process(
         fit: None,
     };
     let mut reports: Vec<StageReport> = Vec::new();
-    let survey_reports = run_unit(&SurveyUnit, &mut survey_ctx, &mut ledger, cfg.force, on_event)?;
+    let survey_reports = run_unit(
+        &SurveyUnit,
+        &mut survey_ctx,
+        &mut ledger,
+        cfg.force,
+        on_event,
+    )?;
     let surveyed = match survey_ctx.survey.take() {
         Some(s) => {
             if let skinbrdf_poses::HeadGauge::Provisional { anchor } = s.head_gauge {

@@ -166,13 +166,31 @@ impl StageUnit for SurveyUnit {
     }
     fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
         let t = Instant::now();
-        let survey = skinbrdf_poses::survey(ctx.session, &ctx.cfg.survey)?;
+        let mut survey = skinbrdf_poses::survey(ctx.session, &ctx.cfg.survey)?;
+        let mut files = vec![SURVEY_FILE.to_string()];
+        let registration = register_to_scan(ctx.session, &mut survey)?;
+        if let Some(reg) = &registration {
+            let path = ctx.out_dir.join(REGISTRATION_FILE);
+            write_atomic(&path, &json_bytes(&path, reg)?)?;
+            files.push(REGISTRATION_FILE.into());
+        }
         let run_time_s = t.elapsed().as_secs_f64();
         let path = ctx.out_dir.join(SURVEY_FILE);
         write_atomic(&path, &json_bytes(&path, &survey)?)?;
-        let report = survey_report(&survey, ctx.truth, run_time_s);
+        let mut report = survey_report(&survey, ctx.truth, run_time_s);
+        if let Some(reg) = &registration {
+            let a = &reg.alignment;
+            report.notes.push(format!(
+                "scan registration ({:?}): {} targets, rms {:.3} mm, rotation sd {:.4} deg, {} left out",
+                reg.method,
+                a.residuals.len(),
+                a.rms_mm,
+                a.rotation_sd_deg,
+                a.dropped.len()
+            ));
+        }
         ctx.survey = Some(survey);
-        Ok((vec![report], vec![SURVEY_FILE.into()]))
+        Ok((vec![report], files))
     }
     fn load(&self, ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
         let path = ctx.out_dir.join(SURVEY_FILE);
@@ -185,6 +203,59 @@ impl StageUnit for SurveyUnit {
         );
         Ok(())
     }
+}
+
+/// The scan registration's report, relative to the output directory.
+pub const REGISTRATION_FILE: &str = "registration.json";
+
+/// When the survey's head frame is provisional and the scan carries a texture: finds the
+/// headdress targets on the scan and moves the surveyed headdress into the scan's frame (a
+/// rigid fit over all their corners; a badly scanned target is left out and named).
+fn register_to_scan(
+    session: &Session,
+    survey: &mut skinbrdf_poses::Survey,
+) -> Result<Option<skinbrdf_register::RegistrationReport>, ProcessError> {
+    if survey.head_frame_fixed() {
+        return Ok(None);
+    }
+    let GeometrySpec::Scan {
+        file,
+        units,
+        accept_repair_loss,
+    } = &session.file.geometry
+    else {
+        return Ok(None);
+    };
+    let path = session.path(file);
+    let scan = skinbrdf_mesh::load_textured(
+        &path,
+        &skinbrdf_mesh::LoadOptions {
+            unit: skinbrdf_mesh::LengthUnit::Custom(units.to_m()),
+            policy: skinbrdf_derender::from_session::scan_repair_policy(*accept_repair_loss),
+        },
+    )
+    .map_err(|source| ProcessError::RegistrationScan { source })?;
+    if matches!(scan.appearance, skinbrdf_mesh::Appearance::None) {
+        return Ok(None);
+    }
+    let corners = survey.headdress_corners();
+    let sizes: Vec<(u32, f64)> = survey
+        .targets
+        .iter()
+        .filter(|t| t.group == skinbrdf_session::TargetGroup::Headdress)
+        .map(|t| (t.id, t.size_m))
+        .collect();
+    let reg = skinbrdf_register::register_by_texture(
+        &corners,
+        &sizes,
+        &scan,
+        skinbrdf_register::AlignKind::Rigid,
+        &skinbrdf_register::ScanTargetConfig::default(),
+        &skinbrdf_register::AlignConfig::default(),
+    )
+    .map_err(|source| ProcessError::Registration { source })?;
+    survey.transform_head(&reg.alignment.scan_from_survey, "texture");
+    Ok(Some(reg))
 }
 
 /// RMS over a group's surveyed targets of the mean corner distance to the truth, mm (`None`
@@ -203,7 +274,12 @@ pub fn survey_rms_error_mm(
                 .placements
                 .iter()
                 .find(|p| p.id == t.id && p.group == group)?;
-            Some((0..4).map(|k| t.corners_m[k].distance(p.corners_m[k])).sum::<f64>() * 250.0)
+            Some(
+                (0..4)
+                    .map(|k| t.corners_m[k].distance(p.corners_m[k]))
+                    .sum::<f64>()
+                    * 250.0,
+            )
         })
         .collect();
     (!errs.is_empty()).then(|| (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt())

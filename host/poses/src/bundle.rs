@@ -723,7 +723,11 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
             heads: p.images.iter().map(|im| im.world_from_head).collect(),
             flash: p.world_from_flash.map(|f| f.0),
             standard: p.world_from_standard.map(|f| f.0),
-            bodies: p.bodies.iter().map(|b| (b.group_from_body, b.scale)).collect(),
+            bodies: p
+                .bodies
+                .iter()
+                .map(|b| (b.group_from_body, b.scale))
+                .collect(),
         };
         for (i, im) in gated.images.iter_mut().enumerate() {
             let mut bad: Vec<(Frame, u32)> = Vec::new();
@@ -759,13 +763,13 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
         heads: p.images.iter().map(|im| im.world_from_head).collect(),
         flash: p.world_from_flash.map(|f| f.0),
         standard: p.world_from_standard.map(|f| f.0),
-        bodies: p.bodies.iter().map(|b| (b.group_from_body, b.scale)).collect(),
+        bodies: p
+            .bodies
+            .iter()
+            .map(|b| (b.group_from_body, b.scale))
+            .collect(),
     };
-    let dbg = std::env::var_os("SKINBRDF_SURVEY_DEBUG").is_some();
-    let Some(e0) = evaluate(p, &st, cfg) else {
-        if dbg { eprintln!("bundle: evaluate at the start failed"); }
-        return None;
-    };
+    let e0 = evaluate(p, &st, cfg)?;
     if e0.count == 0 {
         return None;
     }
@@ -778,10 +782,7 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
             .map(|i| image_normal(p, st, &lay, cfg, i))
             .collect()
     };
-    let Some(mut normals) = normals_at(&st) else {
-        if dbg { eprintln!("bundle: normals at the start failed"); }
-        return None;
-    };
+    let mut normals = normals_at(&st)?;
     for _ in 0..cfg.max_iterations {
         let mut accepted = false;
         for _ in 0..10 {
@@ -813,23 +814,7 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
     }
     let e1 = evaluate(p, &st, cfg)?;
     // Covariance at the solution (undamped).
-    let Some((_, _, cov_l, cov_g)) = solve(&normals, &lay, 0.0) else {
-        if dbg {
-            eprintln!("bundle: undamped solve failed after {iterations} iterations, cost {} -> {}", e0.cost, e1.cost);
-            let mut sg = DMatrix::<f64>::zeros(lay.n_global, lay.n_global);
-            for n in &normals { sg += &n.h_gg; }
-            for k in 0..lay.n_global { if sg[(k,k)] < 1e-6 { eprintln!("  global {k} diag {}", sg[(k,k)]); } }
-            for (i, n) in normals.iter().enumerate() {
-                for k in 0..n.h_ll.nrows() { if n.h_ll[(k,k)] < 1e-6 { eprintln!("  image {i} local {k} diag {}", n.h_ll[(k,k)]); } }
-                if n.h_ll.nrows() > 0 && n.h_ll.clone().cholesky().is_none() { eprintln!("  image {i} local block not PD ({} params, {} points) layout {:?} frames {:?}", n.h_ll.nrows(), p.images[i].points.len(), lay.local[i], p.images[i].points.iter().map(|(f,o)| (*f, o.target)).collect::<Vec<_>>()); }
-            }
-            let ev = sg.clone().symmetric_eigenvalues();
-            let mut evs: Vec<f64> = ev.iter().copied().collect(); evs.sort_by(f64::total_cmp);
-            eprintln!("  global H_gg eigen smallest {:?}", &evs[..evs.len().min(8)]);
-            eprintln!("  body offsets {:?}", lay.bodies);
-        }
-        return None;
-    };
+    let (_, _, cov_l, cov_g) = solve(&normals, &lay, 0.0)?;
     let dof = (2 * e1.count).saturating_sub(n_params).max(1);
     let vf = e1.weighted_sq / dof as f64;
     let images = p

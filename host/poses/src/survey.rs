@@ -298,12 +298,18 @@ struct Obs {
 }
 
 fn points(id: u32, corners_m: &[DVec3; 4], o: &Obs) -> Vec<PointObs> {
-    target_points(id, corners_m, outward(corners_m), &o.corners_px, &o.sigma_px)
-        .into_iter()
-        .zip(o.occluded)
-        .filter(|(_, hidden)| !hidden)
-        .map(|(p, _)| p)
-        .collect()
+    target_points(
+        id,
+        corners_m,
+        outward(corners_m),
+        &o.corners_px,
+        &o.sigma_px,
+    )
+    .into_iter()
+    .zip(o.occluded)
+    .filter(|(_, hidden)| !hidden)
+    .map(|(p, _)| p)
+    .collect()
 }
 
 /// The angle between two rotations, degrees.
@@ -682,7 +688,9 @@ pub fn survey(session: &Session, cfg: &SurveyConfig) -> Result<Survey, PoseError
                         .filter(|&q| !d.occluded[q])
                         .map(|q| {
                             camera
-                                .project(wc.inverse().transform_point(to_world.transform_point(c[q])))
+                                .project(
+                                    wc.inverse().transform_point(to_world.transform_point(c[q])),
+                                )
                                 .map_or(f64::INFINITY, |px| px.distance(d.corners_px[q]))
                         })
                         .fold(0.0, f64::max);
@@ -743,24 +751,6 @@ pub fn survey(session: &Session, cfg: &SurveyConfig) -> Result<Survey, PoseError
         ..cfg.bundle
     };
     let (p1, index1) = build(&left_out);
-    if std::env::var_os("SKINBRDF_SURVEY_DEBUG").is_some() {
-        let mut seen = vec![0usize; p1.bodies.len()];
-        for im in &p1.images {
-            for (f, _) in &im.points {
-                if let Some(b) = f.body() {
-                    seen[b] += 1;
-                }
-            }
-        }
-        eprintln!(
-            "survey debug: {} images, {} bodies, corners per body {:?}, heads {}",
-            p1.images.len(),
-            p1.bodies.len(),
-            seen,
-            p1.images.iter().filter(|i| i.world_from_head.is_some()).count()
-        );
-        eprintln!("issues so far: {issues:?}");
-    }
     let r1 = bundle_adjust(&p1, &pass1_cfg).ok_or(PoseError::SurveySingular)?;
     // Moved bodies: per body, the images where its corners are off by more than the gate.
     for (b, def) in defs.iter().enumerate() {
@@ -783,19 +773,18 @@ pub fn survey(session: &Session, cfg: &SurveyConfig) -> Result<Survey, PoseError
             let mut any = false;
             for (id, _, c) in &def.members {
                 let Some(d) = obs[i].get(id) else { continue };
-                for q in 0..4 {
+                for (q, corner) in c.iter().enumerate() {
                     if d.occluded[q] {
                         continue;
                     }
-                    let w = to_world.transform_point(c[q] * *scale);
+                    let w = to_world.transform_point(*corner * *scale);
                     let e = r1
                         .camera
                         .project(wc.inverse().transform_point(w))
                         .map_or(f64::INFINITY, |px| px.distance(d.corners_px[q]));
                     off = off.max(e);
-                    let l = (cfg.bundle.gate_sigma
-                        * d.sigma_px[q].max(cfg.bundle.sigma_floor_px))
-                    .max(GATE_MIN_PX);
+                    let l = (cfg.bundle.gate_sigma * d.sigma_px[q].max(cfg.bundle.sigma_floor_px))
+                        .max(GATE_MIN_PX);
                     limit = limit.min(l);
                     any = true;
                 }
@@ -945,11 +934,11 @@ fn reprojection(
             _ => Pose::IDENTITY,
         };
         views += 1;
-        for q in 0..4 {
+        for (q, corner) in corners_m.iter().enumerate() {
             if d.occluded[q] {
                 continue;
             }
-            let w = to_world.transform_point(corners_m[q]);
+            let w = to_world.transform_point(*corner);
             if let Some(px) = r.camera.project(wc.inverse().transform_point(w)) {
                 sq += px.distance_squared(d.corners_px[q]);
                 n += 1;
@@ -965,7 +954,9 @@ impl Survey {
     pub fn transform_head(&mut self, head_from_provisional: &Pose, method: &str) {
         for t in &mut self.targets {
             if t.group == TargetGroup::Headdress {
-                t.corners_m = t.corners_m.map(|c| head_from_provisional.transform_point(c));
+                t.corners_m = t
+                    .corners_m
+                    .map(|c| head_from_provisional.transform_point(c));
             }
         }
         for s in &mut self.sheets {
@@ -1009,9 +1000,9 @@ impl Survey {
                 _ => file.targets.reference.push(target),
             }
         }
-        file.targets.unplaced.retain(|u| {
-            !matches!(u.group, TargetGroup::Reference | TargetGroup::Headdress)
-        });
+        file.targets
+            .unplaced
+            .retain(|u| !matches!(u.group, TargetGroup::Reference | TargetGroup::Headdress));
     }
 
     /// The rig with the surveyed placements written in (a rig surveyed once can be loaded

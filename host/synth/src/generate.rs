@@ -598,7 +598,10 @@ fn generate_into(
             (skinbrdf_session::TargetGroup::Reference, &rig.reference),
             (skinbrdf_session::TargetGroup::Headdress, &rig.headdress),
             (skinbrdf_session::TargetGroup::Flash, &rig.flash_targets),
-            (skinbrdf_session::TargetGroup::Standard, &rig.standard_targets),
+            (
+                skinbrdf_session::TargetGroup::Standard,
+                &rig.standard_targets,
+            ),
         ]
         .into_iter()
         .flat_map(|(group, list)| {
