@@ -1,7 +1,8 @@
-//! The placement survey on the synthetic studio: `rig.toml` states only the world's origin (one
-//! reference target), one headdress target and the printed flash ring and standard frame;
-//! every other placement is surveyed from the photographs and scored against
-//! `rig-measured.toml` (the truth: the survey never reads it).
+//! The placement survey on the synthetic studio: `rig.toml` states only the world's origin
+//! (three reference targets), the flash stand's panel and the printed flash ring and standard
+//! frame; every other placement is surveyed from the photographs, the headdress registered to
+//! the textured scan (in its scanner's frame), and everything scored against the studio's
+//! truth (which the path under test never reads).
 //!
 //! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
 
@@ -11,8 +12,8 @@ use std::path::Path;
 use glam::DVec3;
 use skinbrdf_ingest::{ingest, IngestConfig};
 use skinbrdf_pipeline::process::{bounds, process, ProcessConfig};
-use skinbrdf_poses::{survey, SurveyConfig};
-use skinbrdf_session::{Rig, Session, TargetGroup};
+use skinbrdf_poses::{HeadGauge, Survey};
+use skinbrdf_session::{Session, TargetGroup};
 use skinbrdf_synth::studio::STUDIO_DIR;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
@@ -27,6 +28,9 @@ const WELL_SEEN_VIEWS: usize = 5;
 /// Every surveyed target together, RMS, mm: the half-resolution survey's few-view targets
 /// included (measured 0.64 mm for the reference group).
 const ALL_TARGETS_RMS_MM: f64 = 1.0;
+/// The registered head frame against the true scan frame, degrees (the issue's bound on the
+/// registration).
+const HEAD_FRAME_ROTATION_DEG: f64 = 0.05;
 
 /// RMS over targets of the mean corner distance, mm, and the worst target.
 fn corner_rms_mm(
@@ -66,62 +70,85 @@ fn studio(dir: &Path, scene: &Scene) -> std::path::PathBuf {
 
 #[test]
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
-fn the_survey_places_the_unmeasured_targets_within_the_bounds() {
+fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_bounds() {
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = Scene::load("default").expect("default scene");
     let s = studio(dir.path(), &scene);
     let st = s.join(STUDIO_DIR);
     let s2 = dir.path().join("S2");
+    // What a studio holds: the card, the record, a rig nobody measured and the textured scan
+    // in its scanner's frame. The camera's calibration is the PNG session's.
     let mut cfg = IngestConfig::new(
         st.join("card"),
         st.join("capture.json"),
         st.join("rig.toml"),
-        st.join("scan.ply"),
+        st.join("scan").join("head.obj"),
         s2.clone(),
     );
     cfg.camera = Some(s.join("session.toml"));
+    cfg.scan_units = Some(scene.geometry.scan_units);
     ingest(&cfg).expect("ingest");
     let session = Session::load(&s2).expect("session");
     assert!(!session.file.targets.unplaced.is_empty());
-    let r = survey(&session, &SurveyConfig::DEFAULT).expect("survey");
-    eprintln!(
-        "survey: {} targets, {} issues, bundle {:?}, timing {:?}",
-        r.targets.len(),
-        r.issues.len(),
-        r.bundle,
-        r.timing
+
+    // `process` plans the survey (and the registration to the scan), then runs the pose stages
+    // on the surveyed session, scored against the truth in the scan's frame.
+    let mut pcfg = ProcessConfig::new();
+    pcfg.fit.figures = false;
+    pcfg.truth_file = Some(st.join("truth.json"));
+    let out = process(&s2, &pcfg, &mut |_| {}).expect("process the unsurveyed studio session");
+    let survey: Survey = serde_json::from_slice(
+        &std::fs::read(out.out_dir.join("survey.json")).expect("survey.json"),
+    )
+    .expect("survey");
+    assert!(
+        matches!(survey.head_gauge, HeadGauge::Registered { .. }),
+        "{:?}",
+        survey.head_gauge
     );
-    for i in &r.issues {
-        eprintln!("  issue {i:?}");
+    assert!(out.out_dir.join("registration.json").is_file());
+    for i in &survey.issues {
+        eprintln!("  left out: {i:?}");
     }
-    let truth = Rig::load(&st.join("rig-measured.toml"))
-        .expect("measured rig")
-        .session_parts();
-    let by_id = |g: TargetGroup| -> HashMap<u32, [DVec3; 4]> {
-        r.targets
+    let truth = skinbrdf_session::Truth::load(&st.join("truth.json")).expect("truth");
+    let truth_of = |g: TargetGroup| -> HashMap<u32, [DVec3; 4]> {
+        truth
+            .placements
             .iter()
-            .filter(|t| t.group == g)
+            .filter(|p| p.group == g)
+            .map(|p| (p.id, p.corners_m))
+            .collect()
+    };
+    let (truth_ref, truth_head) = (
+        truth_of(TargetGroup::Reference),
+        truth_of(TargetGroup::Headdress),
+    );
+    let surveyed = |g: TargetGroup, min_views: usize| -> HashMap<u32, [DVec3; 4]> {
+        survey
+            .targets
+            .iter()
+            .filter(|t| t.group == g && t.views >= min_views)
             .map(|t| (t.id, t.corners_m))
             .collect()
     };
-    let truth_ref: HashMap<u32, [DVec3; 4]> = truth
-        .targets
-        .reference
-        .iter()
-        .map(|t| (t.id, t.corners_m))
-        .collect();
-    let truth_head: HashMap<u32, [DVec3; 4]> = truth
-        .targets
-        .headdress
-        .iter()
-        .map(|t| (t.id, t.corners_m))
-        .collect();
-    let (ref_rms, ref_worst, ref_n) = corner_rms_mm(&by_id(TargetGroup::Reference), &truth_ref);
-    let (head_rms, head_worst, head_n) = corner_rms_mm(&by_id(TargetGroup::Headdress), &truth_head);
-    eprintln!(
-        "reference: {ref_n} targets, rms {ref_rms:.3} mm, worst {ref_worst:.3} mm; headdress: {head_n} targets, rms {head_rms:.3} mm, worst {head_worst:.3} mm"
+    let (ref_rms, ref_worst, ref_n) =
+        corner_rms_mm(&surveyed(TargetGroup::Reference, 0), &truth_ref);
+    let (head_rms, head_worst, head_n) =
+        corner_rms_mm(&surveyed(TargetGroup::Headdress, 0), &truth_head);
+    let (ref_well, _, ref_well_n) = corner_rms_mm(
+        &surveyed(TargetGroup::Reference, WELL_SEEN_VIEWS),
+        &truth_ref,
     );
-    for t in &r.targets {
+    let (head_well, _, _) = corner_rms_mm(
+        &surveyed(TargetGroup::Headdress, WELL_SEEN_VIEWS),
+        &truth_head,
+    );
+    eprintln!(
+        "survey: reference {ref_n} targets rms {ref_rms:.3} mm (worst {ref_worst:.3}), {ref_well_n} well seen {ref_well:.3} mm; \
+         headdress {head_n} targets rms {head_rms:.3} mm (worst {head_worst:.3}), well seen {head_well:.3} mm; {:?}",
+        survey.timing
+    );
+    for t in &survey.targets {
         let truth = match t.group {
             TargetGroup::Headdress => truth_head.get(&t.id),
             _ => truth_ref.get(&t.id),
@@ -136,31 +163,14 @@ fn the_survey_places_the_unmeasured_targets_within_the_bounds() {
     }
     assert!(ref_n >= 40, "{ref_n} reference targets surveyed");
     assert!(head_n >= 9, "{head_n} headdress targets surveyed");
-    // The issue's bounds over the targets the images determine (seen in at least
-    // WELL_SEEN_VIEWS images); every target within the looser all-target bound.
-    let well = |g: TargetGroup| -> HashMap<u32, [DVec3; 4]> {
-        r.targets
-            .iter()
-            .filter(|t| t.group == g && t.views >= WELL_SEEN_VIEWS)
-            .map(|t| (t.id, t.corners_m))
-            .collect()
-    };
-    let (ref_well, _, ref_well_n) = corner_rms_mm(&well(TargetGroup::Reference), &truth_ref);
-    let (head_well, _, _) = corner_rms_mm(&well(TargetGroup::Headdress), &truth_head);
-    eprintln!("well seen: reference {ref_well_n} targets rms {ref_well:.3} mm, headdress rms {head_well:.3} mm");
+    // The issue's bounds over the targets the images determine; every target within the
+    // looser all-target bound.
     assert!(ref_well < REFERENCE_RMS_MM, "reference rms {ref_well} mm");
     assert!(head_well < HEADDRESS_RMS_MM, "headdress rms {head_well} mm");
     assert!(ref_rms < ALL_TARGETS_RMS_MM, "reference rms {ref_rms} mm");
     assert!(head_rms < ALL_TARGETS_RMS_MM, "headdress rms {head_rms} mm");
 
-    // `process` plans the survey, then runs the pose stages on the surveyed session: the
-    // default scene's bounds still hold, scored against the synthetic truth.
-    let mut pcfg = ProcessConfig::new();
-    pcfg.fit.figures = false;
-    pcfg.truth_file = Some(s.join("truth.json"));
-    let out = process(&s2, &pcfg, &mut |_| {}).expect("process the unsurveyed studio session");
     let sv = out.report.survey().expect("the survey ran");
-    eprintln!("process: survey {sv:?}");
     assert!(sv.reference_rms_error_mm.is_some() && sv.headdress_rms_error_mm.is_some());
     let cam = out.report.camera_poses().expect("camera poses ran");
     let head = out.report.head_tracking().expect("head tracking ran");
@@ -171,11 +181,35 @@ fn the_survey_places_the_unmeasured_targets_within_the_bounds() {
         .and_then(|d| d.sample_median_rel_error_pct)
         .expect("scored");
     eprintln!(
-        "process: camera {:?} mm, head {:?} mm, flash {flash:?} mm, samples {e:.3} %",
-        cam.camera_position_error_median_mm, head.head_position_error_median_mm
+        "process: camera {:?} mm, head {:?} mm / {:?} deg, flash {flash:?} mm, samples {e:.3} %",
+        cam.camera_position_error_median_mm,
+        head.head_position_error_median_mm,
+        head.head_orientation_error_median_deg
     );
     assert!(cam.camera_position_error_median_mm.expect("scored") < bounds::CAMERA_POSITION_MM);
     assert!(head.head_position_error_median_mm.expect("scored") < bounds::HEAD_POSITION_MM);
+    // The head frame: the rigid motion between the registered headdress and the true one (in
+    // the scan's frame) is the registration's error.
+    let est: Vec<(u32, [DVec3; 4])> = surveyed(TargetGroup::Headdress, 0).into_iter().collect();
+    let tru: Vec<(u32, [DVec3; 4])> = truth_head.iter().map(|(k, v)| (*k, *v)).collect();
+    let frame = skinbrdf_register::align(
+        &est,
+        &tru,
+        skinbrdf_register::AlignKind::Rigid,
+        &skinbrdf_register::AlignConfig::default(),
+    )
+    .expect("frame error");
+    let frame_deg = frame
+        .scan_from_survey
+        .rotation_vector()
+        .length()
+        .to_degrees();
+    let frame_mm = frame.scan_from_survey.translation_m.length() * 1e3;
+    eprintln!("head frame: rotation {frame_deg:.4} deg, translation {frame_mm:.3} mm");
+    assert!(
+        frame_deg < HEAD_FRAME_ROTATION_DEG,
+        "head frame rotation {frame_deg} deg"
+    );
     assert!(flash.expect("flash ran") < bounds::FLASH_POSITION_MM);
     assert!(e < bounds::SAMPLE_MEDIAN_REL_ERROR_PCT);
 }

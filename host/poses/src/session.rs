@@ -855,7 +855,21 @@ pub fn compare_truth(est: &SessionPoses, truth: &Truth) -> TruthErrors {
             }
         };
         let (cp, co) = pair(&img.world_from_camera, t.map(|t| t.world_from_camera));
-        let (hp, ho) = pair(&img.world_from_head, t.map(|t| t.world_from_head));
+        let (mut hp, ho) = pair(&img.world_from_head, t.map(|t| t.world_from_head));
+        // Head position at the head's centre (the origin unless the truth says otherwise: a
+        // scan's frame may be far from the head).
+        if let (Some(c), Some(p), Some(t)) = (
+            truth.head_point_m,
+            img.world_from_head
+                .as_ref()
+                .filter(|p| p.source == "estimated"),
+            t,
+        ) {
+            hp = p
+                .pose
+                .transform_point(c)
+                .distance(t.world_from_head.transform_point(c));
+        }
         e.camera_position_error_m.push(cp);
         e.camera_orientation_error_deg.push(co);
         e.head_position_error_m.push(hp);

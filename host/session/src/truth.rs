@@ -48,6 +48,10 @@ pub struct Truth {
     /// truth files have none).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub placements: Vec<PlacementTruth>,
+    /// The head-frame point at which head position errors are measured (the head's centre);
+    /// `None`: the head frame's origin, which is the head's centre in synthetic sessions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub head_point_m: Option<DVec3>,
 }
 
 /// A target's true placement.
@@ -165,6 +169,24 @@ impl Truth {
     /// The truth of the image with this file name.
     pub fn image(&self, file: &str) -> Option<&ImageTruth> {
         self.images.iter().find(|i| i.file == file)
+    }
+
+    /// The same truth with the head frame replaced by another (a scan in its scanner's frame):
+    /// `head_from_new` maps the new frame's points into the old head frame. Head poses become
+    /// `world_from_head · head_from_new`, headdress placements move into the new frame.
+    pub fn with_head_frame(mut self, head_from_new: &skinbrdf_core::Pose) -> Self {
+        let new_from_head = head_from_new.inverse();
+        self.head_point_m =
+            Some(new_from_head.transform_point(self.head_point_m.unwrap_or(DVec3::ZERO)));
+        for im in &mut self.images {
+            im.world_from_head = im.world_from_head * *head_from_new;
+        }
+        for p in &mut self.placements {
+            if p.group == crate::format::TargetGroup::Headdress {
+                p.corners_m = p.corners_m.map(|c| new_from_head.transform_point(c));
+            }
+        }
+        self
     }
 
     /// This truth with its images renamed to another session's files of the same exposure:

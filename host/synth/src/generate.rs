@@ -612,8 +612,17 @@ fn generate_into(
             })
         })
         .collect(),
+        head_point_m: None,
     };
     truth.write(&dir.join(TRUTH_FILE))?;
+    if studio.is_some() {
+        // The studio's head frame is its textured scan's: its truth says so.
+        let head_from_scanner = crate::textured_scan::scanner_from_head(&scene).inverse();
+        truth
+            .clone()
+            .with_head_frame(&head_from_scanner)
+            .write(&dir.join(crate::studio::STUDIO_DIR).join(TRUTH_FILE))?;
+    }
     write_s += t2.elapsed().as_secs_f64();
     Ok(SynthSummary {
         dir: dir.to_path_buf(),

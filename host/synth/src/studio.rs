@@ -7,11 +7,16 @@
 //! studio/
 //!   card/DCIM/100SKBRF/SKB_NNNN.DNG   the camera's raw files (Bayer CFA, EXIF)
 //!   capture.json                      the controller's record (no image names: it never knew them)
-//!   rig-measured.toml                 the rig with its true placements (a surveyed rig)
-//!   rig.toml                          the same rig without placements
-//!   scan.ply                          the head scan
+//!   rig-measured.toml                 the rig with its true placements, head frame (a surveyed
+//!                                     rig, for scan.ply)
+//!   rig.toml                          what a studio states before any survey: the declared
+//!                                     origin, the printed flash and standard layouts, the flash
+//!                                     stand's panel and the ROI, in the textured scan's frame
+//!   scan.ply                          the head scan, head frame (already registered)
 //!   scan/head.obj, head.mtl, head.png the textured scan in the scanner's frame, headdress
 //!                                     included (crate::textured_scan), scan-truth.json
+//!   truth.json                        the truth with the head frame the textured scan's (for
+//!                                     scoring a session ingested with scan/head.obj)
 //! ```
 //!
 //! # Raw image formation
@@ -48,6 +53,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use skinbrdf_core::Pose;
 use skinbrdf_raw::dng::{write_dng, DngImage};
 use skinbrdf_raw::{BayerPhase, CaptureTime, LocalDateTime};
 use skinbrdf_session::capture::{
@@ -522,8 +528,15 @@ pub fn rig_file(scene: &Scene, rig: &Rig) -> RigFile {
 /// The rig as a studio that measured nothing holds it: every placement removed except what
 /// the studio defines rather than measures: the world origin (the `origin` reference targets),
 /// the `declared_head` headdress targets, and the flash ring and the standard's frame (their
-/// printed layouts define their frames).
-pub fn unmeasured_rig(measured: &RigFile, origin: &[u32], declared_head: &[u32]) -> RigFile {
+/// printed layouts define their frames). The studio's head frame is its textured scan's
+/// (`scanner_from_head`): the region of interest and any declared headdress target are given
+/// in it.
+pub fn unmeasured_rig(
+    measured: &RigFile,
+    origin: &[u32],
+    declared_head: &[u32],
+    scanner_from_head: &Pose,
+) -> RigFile {
     let mut f = RigIo::without_placements(measured);
     for (t, m) in f.targets.iter_mut().zip(&measured.targets) {
         let keep = match t.group {
@@ -532,8 +545,16 @@ pub fn unmeasured_rig(measured: &RigFile, origin: &[u32], declared_head: &[u32])
             TargetGroup::Flash | TargetGroup::Standard => true,
         };
         if keep {
-            t.corners_m = m.corners_m;
+            t.corners_m = match t.group {
+                TargetGroup::Headdress => m
+                    .corners_m
+                    .map(|c| c.map(|p| scanner_from_head.transform_point(p))),
+                _ => m.corners_m,
+            };
         }
+    }
+    if let Some(roi) = f.roi.as_mut() {
+        roi.centre_m = scanner_from_head.transform_point(roi.centre_m);
     }
     f
 }
@@ -602,7 +623,12 @@ pub fn write_studio_files(
     RigIo::write_file(&dir.join("rig-measured.toml"), &measured)?;
     RigIo::write_file(
         &dir.join("rig.toml"),
-        &unmeasured_rig(&measured, origin, declared_head),
+        &unmeasured_rig(
+            &measured,
+            origin,
+            declared_head,
+            &crate::textured_scan::scanner_from_head(scene),
+        ),
     )?;
     let scan = session_dir.join("scan.ply");
     let bytes = std::fs::read(&scan).map_err(|e| io(&scan, e))?;
