@@ -37,6 +37,8 @@ enum Command {
     Capture(cmd::capture::Args),
     /// Write printable target sheets and their layout files.
     Targets(cmd::targets::Args),
+    /// Survey the target placements nobody measured and register the headdress to the scan.
+    Survey(cmd::survey::Args),
     /// Recover camera, head, flash and standard poses from a session's images.
     Poses(cmd::poses::Args),
     /// Turn a session's images into calibrated BRDF samples.
@@ -107,6 +109,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Ports(a) => cmd::ports::run(a),
         Command::Capture(a) => cmd::capture::run(a),
         Command::Targets(a) => cmd::targets::run(a),
+        Command::Survey(a) => cmd::survey::run(a),
         Command::Poses(a) => cmd::poses::run(a),
         Command::Derender(a) => cmd::derender::run(a),
         Command::Fit(a) => cmd::fit::run(a),

@@ -16,6 +16,7 @@ pub mod process;
 pub mod report;
 pub mod scenes;
 pub mod stages;
+pub mod survey;
 
 pub use ledger::{Fingerprint, Ledger, LedgerError, RunLock, Unit};
 pub use metrics::StageMetrics;

@@ -240,82 +240,37 @@ pub fn process(
     on_event: &mut dyn FnMut(Event<'_>),
 ) -> Result<ProcessOutput, ProcessError> {
     let t0 = Instant::now();
-    let mut session = Session::load(dir).map_err(|source| ProcessError::Session {
-        dir: dir.to_path_buf(),
-        source,
-    })?;
-    session.truth_file = cfg.truth_file.clone();
-    let policy = if cfg.skip_bad_images {
-        BadImagePolicy::Skip
-    } else {
-        BadImagePolicy::Fail
-    };
-    session
-        .check_images(policy)
-        .map_err(|source| ProcessError::Images {
-            dir: dir.to_path_buf(),
-            source,
-        })?;
-    // What the input check found: on the first line of the report's first table.
+    let Opened {
+        session,
+        truth,
+        out_dir,
+        lock: _lock,
+        stale,
+        mut ledger,
+    } = open(dir, cfg)?;
     let (input_metric, input_notes) = input_findings(&session);
-    let truth = match session.load_truth() {
-        None => None,
-        Some(r) => Some(r.map_err(|source| ProcessError::Truth { source })?),
-    };
-    let out_dir = cfg.out_dir.clone().unwrap_or_else(|| dir.join("out"));
-    std::fs::create_dir_all(&out_dir).map_err(|source| crate::ledger::LedgerError::Io {
-        path: out_dir.clone(),
-        source,
-    })?;
-    let _lock = RunLock::acquire(&out_dir)?;
-    let stale = skinbrdf_core::fsio::remove_stale_temp_files(&out_dir);
-    let mut ledger = if cfg.force {
-        Ledger::default()
-    } else {
-        Ledger::load(&out_dir)?
-    };
 
     let facts = scene_facts(&session);
     let plan = Plan::derive(&facts, &cfg.plan);
     on_event(Event::Plan(&plan));
     // The placement survey first: the other units work on the surveyed session.
-    let mut survey_ctx = Ctx {
-        session: &session,
+    let mut reports: Vec<StageReport> = Vec::new();
+    let (survey_reports, surveyed, facts) = survey_step(
+        &session,
+        truth.as_ref(),
+        cfg,
+        &out_dir,
+        facts,
+        &plan,
+        &mut ledger,
+        on_event,
+    )?;
+    let mut ctx = Ctx {
+        session: surveyed.as_ref().map_or(&session, |s| &s.session),
         truth: truth.as_ref(),
         cfg,
         out_dir: out_dir.clone(),
         facts,
-        plan: plan.clone(),
-        survey: None,
-        poses: None,
-        samples: None,
-        fit: None,
-    };
-    let mut reports: Vec<StageReport> = Vec::new();
-    let survey_reports = run_unit(
-        &SurveyUnit,
-        &mut survey_ctx,
-        &mut ledger,
-        cfg.force,
-        on_event,
-    )?;
-    let surveyed = match survey_ctx.survey.take() {
-        Some(s) => {
-            if let skinbrdf_poses::HeadGauge::Provisional { anchor } = s.head_gauge {
-                return Err(ProcessError::HeadFrame { anchor });
-            }
-            let mut surveyed = session.clone();
-            s.apply_to(&mut surveyed.file);
-            Some(surveyed)
-        }
-        None => None,
-    };
-    let mut ctx = Ctx {
-        session: surveyed.as_ref().unwrap_or(&session),
-        truth: truth.as_ref(),
-        cfg,
-        out_dir: out_dir.clone(),
-        facts: survey_ctx.facts,
         plan,
         survey: None,
         poses: None,
@@ -365,6 +320,114 @@ pub fn process(
     })
 }
 
+/// Runs (or reuses) the placement survey unit: its reports, the session with the surveyed
+/// placements written in (`None` when the plan skips the survey) and the facts as the unit left
+/// them.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn survey_step(
+    session: &Session,
+    truth: Option<&skinbrdf_session::Truth>,
+    cfg: &ProcessConfig,
+    out_dir: &Path,
+    facts: SceneFacts,
+    plan: &Plan,
+    ledger: &mut Ledger,
+    on_event: &mut dyn FnMut(Event<'_>),
+) -> Result<(Vec<StageReport>, Option<Surveyed>, SceneFacts), ProcessError> {
+    let mut ctx = Ctx {
+        session,
+        truth,
+        cfg,
+        out_dir: out_dir.to_path_buf(),
+        facts,
+        plan: plan.clone(),
+        survey: None,
+        poses: None,
+        samples: None,
+        fit: None,
+    };
+    let reports = run_unit(&SurveyUnit, &mut ctx, ledger, cfg.force, on_event)?;
+    let surveyed = match ctx.survey.take() {
+        Some(s) => {
+            if let skinbrdf_poses::HeadGauge::Provisional { anchor } = s.head_gauge {
+                return Err(ProcessError::HeadFrame { anchor });
+            }
+            let mut surveyed = session.clone();
+            s.apply_to(&mut surveyed.file);
+            Some(Surveyed {
+                survey: s,
+                session: surveyed,
+            })
+        }
+        None => None,
+    };
+    Ok((reports, surveyed, ctx.facts))
+}
+
+/// The placement survey's result and the session with its placements written in.
+#[derive(Debug, Clone)]
+pub struct Surveyed {
+    /// The survey.
+    pub survey: skinbrdf_poses::Survey,
+    /// The session, every placement given.
+    pub session: Session,
+}
+
+/// A run's session, truth, output directory, lock and ledger.
+pub(crate) struct Opened {
+    pub(crate) session: Session,
+    pub(crate) truth: Option<skinbrdf_session::Truth>,
+    pub(crate) out_dir: PathBuf,
+    pub(crate) lock: RunLock,
+    pub(crate) stale: Vec<PathBuf>,
+    pub(crate) ledger: Ledger,
+}
+
+/// Loads and checks the session and its truth, takes the output directory's lock, removes the
+/// temporary files of dead runs and loads the ledger (steps 1 and 2 of the module docs).
+pub(crate) fn open(dir: &Path, cfg: &ProcessConfig) -> Result<Opened, ProcessError> {
+    let mut session = Session::load(dir).map_err(|source| ProcessError::Session {
+        dir: dir.to_path_buf(),
+        source,
+    })?;
+    session.truth_file = cfg.truth_file.clone();
+    let policy = if cfg.skip_bad_images {
+        BadImagePolicy::Skip
+    } else {
+        BadImagePolicy::Fail
+    };
+    session
+        .check_images(policy)
+        .map_err(|source| ProcessError::Images {
+            dir: dir.to_path_buf(),
+            source,
+        })?;
+    let truth = match session.load_truth() {
+        None => None,
+        Some(r) => Some(r.map_err(|source| ProcessError::Truth { source })?),
+    };
+    let out_dir = cfg.out_dir.clone().unwrap_or_else(|| dir.join("out"));
+    std::fs::create_dir_all(&out_dir).map_err(|source| crate::ledger::LedgerError::Io {
+        path: out_dir.clone(),
+        source,
+    })?;
+    let lock = RunLock::acquire(&out_dir)?;
+    let stale = skinbrdf_core::fsio::remove_stale_temp_files(&out_dir);
+    let ledger = if cfg.force {
+        Ledger::default()
+    } else {
+        Ledger::load(&out_dir)?
+    };
+    Ok(Opened {
+        session,
+        truth,
+        out_dir,
+        lock,
+        stale,
+        ledger,
+    })
+}
+
 /// The images the input check left out and the defaults the session relies on: a count for the
 /// report's first table and one note per finding.
 fn input_findings(session: &Session) -> (Metric, Vec<String>) {
@@ -385,7 +448,7 @@ fn input_findings(session: &Session) -> (Metric, Vec<String>) {
 
 /// Runs one unit under the ledger's contract (see the module docs); returns its stages'
 /// reports.
-fn run_unit(
+pub(crate) fn run_unit(
     unit: &dyn StageUnit,
     ctx: &mut Ctx<'_>,
     ledger: &mut Ledger,

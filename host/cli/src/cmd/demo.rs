@@ -20,6 +20,10 @@ pub struct Args {
     /// Simulated device time per host time during the capture.
     #[arg(long, default_value_t = 50.0)]
     pub time_scale: f64,
+    /// Process the generator's session with every target placement given, instead of the
+    /// studio's path (raw files, ingest, survey, registration to the textured scan).
+    #[arg(long)]
+    pub given_layout: bool,
     /// Print a JSON summary on stdout (capture, synthesis, every stage's figures, total time).
     #[arg(long)]
     pub json: bool,
@@ -28,6 +32,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut cfg = DemoConfig::new(args.out.clone());
     cfg.scene = args.scene.clone();
+    cfg.given_layout = args.given_layout;
     if !(args.time_scale.is_finite() && args.time_scale > 0.0) {
         anyhow::bail!("--time-scale must be positive");
     }
@@ -56,6 +61,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             progress.println(&format!(
                 "    {} images at {}x{} in {:.2} s",
                 s.images, s.resolution.0, s.resolution.1, s.total_s
+            ));
+        }
+        DemoEvent::Ingested(i) => {
+            progress.finish();
+            progress.println(&format!(
+                "    {} raw files matched to the record, {} targets left to the survey, in {:.2} s",
+                i.images.len(),
+                i.unplaced_targets,
+                i.total_s
             ));
         }
         DemoEvent::Process(e) => super::process::print_event(&mut progress, e),
@@ -87,6 +101,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "render_s": s.render_s,
                 "total_s": s.total_s,
             },
+            "ingest": out.ingest.as_ref().map(|i| serde_json::json!({
+                "images": i.images.len(),
+                "placed_targets": i.placed_targets,
+                "unplaced_targets": i.unplaced_targets,
+                "total_s": i.total_s,
+            })),
             "process": out.process.report,
         });
         println!("{}", serde_json::to_string_pretty(&summary)?);

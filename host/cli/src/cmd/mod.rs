@@ -12,6 +12,7 @@ pub mod poses;
 pub mod process;
 pub mod render;
 pub mod sim;
+pub mod survey;
 pub mod synth;
 pub mod targets;
 

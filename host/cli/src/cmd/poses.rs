@@ -14,7 +14,7 @@
 use anyhow::Context;
 use skinbrdf_poses::session::{compare_truth, median};
 use skinbrdf_poses::{estimate_session, PoseConfig};
-use skinbrdf_session::{write_json_atomic, Session};
+use skinbrdf_session::write_json_atomic;
 use std::path::PathBuf;
 
 /// Flags of `skinbrdf poses`.
@@ -52,8 +52,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return bench_scenes(list, &args);
     }
     let dir = args.session.clone().context("SESSION_DIR is required")?;
-    let session =
-        Session::load(&dir).with_context(|| format!("loading session {}", dir.display()))?;
+    // A session with placements nobody measured is surveyed first (or its current survey
+    // reused), as `process` does.
+    let mut progress = super::StageProgress::default();
+    let (session, _) = skinbrdf_pipeline::survey::surveyed_session(
+        &dir,
+        &skinbrdf_pipeline::process::ProcessConfig::new(),
+        &mut |e| match e {
+            skinbrdf_pipeline::process::Event::Finished(r)
+                if r.stage == skinbrdf_pipeline::Stage::PlacementSurvey =>
+            {
+                super::process::print_event(&mut progress, e)
+            }
+            skinbrdf_pipeline::process::Event::Started(_) => {
+                super::process::print_event(&mut progress, e)
+            }
+            _ => {}
+        },
+    )
+    .with_context(|| format!("loading session {}", dir.display()))?;
+    progress.finish();
     let cfg = PoseConfig {
         recalibrate: args.recalibrate,
         ..PoseConfig::default()
