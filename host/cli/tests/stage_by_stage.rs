@@ -1,7 +1,8 @@
 //! Running the stages one at a time gives what `process` gives: `skinbrdf poses S` then
 //! `skinbrdf derender S` derender with the pose stage's poses (not the truth's), into the same
 //! samples `skinbrdf process S` writes; `derender` before any pose stage is an error that says
-//! which command to run; `--poses truth` is marked as such.
+//! which command to run; `--poses truth` is marked as such; `survey` on a session with every
+//! placement given says so and writes nothing.
 //!
 //! One small sphere session (4 measurement images at 381 x 253). Ignored in debug builds
 //! (rendering takes minutes there).
@@ -70,6 +71,24 @@ fn poses_then_derender_equals_process() {
     assert!(!early.status.success());
     let msg = String::from_utf8_lossy(&early.stderr);
     assert!(msg.contains("skinbrdf poses"), "{msg}");
+
+    // Every placement is given: the survey has nothing to do and says so; a rig to write back
+    // is refused with the plan's reason, and nothing is written.
+    let text = ok(&["survey", s_str]);
+    assert!(text.contains("nothing to survey"), "{text}");
+    let rig_out = dir.path().join("rig-surveyed.toml");
+    let refused = skinbrdf(&[
+        "survey",
+        s_str,
+        "--rig",
+        "rig.toml",
+        "--write-rig",
+        rig_out.to_str().expect("utf-8"),
+    ]);
+    assert!(!refused.status.success());
+    let msg = String::from_utf8_lossy(&refused.stderr);
+    assert!(msg.contains("no surveyed rig to write"), "{msg}");
+    assert!(!rig_out.exists());
 
     ok(&["poses", s_str]);
     let text = ok(&["derender", s_str]);

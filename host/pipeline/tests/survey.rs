@@ -28,6 +28,10 @@ const WELL_SEEN_VIEWS: usize = 5;
 /// Every surveyed target together, RMS, mm: the half-resolution survey's few-view targets
 /// included (measured 0.64 mm for the reference group).
 const ALL_TARGETS_RMS_MM: f64 = 1.0;
+/// The samples of the surveyed session against those of the same card ingested with every
+/// placement given (the measured rig and the registered scan), percentage points of median
+/// relative error (the issue's bound).
+const SAMPLE_ERROR_VS_GIVEN_PP: f64 = 0.1;
 /// The registered head frame against the true scan frame, degrees (the issue's bound on the
 /// registration).
 const HEAD_FRAME_ROTATION_DEG: f64 = 0.05;
@@ -212,4 +216,69 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
     );
     assert!(flash.expect("flash ran") < bounds::FLASH_POSITION_MM);
     assert!(e < bounds::SAMPLE_MEDIAN_REL_ERROR_PCT);
+
+    // Like for like: the same card, record and camera with every placement given.
+    let s4 = dir.path().join("S4");
+    let mut cfg4 = cfg.clone();
+    cfg4.rig = st.join("rig-measured.toml");
+    cfg4.scan = st.join("scan.ply");
+    cfg4.scan_units = None;
+    cfg4.out_dir = s4.clone();
+    ingest(&cfg4).expect("ingest with the measured rig");
+    let mut pcfg4 = pcfg.clone();
+    pcfg4.truth_file = Some(s.join("truth.json"));
+    let given = process(&s4, &pcfg4, &mut |_| {}).expect("process the layout-given session");
+    let e_given = given
+        .report
+        .derender()
+        .and_then(|d| d.sample_median_rel_error_pct)
+        .expect("scored");
+    eprintln!("samples: surveyed {e:.3} %, layout given {e_given:.3} %");
+    assert!(
+        (e - e_given).abs() < SAMPLE_ERROR_VS_GIVEN_PP,
+        "surveyed {e} % against given {e_given} %"
+    );
+
+    // `skinbrdf survey` on the same session reuses the survey `process` ran, and writes the
+    // rig with the surveyed placements: ingested with it, the session has nothing to survey.
+    let rig_out = dir.path().join("rig-surveyed.toml");
+    let sv_out = skinbrdf_pipeline::survey::survey(
+        &s2,
+        &pcfg,
+        Some(&skinbrdf_pipeline::survey::RigWriteBack {
+            rig: st.join("rig.toml"),
+            out: rig_out.clone(),
+        }),
+        &mut |_| {},
+    )
+    .expect("survey again");
+    assert_eq!(
+        sv_out.report.status,
+        skinbrdf_pipeline::report::StageStatus::Reused
+    );
+    assert_eq!(
+        sv_out.surveyed.as_ref().map(|s| &s.survey),
+        Some(&survey),
+        "the reused survey is the one on disk"
+    );
+    let s3 = dir.path().join("S3");
+    let mut cfg3 = cfg.clone();
+    cfg3.rig = rig_out;
+    cfg3.out_dir = s3.clone();
+    ingest(&cfg3).expect("ingest with the surveyed rig");
+    let placed = Session::load(&s3).expect("session with the surveyed rig");
+    let unplaced: Vec<_> = placed
+        .file
+        .targets
+        .unplaced
+        .iter()
+        .filter(|t| matches!(t.group, TargetGroup::Reference | TargetGroup::Headdress))
+        .map(|t| t.id)
+        .collect();
+    // What the survey could not place stays unplaced; everything it placed is now given.
+    let left_out = survey.issues.len();
+    assert!(
+        unplaced.len() <= left_out,
+        "{unplaced:?} still unplaced, the survey left out {left_out}"
+    );
 }
