@@ -50,7 +50,7 @@ pub enum MeshError {
         problems: Vec<skinbrdf_core::MeshError>,
     },
     /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,

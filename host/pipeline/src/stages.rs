@@ -918,7 +918,7 @@ fn render_head(
         return Err("no scan to render".into());
     };
     let model = skinbrdf_render::load_model(&out_dir.join(PARAMS_FILE))
-        .map_err(|e| format!("head rendering skipped: {e}"))?;
+        .map_err(|e| format!("head rendering skipped: {}", skinbrdf_core::error_text(&e)))?;
     let mesh = skinbrdf_mesh::load_mesh(
         &session.path(file),
         &skinbrdf_mesh::LoadOptions {
@@ -926,15 +926,15 @@ fn render_head(
             policy: skinbrdf_derender::from_session::scan_repair_policy(*accept_repair_loss),
         },
     )
-    .map_err(|e| format!("head rendering skipped: {e}"))?;
+    .map_err(|e| format!("head rendering skipped: {}", skinbrdf_core::error_text(&e)))?;
     let cfg = skinbrdf_render::RenderConfig::default();
     let img = skinbrdf_render::render_comparison(&mesh.mesh, &model, &cfg)
-        .map_err(|e| format!("head rendering failed: {e}"))?;
+        .map_err(|e| format!("head rendering failed: {}", skinbrdf_core::error_text(&e)))?;
     let dir = out_dir.join("render");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let files = img
         .write(&dir.join("head_comparison"), &cfg.labels)
-        .map_err(|e| format!("head rendering not written: {e}"))?;
+        .map_err(|e| format!("head rendering not written: {}", skinbrdf_core::error_text(&e)))?;
     Ok((img.stats, files))
 }
 
