@@ -1205,8 +1205,10 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         self.aborting = true;
         if let Some(c) = self.client.as_mut() {
             if let Err(e) = c.request(RequestBody::Abort) {
-                self.observer
-                    .log(LogLevel::Warn, &format!("abort request failed: {}", skinbrdf_core::error_text(&e)));
+                self.observer.log(
+                    LogLevel::Warn,
+                    &format!("abort request failed: {}", skinbrdf_core::error_text(&e)),
+                );
             }
         }
         if let Ok(status) = self.status() {
@@ -1215,7 +1217,10 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             if let Err(e) = self.ensure_records(status.next_index) {
                 self.observer.log(
                     LogLevel::Warn,
-                    &format!("could not fetch every record: {}", skinbrdf_core::error_text(&e)),
+                    &format!(
+                        "could not fetch every record: {}",
+                        skinbrdf_core::error_text(&e)
+                    ),
                 );
             }
             self.flush_acks_best_effort();

@@ -50,7 +50,9 @@ pub enum ProcessError {
         source: skinbrdf_session::FileError,
     },
     /// An image is unreadable or implausible.
-    #[error("{dir}: unusable images (--skip-bad-images leaves them out and lists them in the report)")]
+    #[error(
+        "{dir}: unusable images (--skip-bad-images leaves them out and lists them in the report)"
+    )]
     Images {
         /// Session directory.
         dir: PathBuf,

@@ -934,7 +934,12 @@ fn render_head(
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let files = img
         .write(&dir.join("head_comparison"), &cfg.labels)
-        .map_err(|e| format!("head rendering not written: {}", skinbrdf_core::error_text(&e)))?;
+        .map_err(|e| {
+            format!(
+                "head rendering not written: {}",
+                skinbrdf_core::error_text(&e)
+            )
+        })?;
     Ok((img.stats, files))
 }
 
