@@ -77,6 +77,9 @@ pub enum ProcessError {
     /// Ledger, lock or output I/O.
     #[error(transparent)]
     Ledger(#[from] crate::ledger::LedgerError),
+    /// An image could not be read, or a figure not written.
+    #[error(transparent)]
+    File(#[from] skinbrdf_session::FileError),
     /// An output or stage file could not be read.
     #[error("{path}")]
     Read {
