@@ -20,7 +20,7 @@ use skinbrdf_session::{
 };
 
 use crate::layout::{build_rig, plan_shots, shots_from_capture, Layout, Rig, Shot};
-use crate::render::{Rendered, Renderer};
+use crate::photograph::{Rendered, Renderer};
 use crate::scene::{CurveScene, Encoding, GeometryKind, Scene};
 use crate::shape::Shape;
 

@@ -12,7 +12,7 @@ use glam::{DVec2, DVec3};
 use skinbrdf_core::ShadingFrame;
 use skinbrdf_session::{ImageRole, Session};
 use skinbrdf_synth::layout::{build_rig, plan_shots};
-use skinbrdf_synth::render::Renderer;
+use skinbrdf_synth::photograph::Renderer;
 use skinbrdf_synth::shape::Shape;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
