@@ -80,7 +80,15 @@ pub enum ProcessError {
     /// An image could not be read, or a figure not written.
     #[error(transparent)]
     File(#[from] skinbrdf_session::FileError),
-    /// An output or stage file could not be read.
+    /// A calibration could not be serialised as a `[camera]` table.
+    #[error("{path}: cannot serialise the calibration")]
+    CameraFile {
+        /// The camera file.
+        path: PathBuf,
+        /// The serialiser's error.
+        source: toml::ser::Error,
+    },
+    /// An output or stage file could not be read, or its directory not created.
     #[error("{path}")]
     Read {
         /// The file.

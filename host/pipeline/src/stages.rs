@@ -506,6 +506,75 @@ pub fn pose_stage_reports(
 
 // --- derendering ------------------------------------------------------------------------------
 
+/// What [`estimate_and_write_poses`] wrote.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PoseFiles {
+    /// The pose stage's result.
+    pub poses: PathBuf,
+    /// The camera calibration as a `[camera]` table, when the pose stage calibrated.
+    pub camera: Option<PathBuf>,
+}
+
+/// `skinbrdf poses`: estimates the session's poses and writes them to `poses_file`, and, when
+/// the stage calibrated the camera, `camera.toml` beside it (the file `skinbrdf ingest --camera`
+/// reads).
+pub fn estimate_and_write_poses(
+    session: &Session,
+    cfg: &skinbrdf_poses::PoseConfig,
+    poses_file: &Path,
+) -> Result<(SessionPoses, PoseFiles), ProcessError> {
+    let est = skinbrdf_poses::estimate_session(session, cfg)?;
+    if let Some(dir) = poses_file.parent() {
+        std::fs::create_dir_all(dir).map_err(|source| ProcessError::Read {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    skinbrdf_session::write_json_atomic(poses_file, &est)?;
+    let camera = match &est.calibration {
+        Some(cal) => {
+            let path = poses_file.with_file_name("camera.toml");
+            write_camera_file(&path, cal, &session.dir)?;
+            Some(path)
+        }
+        None => None,
+    };
+    Ok((
+        est,
+        PoseFiles {
+            poses: poses_file.to_path_buf(),
+            camera,
+        },
+    ))
+}
+
+/// Writes a calibration as a `[camera]` table (the `session.toml` format).
+fn write_camera_file(
+    path: &Path,
+    cal: &skinbrdf_poses::calib::Calibration,
+    session: &Path,
+) -> Result<(), ProcessError> {
+    #[derive(serde::Serialize)]
+    struct CameraFile {
+        camera: skinbrdf_session::CameraSpec,
+    }
+    let body = toml::to_string(&CameraFile {
+        camera: skinbrdf_session::CameraSpec::Calibrated(cal.camera),
+    })
+    .map_err(|source| ProcessError::CameraFile {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let text = format!(
+        "# Camera calibration from the reference targets of {} ({} points, reprojection RMS {:.3} px).\n# The image size is the images' as loaded (2x2 superpixels for raw files).\n{body}",
+        session.display(),
+        cal.points,
+        cal.rms_px,
+    );
+    write_atomic(path, text.as_bytes())?;
+    Ok(())
+}
+
 /// Scan preparation, shadow rays and derendering (see the module docs).
 #[derive(Debug)]
 pub struct DerenderUnit;
