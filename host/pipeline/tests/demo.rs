@@ -86,8 +86,7 @@ fn a_broken_session_is_a_precise_error() {
         "format_version = 1\n[camera\n",
     )
     .unwrap();
-    let err = process(dir.path(), &ProcessConfig::new(), &mut |_| {})
-        .unwrap_err()
-        .to_string();
+    let err = process(dir.path(), &ProcessConfig::new(), &mut |_| {}).unwrap_err();
+    let err = skinbrdf_core::error_text(&err);
     assert!(err.contains("session.toml"), "{err}");
 }
