@@ -41,7 +41,7 @@ const GROUP_KEYS: &[&str] = &[
 #[derive(Debug, thiserror::Error)]
 pub enum PlanError {
     /// The file could not be read.
-    #[error("{path}: cannot read the plan: {source}")]
+    #[error("{path}: cannot read the plan")]
     Read {
         /// The plan file.
         path: PathBuf,

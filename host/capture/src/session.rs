@@ -1024,7 +1024,10 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         if let Err(e) = self.flush_acks() {
             self.observer.log(
                 LogLevel::Warn,
-                &format!("could not acknowledge the last records: {e}"),
+                &format!(
+                    "could not acknowledge the last records: {}",
+                    skinbrdf_core::error_text(&e)
+                ),
             );
         }
     }
@@ -1151,7 +1154,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                     // The link is dead: fall through and reopen it.
                     Err(ClientError::Transport(_)) => self.keep_stats(c.stats()),
                     Err(e) => {
-                        last_error = e.to_string();
+                        last_error = skinbrdf_core::error_text(&e);
                         keep = Some(c);
                         continue;
                     }
@@ -1164,9 +1167,9 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                         break;
                     }
                     Err(e @ ClientError::VersionMismatch { .. }) => return Err(e.into()),
-                    Err(e) => last_error = e.to_string(),
+                    Err(e) => last_error = skinbrdf_core::error_text(&e),
                 },
-                Err(e) => last_error = e.to_string(),
+                Err(e) => last_error = skinbrdf_core::error_text(&e),
             }
             std::thread::sleep(self.options.reconnect_pause);
         }
@@ -1202,8 +1205,10 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
         self.aborting = true;
         if let Some(c) = self.client.as_mut() {
             if let Err(e) = c.request(RequestBody::Abort) {
-                self.observer
-                    .log(LogLevel::Warn, &format!("abort request failed: {e}"));
+                self.observer.log(
+                    LogLevel::Warn,
+                    &format!("abort request failed: {}", skinbrdf_core::error_text(&e)),
+                );
             }
         }
         if let Ok(status) = self.status() {
@@ -1212,7 +1217,10 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
             if let Err(e) = self.ensure_records(status.next_index) {
                 self.observer.log(
                     LogLevel::Warn,
-                    &format!("could not fetch every record: {e}"),
+                    &format!(
+                        "could not fetch every record: {}",
+                        skinbrdf_core::error_text(&e)
+                    ),
                 );
             }
             self.flush_acks_best_effort();

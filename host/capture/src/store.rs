@@ -18,7 +18,7 @@ pub const CAPTURE_FILE_NAME: &str = "capture.json";
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
     /// A file-system operation failed.
-    #[error("{path}: cannot {action}: {source}")]
+    #[error("{path}: cannot {action}")]
     Io {
         /// File or directory involved.
         path: PathBuf,

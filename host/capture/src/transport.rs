@@ -69,7 +69,7 @@ pub enum TransportError {
         port: String,
     },
     /// Any other I/O error on an open link.
-    #[error("{port}: {source}")]
+    #[error("{port}")]
     Io {
         /// Which link.
         port: String,

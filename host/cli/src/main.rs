@@ -61,25 +61,12 @@ fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("error: {}", error_chain(&err));
+            // `{:#}` joins the error and its causes with ": "; each error either names its cause
+            // or exposes it as its source, never both, so no cause is printed twice.
+            eprintln!("error: {err:#}");
             ExitCode::FAILURE
         }
     }
-}
-
-/// The error and its causes joined by `: `, leaving out a cause whose text the message so far
-/// already contains (the library errors name their cause in their own message, so `{:#}` would
-/// print it twice).
-fn error_chain(err: &anyhow::Error) -> String {
-    let mut text = err.to_string();
-    for cause in err.chain().skip(1) {
-        let c = cause.to_string();
-        if !text.contains(&c) {
-            text.push_str(": ");
-            text.push_str(&c);
-        }
-    }
-    text
 }
 
 fn init_logging(verbose: u8) {
@@ -117,30 +104,5 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Process(a) => cmd::process::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::Render(a) => cmd::render::run(a),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::error_chain;
-    use anyhow::Context;
-
-    #[derive(Debug, thiserror::Error)]
-    #[error("fit of a.skbs: {source}")]
-    struct Wrapping {
-        source: std::io::Error,
-    }
-
-    #[test]
-    fn the_error_chain_names_each_cause_once() {
-        let inner = std::io::Error::other("channel 1: no convergence");
-        let err = anyhow::Error::new(Wrapping { source: inner }).context("processing /tmp/s");
-        assert_eq!(
-            error_chain(&err),
-            "processing /tmp/s: fit of a.skbs: channel 1: no convergence"
-        );
-        let plain: anyhow::Result<()> =
-            Err(std::io::Error::other("disk full")).context("writing x");
-        assert_eq!(error_chain(&plain.unwrap_err()), "writing x: disk full");
     }
 }

@@ -27,3 +27,36 @@ pub use sample::BrdfSample;
 
 /// Re-export of the vector math the domain types are built on.
 pub use glam;
+
+/// An error and its causes, joined by `": "` (what `anyhow`'s `{:#}` prints).
+///
+/// Every error in the workspace either names its cause in its own message or exposes it as
+/// [`std::error::Error::source`], never both, so this text names each cause once. Use it wherever
+/// an error becomes text (a report entry, a log line, another error's `problem` string).
+pub fn error_text(err: &dyn std::error::Error) -> String {
+    let mut text = err.to_string();
+    let mut cause = err.source();
+    while let Some(c) = cause {
+        text.push_str(": ");
+        text.push_str(&c.to_string());
+        cause = c.source();
+    }
+    text
+}
+
+#[cfg(test)]
+mod error_text_tests {
+    #[derive(Debug, thiserror::Error)]
+    #[error("reading a.png")]
+    struct Outer {
+        source: std::io::Error,
+    }
+
+    #[test]
+    fn each_cause_follows_its_error() {
+        let err = Outer {
+            source: std::io::Error::other("disk full"),
+        };
+        assert_eq!(super::error_text(&err), "reading a.png: disk full");
+    }
+}

@@ -114,7 +114,7 @@ pub enum FitError {
         condition_number: f64,
     },
     /// The model rejected the fitted parameters.
-    #[error("fitted parameters rejected: {0}")]
+    #[error("fitted parameters rejected")]
     Model(#[from] skinbrdf_brdf::BrdfError),
 }
 

@@ -221,7 +221,7 @@ pub struct IngestReport {
 #[derive(Debug, thiserror::Error)]
 pub enum IngestError {
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -229,7 +229,7 @@ pub enum IngestError {
         source: std::io::Error,
     },
     /// The capture record is not valid JSON of the format.
-    #[error("{path}: not a capture record: {source}")]
+    #[error("{path}: not a capture record")]
     Capture {
         /// The file.
         path: PathBuf,
@@ -237,7 +237,7 @@ pub enum IngestError {
         source: serde_json::Error,
     },
     /// The rig file has problems.
-    #[error("the rig file is not valid:\n{source}")]
+    #[error("the rig file is not valid")]
     Rig {
         /// Every problem.
         source: SessionErrors,
@@ -254,7 +254,7 @@ pub enum IngestError {
     #[error(transparent)]
     Raw(#[from] RawError),
     /// The scan does not load.
-    #[error("{path}: the scan does not load: {source}")]
+    #[error("{path}: the scan does not load")]
     Scan {
         /// The scan.
         path: PathBuf,
@@ -262,7 +262,7 @@ pub enum IngestError {
         source: skinbrdf_mesh::MeshError,
     },
     /// The files could not be matched to the exposures.
-    #[error("matching the card's files to {capture}: {source}")]
+    #[error("matching the card's files to {capture}")]
     Match {
         /// The capture record.
         capture: PathBuf,
@@ -296,7 +296,7 @@ pub enum IngestError {
         dir: PathBuf,
     },
     /// The written session does not load (a bug: the ingest's own output must load).
-    #[error("the written session does not load:\n{source}")]
+    #[error("the written session does not load")]
     Session {
         /// Every problem.
         source: SessionErrors,
@@ -865,7 +865,7 @@ fn decoded_size(path: &Path) -> Result<(u32, u32), IngestError> {
     } else {
         let h = skinbrdf_session::read_header(path).map_err(|e| IngestError::Input {
             path: path.to_path_buf(),
-            problem: e.to_string(),
+            problem: skinbrdf_core::error_text(&e),
         })?;
         Ok((h.width, h.height))
     }
@@ -1044,7 +1044,7 @@ fn write_session(
     };
     Session::write_file(staging, &session).map_err(|e| IngestError::Input {
         path: staging.join("session.toml"),
-        problem: e.to_string(),
+        problem: skinbrdf_core::error_text(&e),
     })?;
     Ok(images)
 }

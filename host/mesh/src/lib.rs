@@ -49,8 +49,16 @@ pub enum MeshError {
         /// Every problem found.
         problems: Vec<skinbrdf_core::MeshError>,
     },
+    /// No triangle is left (none in the file, or none survived the repair).
+    #[error("{source_name}: the mesh has no usable triangle (of {triangles_in} read)")]
+    Empty {
+        /// File or mesh name.
+        source_name: String,
+        /// Triangles in the input.
+        triangles_in: usize,
+    },
     /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,

@@ -258,8 +258,9 @@ pub fn repair_tracked(
         });
     }
     if out.indices.is_empty() {
-        return Err(MeshError::Invalid {
-            problems: vec![skinbrdf_core::MeshError::Empty],
+        return Err(MeshError::Empty {
+            source_name: source.to_string(),
+            triangles_in: report.triangles_in,
         });
     }
     let dropped = report.lost_triangles();

@@ -38,13 +38,13 @@ use crate::ledger::write_atomic;
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
     /// Scene.
-    #[error("scene: {0}")]
+    #[error("scene")]
     Scene(#[from] skinbrdf_synth::SceneError),
     /// Synthesis.
-    #[error("synthesis: {0}")]
+    #[error("synthesis")]
     Synth(#[from] skinbrdf_synth::SynthError),
     /// The session did not load.
-    #[error("{dir}: the session is not valid:\n{source}")]
+    #[error("{dir}: the session is not valid")]
     Session {
         /// Session directory.
         dir: PathBuf,
@@ -55,22 +55,22 @@ pub enum BenchError {
     #[error("{0}: the bench needs a synthetic session with truth.json")]
     NoTruth(PathBuf),
     /// Photogrammetry.
-    #[error("photogrammetry: {0}")]
+    #[error("photogrammetry")]
     Poses(#[from] skinbrdf_poses::PoseError),
     /// Derendering.
-    #[error("derendering: {0}")]
+    #[error("derendering")]
     Derender(#[from] skinbrdf_derender::DerenderError),
     /// Resolving the poses for derendering, or derendering, failed.
     #[error(transparent)]
     DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Ray casting.
-    #[error("ray casting: {0}")]
+    #[error("ray casting")]
     Mesh(#[from] skinbrdf_mesh::MeshError),
     /// Fitting.
-    #[error("fitting: {0}")]
+    #[error("fitting")]
     Fit(#[from] skinbrdf_fit::FitError),
     /// Smoothing.
-    #[error("smoothing: {0}")]
+    #[error("smoothing")]
     Smooth(#[from] skinbrdf_fit::loess::LoessError),
     /// Figures.
     #[error(transparent)]
@@ -823,7 +823,10 @@ fn sweep_fit(
         // its failure, not the end of the sweep.
         let (error_pct, value) = match fit_rgb(model, samples, &c) {
             Ok(f) => (model_error_pct(&f.model, &truth.brdf, samples), value),
-            Err(e) => (f64::NAN, format!("{value} (failed: {e})")),
+            Err(e) => (
+                f64::NAN,
+                format!("{value} (failed: {})", skinbrdf_core::error_text(&e)),
+            ),
         };
         let time_s = t.elapsed().as_secs_f64();
         rows.push(BenchRow {

@@ -48,22 +48,22 @@ pub const METHOD_PLAN: &str = include_str!("../../../plans/method.toml");
 #[derive(Debug, thiserror::Error)]
 pub enum DemoError {
     /// The simulator did not start.
-    #[error("simulator: {0}")]
+    #[error("simulator")]
     Sim(#[from] skinbrdf_sim::SimError),
     /// The built-in plan did not parse.
-    #[error("capture plan: {0}")]
+    #[error("capture plan")]
     Plan(#[from] skinbrdf_capture::PlanError),
     /// The capture failed.
-    #[error("capture: {0}")]
+    #[error("capture")]
     Capture(#[from] skinbrdf_capture::CaptureError),
     /// The scene did not load.
-    #[error("scene: {0}")]
+    #[error("scene")]
     Scene(#[from] skinbrdf_synth::SceneError),
     /// Synthesis failed.
-    #[error("synthesis: {0}")]
+    #[error("synthesis")]
     Synth(#[from] skinbrdf_synth::SynthError),
     /// Ingesting the synthetic studio failed.
-    #[error("ingest of the synthetic studio: {0}")]
+    #[error("ingest of the synthetic studio")]
     Ingest(#[from] skinbrdf_ingest::IngestError),
     /// Processing failed.
     #[error(transparent)]

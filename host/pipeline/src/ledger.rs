@@ -17,7 +17,7 @@ use crate::report::StageReport;
 #[derive(Debug, thiserror::Error)]
 pub enum LedgerError {
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -34,7 +34,7 @@ pub enum LedgerError {
         pid: u32,
     },
     /// The ledger file is not valid JSON of the expected shape.
-    #[error("{path}: not a valid ledger: {source}")]
+    #[error("{path}: not a valid ledger")]
     Corrupt {
         /// The file.
         path: PathBuf,

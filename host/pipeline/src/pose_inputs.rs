@@ -386,7 +386,7 @@ pub fn derender_session(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use std::collections::HashMap;
 
     use glam::DVec3;
@@ -408,13 +408,13 @@ mod tests {
         ImageRole::ReferenceStandard,
     ];
 
-    fn camera_pose(i: usize) -> Pose {
+    pub(crate) fn camera_pose(i: usize) -> Pose {
         Pose::look_at(DVec3::new(0.1 * i as f64, 0.0, 0.6), DVec3::ZERO, DVec3::Y)
             .expect("camera pose")
     }
 
     /// Three measurement images and one standard image; nothing known but `known`.
-    fn session(known: KnownQuantities) -> Session {
+    pub(crate) fn session(known: KnownQuantities) -> Session {
         let images = ROLES
             .iter()
             .enumerate()

@@ -36,7 +36,7 @@ pub use crate::stages::RENDER_FIGURE;
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessError {
     /// The session did not load.
-    #[error("{dir}: the session is not valid:\n{source}")]
+    #[error("{dir}: the session is not valid")]
     Session {
         /// Session directory.
         dir: PathBuf,
@@ -44,13 +44,15 @@ pub enum ProcessError {
         source: skinbrdf_session::SessionErrors,
     },
     /// `truth.json` is present but unreadable.
-    #[error("{source}")]
+    #[error(transparent)]
     Truth {
         /// Why it did not load (names the file).
         source: skinbrdf_session::FileError,
     },
     /// An image is unreadable or implausible.
-    #[error("{dir}: unusable images (--skip-bad-images leaves them out and lists them in the report):\n{source}")]
+    #[error(
+        "{dir}: unusable images (--skip-bad-images leaves them out and lists them in the report)"
+    )]
     Images {
         /// Session directory.
         dir: PathBuf,
@@ -58,16 +60,16 @@ pub enum ProcessError {
         source: skinbrdf_session::SessionErrors,
     },
     /// Photogrammetry failed.
-    #[error("photogrammetry: {0}")]
+    #[error("photogrammetry")]
     Poses(#[from] skinbrdf_poses::PoseError),
     /// Derendering failed.
-    #[error("derendering: {0}")]
+    #[error("derendering")]
     Derender(#[from] skinbrdf_derender::DerenderError),
     /// The poses for derendering could not be resolved, or derendering failed.
     #[error(transparent)]
     DerenderSession(#[from] crate::pose_inputs::DerenderSessionError),
     /// Smoothing or fitting failed.
-    #[error("fitting: {0}")]
+    #[error("fitting")]
     Fit(#[from] skinbrdf_fit::report::ReportError),
     /// Sample file I/O.
     #[error(transparent)]
@@ -75,8 +77,19 @@ pub enum ProcessError {
     /// Ledger, lock or output I/O.
     #[error(transparent)]
     Ledger(#[from] crate::ledger::LedgerError),
-    /// An output or stage file could not be read.
-    #[error("{path}: {source}")]
+    /// An image could not be read, or a figure not written.
+    #[error(transparent)]
+    File(#[from] skinbrdf_session::FileError),
+    /// A calibration could not be serialised as a `[camera]` table.
+    #[error("{path}: cannot serialise the calibration")]
+    CameraFile {
+        /// The camera file.
+        path: PathBuf,
+        /// The serialiser's error.
+        source: toml::ser::Error,
+    },
+    /// An output or stage file could not be read, or its directory not created.
+    #[error("{path}")]
     Read {
         /// The file.
         path: PathBuf,
@@ -84,7 +97,7 @@ pub enum ProcessError {
         source: std::io::Error,
     },
     /// A JSON output could not be written or a stage file not parsed.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Json {
         /// The file.
         path: PathBuf,
@@ -110,13 +123,13 @@ pub enum ProcessError {
         anchor: u32,
     },
     /// The survey could not be registered to the head scan.
-    #[error("scan registration: {source}")]
+    #[error("scan registration")]
     Registration {
         /// Why.
         source: skinbrdf_register::RegisterError,
     },
     /// The scan could not be loaded for the registration.
-    #[error("scan registration: {source}")]
+    #[error("scan registration")]
     RegistrationScan {
         /// Why (names the file).
         source: skinbrdf_mesh::MeshError,
@@ -466,7 +479,8 @@ pub(crate) fn run_unit(
                 Ok(()) => return Ok(crate::stages::as_reused(&entry.reports)),
                 Err(e) => {
                     note = Some(format!(
-                        "the recorded outputs did not load ({e}): ran again"
+                        "the recorded outputs did not load ({}): ran again",
+                        skinbrdf_core::error_text(&e)
                     ))
                 }
             }

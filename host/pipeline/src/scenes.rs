@@ -14,7 +14,7 @@ use skinbrdf_synth::{generate, Scene, SynthOptions, BUILTIN_SCENES};
 #[derive(Debug, thiserror::Error)]
 pub enum ScenesError {
     /// The scene did not load.
-    #[error("scene {scene}: {source}")]
+    #[error("scene {scene}")]
     Scene {
         /// The scene.
         scene: String,
@@ -22,7 +22,7 @@ pub enum ScenesError {
         source: skinbrdf_synth::SceneError,
     },
     /// Rendering failed.
-    #[error("rendering scene {scene} into {dir}: {source}")]
+    #[error("rendering scene {scene} into {dir}")]
     Synth {
         /// The scene.
         scene: String,
@@ -32,7 +32,7 @@ pub enum ScenesError {
         source: Box<skinbrdf_synth::SynthError>,
     },
     /// The rendered session did not load.
-    #[error("{dir}: the session is not valid:\n{source}")]
+    #[error("{dir}: the session is not valid")]
     Session {
         /// Its directory.
         dir: PathBuf,
@@ -46,7 +46,7 @@ pub enum ScenesError {
         dir: PathBuf,
     },
     /// The pose stage failed.
-    #[error("estimating the poses of {scene}: {source}")]
+    #[error("estimating the poses of {scene}")]
     Poses {
         /// The scene.
         scene: String,
@@ -54,7 +54,7 @@ pub enum ScenesError {
         source: skinbrdf_poses::PoseError,
     },
     /// The work directory could not be removed.
-    #[error("removing {dir}: {source}")]
+    #[error("removing {dir}")]
     Remove {
         /// The directory.
         dir: PathBuf,

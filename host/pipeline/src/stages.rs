@@ -506,6 +506,75 @@ pub fn pose_stage_reports(
 
 // --- derendering ------------------------------------------------------------------------------
 
+/// What [`estimate_and_write_poses`] wrote.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PoseFiles {
+    /// The pose stage's result.
+    pub poses: PathBuf,
+    /// The camera calibration as a `[camera]` table, when the pose stage calibrated.
+    pub camera: Option<PathBuf>,
+}
+
+/// `skinbrdf poses`: estimates the session's poses and writes them to `poses_file`, and, when
+/// the stage calibrated the camera, `camera.toml` beside it (the file `skinbrdf ingest --camera`
+/// reads).
+pub fn estimate_and_write_poses(
+    session: &Session,
+    cfg: &skinbrdf_poses::PoseConfig,
+    poses_file: &Path,
+) -> Result<(SessionPoses, PoseFiles), ProcessError> {
+    let est = skinbrdf_poses::estimate_session(session, cfg)?;
+    if let Some(dir) = poses_file.parent() {
+        std::fs::create_dir_all(dir).map_err(|source| ProcessError::Read {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    skinbrdf_session::write_json_atomic(poses_file, &est)?;
+    let camera = match &est.calibration {
+        Some(cal) => {
+            let path = poses_file.with_file_name("camera.toml");
+            write_camera_file(&path, cal, &session.dir)?;
+            Some(path)
+        }
+        None => None,
+    };
+    Ok((
+        est,
+        PoseFiles {
+            poses: poses_file.to_path_buf(),
+            camera,
+        },
+    ))
+}
+
+/// Writes a calibration as a `[camera]` table (the `session.toml` format).
+fn write_camera_file(
+    path: &Path,
+    cal: &skinbrdf_poses::calib::Calibration,
+    session: &Path,
+) -> Result<(), ProcessError> {
+    #[derive(serde::Serialize)]
+    struct CameraFile {
+        camera: skinbrdf_session::CameraSpec,
+    }
+    let body = toml::to_string(&CameraFile {
+        camera: skinbrdf_session::CameraSpec::Calibrated(cal.camera),
+    })
+    .map_err(|source| ProcessError::CameraFile {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let text = format!(
+        "# Camera calibration from the reference targets of {} ({} points, reprojection RMS {:.3} px).\n# The image size is the images' as loaded (2x2 superpixels for raw files).\n{body}",
+        session.display(),
+        cal.points,
+        cal.rms_px,
+    );
+    write_atomic(path, text.as_bytes())?;
+    Ok(())
+}
+
 /// Scan preparation, shadow rays and derendering (see the module docs).
 #[derive(Debug)]
 pub struct DerenderUnit;
@@ -551,6 +620,191 @@ pub fn derender_stage(
         samples.retain(near_incidence_plane);
     }
     Ok((run, samples))
+}
+
+/// The poses `skinbrdf derender` was asked to use (`--poses`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PoseRequest {
+    /// The session's when it gives every pose, else the pose stage's (as `process` does).
+    #[default]
+    Auto,
+    /// Only the session's.
+    Session,
+    /// The pose stage's output.
+    Estimated,
+    /// The ground truth of a synthetic session (a check of derendering alone).
+    Truth,
+}
+
+/// Where derendering takes its poses from, once chosen.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PoseSourceChoice {
+    /// The poses `session.toml` gives.
+    Session,
+    /// The pose stage's output file.
+    Estimated(PathBuf),
+    /// `truth.json` (marked as such in the samples' header).
+    Truth,
+}
+
+/// Chooses the pose source for a request: `Auto` takes the session's poses when it gives every
+/// one (camera poses, and head poses or a stationary sample), else the pose stage's
+/// `poses_file`; `Estimated` needs `poses_file`. A missing pose-stage file is
+/// [`ProcessError::NoPoses`], which says which command to run.
+pub fn choose_pose_source(
+    session: &Session,
+    request: PoseRequest,
+    poses_file: &Path,
+) -> Result<PoseSourceChoice, ProcessError> {
+    let facts = crate::process::scene_facts(session);
+    let session_has_poses =
+        facts.camera_poses_known && (facts.head_poses_known || facts.stationary_sample);
+    match request {
+        PoseRequest::Truth => Ok(PoseSourceChoice::Truth),
+        PoseRequest::Session => Ok(PoseSourceChoice::Session),
+        PoseRequest::Auto if session_has_poses => Ok(PoseSourceChoice::Session),
+        PoseRequest::Auto | PoseRequest::Estimated => {
+            if poses_file.is_file() {
+                Ok(PoseSourceChoice::Estimated(poses_file.to_path_buf()))
+            } else {
+                Err(ProcessError::NoPoses {
+                    dir: session.dir.clone(),
+                    poses: poses_file.to_path_buf(),
+                })
+            }
+        }
+    }
+}
+
+/// What [`derender_chosen`] wrote.
+#[derive(Debug)]
+pub struct DerenderOutput {
+    /// The run, its report holding the samples written.
+    pub run: SessionRun,
+    /// `samples.skbs`.
+    pub samples_file: PathBuf,
+    /// `derender.json`.
+    pub report_file: PathBuf,
+}
+
+/// Options of [`derender_chosen`] beyond the derender settings.
+#[derive(Debug, Clone, Default)]
+pub struct DerenderOutputOptions {
+    /// Leave the projected printed targets unmasked (only with [`PoseSourceChoice::Truth`]).
+    pub skip_target_mask: bool,
+    /// Also write `samples.csv`.
+    pub csv: bool,
+    /// Write the coverage figures into `OUT/figures` at this incident angle and tolerance
+    /// (degrees).
+    pub figures: Option<(f64, f64)>,
+}
+
+/// Derenders with the chosen poses (as [`derender_stage`] does for the session's and the pose
+/// stage's) and writes `samples.skbs`, `derender.json` and what `opts` asks for into `out_dir`.
+/// Samples from the truth's poses say so in their header.
+pub fn derender_chosen(
+    session: &Session,
+    source: &PoseSourceChoice,
+    dcfg: &DerenderConfig,
+    plan_opts: &PlanOptions,
+    out_dir: &Path,
+    opts: &DerenderOutputOptions,
+) -> Result<DerenderOutput, ProcessError> {
+    let (mut run, samples) = match source {
+        PoseSourceChoice::Truth => {
+            let session_opts = SessionOptions {
+                poses: PoseChoice::Truth,
+                skip_target_mask: opts.skip_target_mask,
+                estimated: None,
+            };
+            let mut run = crate::pose_inputs::derender_session(session, &session_opts, dcfg)?;
+            let samples = std::mem::take(&mut run.report.samples);
+            (run, samples)
+        }
+        PoseSourceChoice::Session => derender_stage(session, None, dcfg, plan_opts)?,
+        PoseSourceChoice::Estimated(file) => {
+            let poses = read_poses(file)?;
+            derender_stage(session, Some(&poses), dcfg, plan_opts)?
+        }
+    };
+    let mut header = samples_header(session, &run);
+    if *source == PoseSourceChoice::Truth {
+        header.description = format!("{} (poses from truth.json)", header.description);
+    }
+    let samples_file = out_dir.join(SAMPLES_FILE);
+    skinbrdf_samples::write_samples(&samples_file, &header, &samples)?;
+    if opts.csv {
+        skinbrdf_samples::write_csv(out_dir.join("samples.csv"), &samples)?;
+    }
+    run.report.samples = samples;
+    if let Some((theta_i_deg, tol_deg)) = opts.figures {
+        write_derender_figures(
+            &out_dir.join("figures"),
+            session,
+            &run,
+            theta_i_deg,
+            tol_deg,
+        )?;
+    }
+    let report_file = out_dir.join("derender.json");
+    let json = serde_json::to_vec_pretty(&run).map_err(|source| ProcessError::Json {
+        path: report_file.clone(),
+        source,
+    })?;
+    write_atomic(&report_file, &json)?;
+    Ok(DerenderOutput {
+        run,
+        samples_file,
+        report_file,
+    })
+}
+
+/// The derender coverage figures: pixels used per image (PNG) and the exitant hemisphere at
+/// `theta_i_deg` +- `tol_deg` (PNG and SVG).
+fn write_derender_figures(
+    dir: &Path,
+    session: &Session,
+    run: &SessionRun,
+    theta_i_deg: f64,
+    tol_deg: f64,
+) -> Result<(), ProcessError> {
+    use skinbrdf_derender::figures;
+    std::fs::create_dir_all(dir).map_err(|source| ProcessError::Read {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let samples = &run.report.samples;
+    for im in &run.report.images {
+        let img = session.load_image(im.image_index)?;
+        let view = skinbrdf_derender::ImageView {
+            width: img.width,
+            height: img.height,
+            rgb: &img.rgb,
+            saturated: None,
+        };
+        let index = u16::try_from(im.image_index).map_err(|_| {
+            skinbrdf_derender::DerenderError::ImageIndex {
+                index: im.image_index,
+            }
+        })?;
+        let rgb = figures::pixels_used_rgb8(&view, samples, index);
+        let p = dir.join(format!("pixels_used_{:03}.png", im.image_index));
+        skinbrdf_session::write::write_png_rgb8(&p, img.width, img.height, &rgb)?;
+    }
+    let svg = figures::hemisphere_svg(samples, theta_i_deg, tol_deg);
+    write_atomic(
+        &dir.join(format!("hemisphere_theta_i_{theta_i_deg}.svg")),
+        svg.as_bytes(),
+    )?;
+    let size = 600;
+    let png = figures::hemisphere_rgb8(samples, theta_i_deg, tol_deg, size);
+    skinbrdf_session::write::write_png_rgb8(
+        &dir.join(format!("hemisphere_theta_i_{theta_i_deg}.png")),
+        size,
+        size,
+        &png,
+    )?;
+    Ok(())
 }
 
 /// The header `process` writes into `samples.skbs`.
@@ -918,7 +1172,7 @@ fn render_head(
         return Err("no scan to render".into());
     };
     let model = skinbrdf_render::load_model(&out_dir.join(PARAMS_FILE))
-        .map_err(|e| format!("head rendering skipped: {e}"))?;
+        .map_err(|e| format!("head rendering skipped: {}", skinbrdf_core::error_text(&e)))?;
     let mesh = skinbrdf_mesh::load_mesh(
         &session.path(file),
         &skinbrdf_mesh::LoadOptions {
@@ -926,15 +1180,20 @@ fn render_head(
             policy: skinbrdf_derender::from_session::scan_repair_policy(*accept_repair_loss),
         },
     )
-    .map_err(|e| format!("head rendering skipped: {e}"))?;
+    .map_err(|e| format!("head rendering skipped: {}", skinbrdf_core::error_text(&e)))?;
     let cfg = skinbrdf_render::RenderConfig::default();
     let img = skinbrdf_render::render_comparison(&mesh.mesh, &model, &cfg)
-        .map_err(|e| format!("head rendering failed: {e}"))?;
+        .map_err(|e| format!("head rendering failed: {}", skinbrdf_core::error_text(&e)))?;
     let dir = out_dir.join("render");
     std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let files = img
         .write(&dir.join("head_comparison"), &cfg.labels)
-        .map_err(|e| format!("head rendering not written: {e}"))?;
+        .map_err(|e| {
+            format!(
+                "head rendering not written: {}",
+                skinbrdf_core::error_text(&e)
+            )
+        })?;
     Ok((img.stats, files))
 }
 
@@ -950,4 +1209,84 @@ pub fn as_reused(recorded: &[StageReport]) -> Vec<StageReport> {
             r
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use skinbrdf_session::KnownQuantities;
+
+    use super::*;
+    use crate::pose_inputs::tests::{camera_pose, session};
+
+    /// A session that states every camera pose of a stationary sample: it needs no pose stage.
+    fn posed_session() -> Session {
+        let mut s = session(KnownQuantities {
+            stationary_sample: true,
+            ..Default::default()
+        });
+        for (i, im) in s.file.images.iter_mut().enumerate() {
+            im.world_from_camera = Some(camera_pose(i));
+        }
+        s
+    }
+
+    #[test]
+    fn auto_takes_the_pose_stages_file_when_the_session_gives_no_poses() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = dir.path().join(POSES_FILE);
+        let s = session(KnownQuantities::default());
+        match choose_pose_source(&s, PoseRequest::Auto, &file) {
+            Err(ProcessError::NoPoses { dir, poses }) => {
+                assert_eq!(dir, s.dir);
+                assert_eq!(poses, file);
+            }
+            other => panic!("expected NoPoses, got {other:?}"),
+        }
+        std::fs::write(&file, "{}").expect("write");
+        for request in [PoseRequest::Auto, PoseRequest::Estimated] {
+            assert_eq!(
+                choose_pose_source(&s, request, &file).expect("a source"),
+                PoseSourceChoice::Estimated(file.clone())
+            );
+        }
+    }
+
+    #[test]
+    fn auto_prefers_the_sessions_poses_and_truth_only_when_asked() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = dir.path().join(POSES_FILE);
+        std::fs::write(&file, "{}").expect("write");
+        let s = posed_session();
+        let choose = |r| choose_pose_source(&s, r, &file).expect("a source");
+        assert_eq!(choose(PoseRequest::Auto), PoseSourceChoice::Session);
+        assert_eq!(choose(PoseRequest::Session), PoseSourceChoice::Session);
+        assert_eq!(
+            choose(PoseRequest::Estimated),
+            PoseSourceChoice::Estimated(file.clone())
+        );
+        assert_eq!(choose(PoseRequest::Truth), PoseSourceChoice::Truth);
+    }
+
+    #[test]
+    fn an_unreadable_pose_file_is_an_error_naming_it_and_writes_nothing() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = dir.path().join(POSES_FILE);
+        std::fs::write(&file, "not json").expect("write");
+        let s = session(KnownQuantities::default());
+        let out = dir.path().join("out");
+        let err = derender_chosen(
+            &s,
+            &PoseSourceChoice::Estimated(file.clone()),
+            &DerenderConfig::DEFAULT,
+            &PlanOptions::default(),
+            &out,
+            &DerenderOutputOptions::default(),
+        )
+        .expect_err("garbage poses");
+        assert!(
+            skinbrdf_core::error_text(&err).contains(POSES_FILE),
+            "{err:?}"
+        );
+        assert!(!out.join(SAMPLES_FILE).exists());
+    }
 }

@@ -6,6 +6,10 @@
 
 use skinbrdf_pipeline::demo::{run_demo, DemoConfig};
 use skinbrdf_pipeline::process::bounds;
+
+/// The fitted model against the true BRDF, median relative error, percent: the fit of samples
+/// within the derender bound cannot be held to a tighter one.
+const MODEL_MEDIAN_REL_ERROR_PCT: f64 = bounds::SAMPLE_MEDIAN_REL_ERROR_PCT;
 use skinbrdf_pipeline::process::{process, ProcessConfig};
 use skinbrdf_pipeline::report::StageStatus;
 use skinbrdf_pipeline::Stage;
@@ -56,9 +60,11 @@ fn demo_runs_end_to_end_and_process_resumes() {
     );
     let flash = r.flash().and_then(|f| f.flash_position_error_mm);
     assert!(flash.expect("flash ran") < bounds::FLASH_POSITION_MM);
-    assert!(derender.sample_median_rel_error_pct.expect("truth") < 3.0);
+    assert!(
+        derender.sample_median_rel_error_pct.expect("truth") < bounds::SAMPLE_MEDIAN_REL_ERROR_PCT
+    );
     assert!(derender.samples_kept > 10_000);
-    assert!(fit.model_median_rel_error_vs_truth_pct.expect("truth") < 3.0);
+    assert!(fit.model_median_rel_error_vs_truth_pct.expect("truth") < MODEL_MEDIAN_REL_ERROR_PCT);
     let md = std::fs::read_to_string(&out.report_path).unwrap();
     assert!(md.contains("## Stages: accuracy against ground truth and run time"));
     assert!(md.contains("camera_position_error_median"));
@@ -117,8 +123,7 @@ fn a_broken_session_is_a_precise_error() {
         "format_version = 1\n[camera\n",
     )
     .unwrap();
-    let err = process(dir.path(), &ProcessConfig::new(), &mut |_| {})
-        .unwrap_err()
-        .to_string();
+    let err = process(dir.path(), &ProcessConfig::new(), &mut |_| {}).unwrap_err();
+    let err = skinbrdf_core::error_text(&err);
     assert!(err.contains("session.toml"), "{err}");
 }

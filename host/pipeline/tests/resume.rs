@@ -176,3 +176,134 @@ fn resume_reuses_only_what_is_intact() {
     drop(lock);
     run(&session);
 }
+
+/// The default scene (a scan, targets, a standard) at a fifth of the pixels per axis and one
+/// ray per pixel: small enough to process several times.
+fn small_scan_session(dir: &Path) -> std::path::PathBuf {
+    let session = dir.join("session");
+    let scene = Scene::load("default").expect("built-in scene");
+    let small = (scene.camera.width_px / 5, scene.camera.height_px / 5);
+    generate(
+        &scene,
+        &SynthOptions {
+            resolution: Some(small),
+            capture: None,
+            noise_free: false,
+            samples_per_pixel: Some(1),
+            studio: false,
+        },
+        &session,
+    )
+    .expect("synthesis");
+    session
+}
+
+/// The report's derender and fit figures describe the samples file on disk.
+fn assert_report_matches_files(out: &ProcessOutput) {
+    let on_disk = samples_in_file(out);
+    assert_eq!(
+        out.report.derender().expect("derender").samples_kept,
+        on_disk
+    );
+    assert_eq!(out.report.fit().expect("fit").samples_fitted, on_disk);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn resume_sees_the_scan_a_mask_and_a_hand_run_derender() {
+    use skinbrdf_pipeline::stages::{self, DerenderOutputOptions, PoseRequest};
+    use skinbrdf_pipeline::{Plan, PlanOptions};
+
+    let dir = tempfile::tempdir().expect("tempdir");
+    let session = small_scan_session(dir.path());
+
+    // The first ten measurement images get masks (the truth masks of the forehead).
+    std::fs::create_dir_all(session.join("masks")).expect("masks dir");
+    let toml = session.join("session.toml");
+    let mut text = std::fs::read_to_string(&toml).expect("session.toml");
+    for i in 0..10 {
+        std::fs::copy(
+            session.join(format!("truth/m{i:02}_forehead.png")),
+            session.join(format!("masks/m{i:02}.png")),
+        )
+        .expect("copy mask");
+        let entry = format!("file = \"images/m{i:02}.png\"\n");
+        assert!(text.contains(&entry), "{text}");
+        text = text.replacen(&entry, &format!("{entry}mask = \"masks/m{i:02}.png\"\n"), 1);
+    }
+    std::fs::write(&toml, text).expect("write");
+
+    let first = run(&session);
+    assert_report_matches_files(&first);
+    let out = first.out_dir.clone();
+    assert_eq!(status(&run(&session), Stage::Derender), StageStatus::Reused);
+
+    // Changed masks (the targets' pixels only, so these images give no skin sample): derender
+    // and the fit of its changed samples run again.
+    for i in 0..10 {
+        std::fs::copy(
+            session.join(format!("truth/m{i:02}_targets.png")),
+            session.join(format!("masks/m{i:02}.png")),
+        )
+        .expect("change mask");
+    }
+    let masked = run(&session);
+    assert_eq!(status(&masked, Stage::Derender), StageStatus::Ran);
+    assert_eq!(status(&masked, Stage::Fit), StageStatus::Ran);
+    assert_report_matches_files(&masked);
+    let masked_kept = samples_in_file(&masked);
+
+    // `skinbrdf derender S --stride 4` by hand (the command's own pipeline calls): the next
+    // `process` derenders again at its own stride and reports what the file holds.
+    let loaded = skinbrdf_session::Session::load(&session).expect("session");
+    let plan_opts = PlanOptions::default();
+    let plan = Plan::derive(
+        &skinbrdf_pipeline::process::scene_facts(&loaded),
+        &plan_opts,
+    );
+    let mut dcfg = ProcessConfig::new().derender;
+    dcfg.stride = 4;
+    let dcfg = stages::planned_derender_config(&dcfg, &plan, &plan_opts);
+    let source =
+        stages::choose_pose_source(&loaded, PoseRequest::Auto, &out.join(stages::POSES_FILE))
+            .expect("the pose stage's poses");
+    let by_hand = stages::derender_chosen(
+        &loaded,
+        &source,
+        &dcfg,
+        &plan_opts,
+        &out,
+        &DerenderOutputOptions::default(),
+    )
+    .expect("derender --stride 4");
+    let strided = by_hand.run.report.samples.len() as u64;
+    assert!(
+        strided < masked_kept,
+        "stride 4 keeps fewer samples: {strided} of {masked_kept}"
+    );
+    assert_eq!(samples_in_file(&masked), strided);
+    let after = run(&session);
+    assert_eq!(status(&after, Stage::CameraPoses), StageStatus::Reused);
+    assert_eq!(status(&after, Stage::Derender), StageStatus::Ran);
+    assert_report_matches_files(&after);
+    assert_eq!(samples_in_file(&after), masked_kept);
+
+    // scan.ply replaced by an empty mesh: no stage that reads it is reused; the run fails
+    // naming the scan.
+    let scan = session.join("scan.ply");
+    let good_scan = std::fs::read(&scan).expect("scan.ply");
+    std::fs::write(
+        &scan,
+        "ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\n\
+         property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n",
+    )
+    .expect("empty scan");
+    let err = process(&session, &ProcessConfig::new(), &mut |_| {})
+        .expect_err("an empty scan cannot be derendered");
+    let text = skinbrdf_core::error_text(&err);
+    assert!(text.contains("scan.ply"), "{text}");
+    // Restored: the run matches the files again.
+    std::fs::write(&scan, good_scan).expect("restore scan");
+    let restored = run(&session);
+    assert_report_matches_files(&restored);
+}

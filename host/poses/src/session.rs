@@ -237,7 +237,7 @@ fn layout_table(session: &Session) -> HashMap<u32, (Layout, Target)> {
 fn load_grey(session: &Session, index: usize) -> Result<GrayF32, PoseError> {
     let img = session.load_image(index).map_err(|e| PoseError::Image {
         file: session.file.images[index].file.clone(),
-        problem: e.to_string(),
+        problem: skinbrdf_core::error_text(&e),
     })?;
     let data = img
         .rgb
@@ -357,7 +357,7 @@ pub(crate) fn detect_all(session: &Session, detector: &DetectorConfig) -> Vec<De
                 Err(e) => Detected {
                     dets: Vec::new(),
                     detect_ms: t.elapsed().as_secs_f64() * 1e3,
-                    error: Some(e.to_string()),
+                    error: Some(skinbrdf_core::error_text(&e)),
                 },
             }
         })
@@ -474,7 +474,7 @@ pub fn estimate_session_stages(
                         out.diagnostics.extend(e.diagnostics.iter().cloned());
                         out.world_from_camera = Some(PoseWithCov::from_estimate(&e));
                     }
-                    Err(e) => out.errors.push(format!("camera pose: {e}")),
+                    Err(e) => out.errors.push(format!("camera pose: {}", skinbrdf_core::error_text(&e))),
                 }
             }
             let Some(wc) = out.world_from_camera.clone() else {
@@ -504,7 +504,7 @@ pub fn estimate_session_stages(
                         Some(compose(&wc, &e))
                     }
                     Err(e) => {
-                        out.errors.push(format!("{which} pose: {e}"));
+                        out.errors.push(format!("{which} pose: {}", skinbrdf_core::error_text(&e)));
                         None
                     }
                 }

@@ -8,7 +8,7 @@ use crate::kind::FileKind;
 #[derive(Debug, thiserror::Error)]
 pub enum RawError {
     /// The file could not be read.
-    #[error("{path}: cannot read: {source}")]
+    #[error("{path}: cannot read")]
     Io {
         /// The file.
         path: PathBuf,

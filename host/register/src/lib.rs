@@ -83,7 +83,7 @@ pub enum RegisterError {
         reason: String,
     },
     /// The points file cannot be read.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,

@@ -14,6 +14,22 @@ use skinbrdf_synth::layout::{build_rig, Rig};
 use skinbrdf_synth::textured_scan::{write_textured_scan, ScanTruth};
 use skinbrdf_synth::Scene;
 
+/// A ray from 10 cm along a target's normal that meets it at 10 cm within this (1 mm) is
+/// unobstructed.
+const UNOBSTRUCTED_TOL_M: f64 = 1e-3;
+/// Corners found on the textured scan against their truth, mm: the survey's headdress bound.
+const CORNER_MAX_MM: f64 = 0.5;
+/// Registration rotation error, degrees: well below what changes a sample's angles visibly.
+const ROTATION_MAX_DEG: f64 = 0.05;
+/// Registration translation error, mm: within the survey's reference-target accuracy.
+const TRANSLATION_MAX_MM: f64 = 0.3;
+/// A similarity between frames of equal units recovers a scale of 1 within this (0.2 %).
+const SCALE_TOL: f64 = 2e-3;
+/// Rotation error from picked corners (a points file, picked to about a millimetre), degrees.
+const PICKED_ROTATION_MAX_DEG: f64 = 0.5;
+/// Translation error from picked corners, mm.
+const PICKED_TRANSLATION_MAX_MM: f64 = 3.0;
+
 struct Fixture {
     rig: Rig,
     truth: ScanTruth,
@@ -35,7 +51,7 @@ fn visible_targets(scan: &skinbrdf_mesh::TexturedMesh, truth: &ScanTruth) -> Vec
             let out = -((c1 - c0).cross(c0 - c3)).normalize();
             let eye = centre + out * 0.1;
             let hit = bvh.intersect(eye.as_vec3(), (-out).as_vec3(), 1.0);
-            hit.is_some_and(|h| (f64::from(h.t_m) - 0.1).abs() < 1e-3)
+            hit.is_some_and(|h| (f64::from(h.t_m) - 0.1).abs() < UNOBSTRUCTED_TOL_M)
         })
         .map(|t| t.id)
         .collect()
@@ -99,7 +115,10 @@ fn every_visible_target_is_found_within_half_a_millimetre() {
         let truth = f.truth.targets.iter().find(|x| x.id == *id).expect("truth");
         for k in 0..4 {
             let e = t.corners_m[k].distance(truth.corners_m[k]) * 1e3;
-            assert!(e < 0.5, "target {id} corner {k}: {e:.3} mm ({t:?})");
+            assert!(
+                e < CORNER_MAX_MM,
+                "target {id} corner {k}: {e:.3} mm ({t:?})"
+            );
             errs.push(e);
         }
     }
@@ -157,10 +176,10 @@ fn aligning_the_true_corners_recovers_scanner_from_head() {
          sd {:.4} deg / {:.3} mm (centroid {:.3} mm), dropped {:?}",
         a.rms_mm, a.rotation_sd_deg, a.translation_sd_mm, a.centroid_sd_mm, a.dropped
     );
-    assert!(rot_deg < 0.05, "{rot_deg} deg");
-    assert!(t_mm < 0.3, "{t_mm} mm");
+    assert!(rot_deg < ROTATION_MAX_DEG, "{rot_deg} deg");
+    assert!(t_mm < TRANSLATION_MAX_MM, "{t_mm} mm");
     assert!(a.dropped.is_empty(), "{:?}", a.dropped);
-    assert!(a.rotation_sd_deg > 0.0 && a.rotation_sd_deg < 0.05);
+    assert!(a.rotation_sd_deg > 0.0 && a.rotation_sd_deg < ROTATION_MAX_DEG);
 
     // A similarity fit finds scale 1.
     let s = align(
@@ -170,7 +189,7 @@ fn aligning_the_true_corners_recovers_scanner_from_head() {
         &AlignConfig::default(),
     )
     .expect("similarity");
-    assert!((s.scale - 1.0).abs() < 2e-3, "{}", s.scale);
+    assert!((s.scale - 1.0).abs() < SCALE_TOL, "{}", s.scale);
 }
 
 #[test]
@@ -214,8 +233,8 @@ fn corrupted_target_is_dropped(shift: DVec3) {
         a.robust_median_mm,
         a.dropped
     );
-    assert!(rot_deg < 0.05, "{rot_deg} deg");
-    assert!(t_mm < 0.3, "{t_mm} mm");
+    assert!(rot_deg < ROTATION_MAX_DEG, "{rot_deg} deg");
+    assert!(t_mm < TRANSLATION_MAX_MM, "{t_mm} mm");
 }
 
 #[test]
@@ -250,7 +269,10 @@ fn the_points_file_path_aligns_by_picked_corners() {
         "points: rotation error {rot_deg:.4} deg, translation {t_mm:.3} mm, rms {:.3} mm",
         a.rms_mm
     );
-    assert!(rot_deg < 0.5 && t_mm < 3.0, "{rot_deg} deg {t_mm} mm");
+    assert!(
+        rot_deg < PICKED_ROTATION_MAX_DEG && t_mm < PICKED_TRANSLATION_MAX_MM,
+        "{rot_deg} deg {t_mm} mm"
+    );
 
     // A bad file names itself and the field.
     std::fs::write(&path, text.replacen("corner = 2", "corner = 9", 1)).expect("write");

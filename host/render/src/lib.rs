@@ -67,10 +67,10 @@ pub enum RenderError {
         reason: String,
     },
     /// The mesh cannot be traced.
-    #[error("mesh: {0}")]
+    #[error("mesh")]
     Mesh(#[from] skinbrdf_mesh::MeshError),
     /// The model is invalid.
-    #[error("model: {0}")]
+    #[error("model")]
     Model(#[from] skinbrdf_brdf::BrdfError),
     /// An input file is missing or malformed.
     #[error("{path}: {problem}")]

@@ -97,7 +97,7 @@ impl std::error::Error for SessionErrors {}
 #[derive(Debug, thiserror::Error)]
 pub enum FileError {
     /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -105,7 +105,7 @@ pub enum FileError {
         source: std::io::Error,
     },
     /// The image could not be decoded or encoded.
-    #[error("{path}: image: {source}")]
+    #[error("{path}: image")]
     Image {
         /// The file.
         path: PathBuf,
@@ -127,7 +127,7 @@ pub enum FileError {
     #[error(transparent)]
     Raw(#[from] skinbrdf_raw::RawError),
     /// JSON (de)serialisation failed.
-    #[error("{path}: {source}")]
+    #[error("{path}")]
     Json {
         /// The file.
         path: PathBuf,

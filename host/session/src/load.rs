@@ -594,7 +594,11 @@ fn validate(
                 Err(e) => errs.push(
                     file,
                     format!("{field}.file"),
-                    format!("`{}` is not a readable image: {e}", im.file),
+                    format!(
+                        "`{}` is not a readable image: {}",
+                        im.file,
+                        skinbrdf_core::error_text(&e)
+                    ),
                 ),
             }
         }
@@ -1137,7 +1141,7 @@ fn image_problem(path: &Path, lin: &Linearization) -> Option<String> {
         Err(FileError::Invalid { field, problem, .. }) => {
             return Some(format!("`{field}`: {problem}"))
         }
-        Err(e) => return Some(e.to_string()),
+        Err(e) => return Some(skinbrdf_core::error_text(&e)),
     };
     let bad = img
         .rgb

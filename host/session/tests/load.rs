@@ -10,6 +10,9 @@ use skinbrdf_core::{CameraModel, Pose};
 use skinbrdf_session::write::write_png_rgb16;
 use skinbrdf_session::*;
 
+/// A 16-bit code decoded to `f32` in [0, 1] equals the exact quotient within `f32` rounding.
+const F32_DECODE_TOL: f32 = 1e-7;
+
 const W: u32 = 8;
 const H: u32 = 6;
 
@@ -97,7 +100,7 @@ fn a_valid_session_loads_and_its_images_linearize() {
     assert_eq!(s.images_with_role(ImageRole::Measurement).count(), 2);
     let img = s.load_image(0).unwrap();
     assert_eq!((img.width, img.height), (W, H));
-    assert!((img.rgb[7][1] - 1000.0 / 65535.0).abs() < 1e-7);
+    assert!((img.rgb[7][1] - 1000.0 / 65535.0).abs() < F32_DECODE_TOL);
     assert!(s.load_truth().is_none());
 }
 

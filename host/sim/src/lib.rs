@@ -49,7 +49,7 @@ pub enum SimError {
         problem: String,
     },
     /// I/O on the link failed.
-    #[error("simulator link: {what}: {source}")]
+    #[error("simulator link: {what}")]
     Io {
         /// What was being done.
         what: &'static str,

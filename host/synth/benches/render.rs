@@ -3,7 +3,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use skinbrdf_synth::layout::{build_rig, plan_shots};
-use skinbrdf_synth::render::Renderer;
+use skinbrdf_synth::photograph::Renderer;
 use skinbrdf_synth::Scene;
 
 fn bench(c: &mut Criterion) {

@@ -20,7 +20,7 @@ use skinbrdf_session::{
 };
 
 use crate::layout::{build_rig, plan_shots, shots_from_capture, Layout, Rig, Shot};
-use crate::render::{Rendered, Renderer};
+use crate::photograph::{Rendered, Renderer};
 use crate::scene::{CurveScene, Encoding, GeometryKind, Scene};
 use crate::shape::Shape;
 
@@ -35,7 +35,7 @@ pub enum SynthError {
     #[error(transparent)]
     File(#[from] skinbrdf_session::FileError),
     /// Building or writing a mesh failed.
-    #[error("mesh: {0}")]
+    #[error("mesh")]
     Mesh(#[from] skinbrdf_mesh::MeshError),
     /// The scene (with the options applied) has values outside their stated ranges.
     #[error("the scene is not valid: {}", problems.join("; "))]
@@ -44,7 +44,7 @@ pub enum SynthError {
         problems: Vec<String>,
     },
     /// Writing a raw image of the synthetic studio failed.
-    #[error("studio raw image: {source}")]
+    #[error("studio raw image")]
     Raw {
         /// The writer's error (it names the file).
         source: skinbrdf_raw::RawError,

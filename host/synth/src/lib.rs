@@ -7,7 +7,8 @@
 //!   analytic normals, tessellation and an independent analytic ray intersection.
 //! * [`layout`]: the set-up (reference structure, headdress, flash, standard), the shot list
 //!   (30 measurement + 6 extra images, or one per exposure of a `capture.json`) and head motion.
-//! * [`render`]: ray casting (obvhs through `skinbrdf-mesh`, rayon over rows) and shading.
+//! * [`photograph`]: the synthetic photographer: ray casting (obvhs through `skinbrdf-mesh`,
+//!   rayon over rows) and shading of the studio photographs.
 //! * [`generate`]: writes a session directory that `skinbrdf_session::Session::load` accepts,
 //!   with `truth.json` and truth masks. Entry point: [`generate::generate`].
 //! * [`studio`]: with `--studio`, what a studio holds after the capture: the camera's raw
@@ -21,7 +22,7 @@
 
 pub mod generate;
 pub mod layout;
-pub mod render;
+pub mod photograph;
 pub mod scene;
 pub mod shape;
 pub mod studio;

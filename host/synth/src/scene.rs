@@ -51,7 +51,7 @@ pub const MIN_SPACING_M: f64 = 1e-4;
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     /// Neither a built-in scene nor a readable file.
-    #[error("no built-in scene `{name}` (built-in: {known}) and no file of that name: {source}")]
+    #[error("no built-in scene `{name}` (built-in: {known}) and no file of that name")]
     NotFound {
         /// What was asked for.
         name: String,

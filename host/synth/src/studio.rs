@@ -65,7 +65,7 @@ use skinbrdf_session::{Rig as RigIo, Target, TargetGroup, TAG_FAMILY};
 
 use crate::generate::SynthError;
 use crate::layout::{Rig, Shot};
-use crate::render::Rendered;
+use crate::photograph::Rendered;
 use crate::scene::Scene;
 
 /// The studio directory inside a synthetic session.
@@ -578,7 +578,7 @@ const FLASH_PANEL_RADIUS_M: f64 = 0.4;
 
 /// The `n` targets of a group seen (usable) in the most shots, most-seen first (ties: lower id).
 pub fn most_seen(
-    renderer: &crate::render::Renderer,
+    renderer: &crate::photograph::Renderer,
     rig: &Rig,
     shots: &[Shot],
     layout: crate::layout::Layout,

@@ -1,12 +1,12 @@
 //! Which targets of a shot a detector can use: the synthetic session's own visibility test
 //! (facing the camera, inside the image, unoccluded, lit), shared by the generator's framing
 //! checks and its truth. It needs both the rig ([`crate::layout`]) and the renderer
-//! ([`crate::render`]), which is why it lives apart from either.
+//! ([`crate::photograph`]), which is why it lives apart from either.
 
 use glam::DVec3;
 
 use crate::layout::{Layout, Rig, Shot};
-use crate::render::Renderer;
+use crate::photograph::Renderer;
 
 /// Most oblique view of a target counted as usable by [`usable_targets`], degrees (the pose
 /// stage warns at 70).

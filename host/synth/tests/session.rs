@@ -5,6 +5,10 @@ use skinbrdf_session::capture::*;
 use skinbrdf_session::{GeometrySpec, ImageRole, Session};
 use skinbrdf_synth::{generate, Scene, SynthOptions, BUILTIN_SCENES};
 
+/// The brightest pixel of a measurement image is at least this (linear, 1.0 = white): lit
+/// skin, not a blank image.
+const MIN_PEAK: f32 = 0.1;
+
 fn small(samples: u32) -> SynthOptions {
     SynthOptions {
         resolution: Some((381, 253)),
@@ -90,7 +94,7 @@ fn default_scene_writes_a_valid_36_image_session_with_truth() {
     // The images are not blank and the skin is brighter than the background.
     let img = s.load_image(10).unwrap();
     let max = img.rgb.iter().map(|p| p[1]).fold(0.0f32, f32::max);
-    assert!(max > 0.1, "max {max}");
+    assert!(max > MIN_PEAK, "max {max}");
 }
 
 #[test]

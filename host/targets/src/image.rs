@@ -8,7 +8,7 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum ImageError {
     /// The file could not be read or decoded.
-    #[error("cannot read image {path}: {source}")]
+    #[error("cannot read image {path}")]
     Read {
         /// The file.
         path: String,

@@ -56,7 +56,7 @@ pub struct Sheet {
 /// Half extent of a cut-out target's paper in units of half the tag's black square: the black
 /// border ends at 1, the tag's white ring at 1.25, and a quarter cell more of paper keeps the
 /// ring clear of the mount's edge. The synthetic renderer paints targets with the same paper
-/// (`skinbrdf_synth::render::PAPER_HALF_EXTENT`), so a printed rig matches the scenes.
+/// (`skinbrdf_synth::photograph::PAPER_HALF_EXTENT`), so a printed rig matches the scenes.
 pub const CUTOUT_PAPER_HALF_EXTENT: f64 = 1.5;
 /// Space between neighbouring cut-outs, mm (room for scissors).
 const CUTOUT_GAP_MM: f64 = 4.0;

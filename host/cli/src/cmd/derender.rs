@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use skinbrdf_derender::{CEstimator, DerenderConfig, ShadowMode};
 use skinbrdf_mesh::NormalMethod;
-use skinbrdf_pipeline::pose_inputs::{derender_session, PoseChoice, SessionOptions};
-use skinbrdf_pipeline::process::{scene_facts, ProcessError};
+use skinbrdf_pipeline::process::scene_facts;
+use skinbrdf_pipeline::stages::{DerenderOutputOptions, PoseRequest, PoseSourceChoice};
 use skinbrdf_pipeline::{stages, Plan, PlanOptions};
 
 /// Flags of `skinbrdf derender`.
@@ -119,45 +119,6 @@ pub enum Poses {
     Truth,
 }
 
-fn write_figures(
-    args: &Args,
-    out: &std::path::Path,
-    session: &skinbrdf_session::Session,
-    run: &skinbrdf_derender::SessionRun,
-) -> anyhow::Result<()> {
-    use skinbrdf_derender::figures;
-    let dir = out.join("figures");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let samples = &run.report.samples;
-    for im in &run.report.images {
-        let img = session.load_image(im.image_index)?;
-        let view = skinbrdf_derender::ImageView {
-            width: img.width,
-            height: img.height,
-            rgb: &img.rgb,
-            saturated: None,
-        };
-        let rgb = figures::pixels_used_rgb8(&view, samples, im.image_index as u16);
-        let p = dir.join(format!("pixels_used_{:03}.png", im.image_index));
-        skinbrdf_session::write::write_png_rgb8(&p, img.width, img.height, &rgb)?;
-    }
-    let (ti, tol) = (args.figure_theta_i_deg, args.figure_tol_deg);
-    let svg = figures::hemisphere_svg(samples, ti, tol);
-    skinbrdf_session::write_atomic(
-        &dir.join(format!("hemisphere_theta_i_{ti}.svg")),
-        svg.as_bytes(),
-    )?;
-    let size = 600;
-    let png = figures::hemisphere_rgb8(samples, ti, tol, size);
-    skinbrdf_session::write::write_png_rgb8(
-        &dir.join(format!("hemisphere_theta_i_{ti}.png")),
-        size,
-        size,
-        &png,
-    )?;
-    Ok(())
-}
-
 fn config(args: &Args) -> anyhow::Result<DerenderConfig> {
     let shadows = match args.shadows {
         Shadows::Plan | Shadows::Auto => ShadowMode::Auto,
@@ -212,54 +173,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.no_target_mask && choice != Poses::Truth {
         anyhow::bail!("--no-target-mask is only for --poses truth (a check of the mask itself)");
     }
-    let facts = scene_facts(&session);
-    let session_has_poses =
-        facts.camera_poses_known && (facts.head_poses_known || facts.stationary_sample);
-    let (run, mut samples) = match choice {
-        Poses::Truth => {
-            let opts = SessionOptions {
-                poses: PoseChoice::Truth,
-                skip_target_mask: args.no_target_mask,
-                estimated: None,
-            };
-            let mut run = derender_session(&session, &opts, &cfg)?;
-            let samples = std::mem::take(&mut run.report.samples);
-            eprintln!("note: derendered with the TRUE poses of truth.json (a check of derendering alone, not a measurement)");
-            (run, samples)
-        }
-        Poses::Session => stages::derender_stage(&session, None, &cfg, &plan_opts)?,
-        Poses::Auto if session_has_poses => {
-            stages::derender_stage(&session, None, &cfg, &plan_opts)?
-        }
-        Poses::Auto | Poses::Estimated => {
-            if !poses_file.is_file() {
-                return Err(ProcessError::NoPoses {
-                    dir: args.session.clone(),
-                    poses: poses_file,
-                }
-                .into());
-            }
-            let poses = stages::read_poses(&poses_file)?;
-            stages::derender_stage(&session, Some(&poses), &cfg, &plan_opts)?
-        }
+    let request = match choice {
+        Poses::Auto => PoseRequest::Auto,
+        Poses::Session => PoseRequest::Session,
+        Poses::Estimated => PoseRequest::Estimated,
+        Poses::Truth => PoseRequest::Truth,
     };
-    let mut header = stages::samples_header(&session, &run);
-    if choice == Poses::Truth {
-        header.description = format!("{} (poses from truth.json)", header.description);
+    let source = stages::choose_pose_source(&session, request, &poses_file)?;
+    let opts = DerenderOutputOptions {
+        skip_target_mask: args.no_target_mask,
+        csv: args.csv,
+        figures: args
+            .figures
+            .then_some((args.figure_theta_i_deg, args.figure_tol_deg)),
+    };
+    let written = stages::derender_chosen(&session, &source, &cfg, &plan_opts, &out, &opts)?;
+    if source == PoseSourceChoice::Truth {
+        eprintln!("note: derendered with the TRUE poses of truth.json (a check of derendering alone, not a measurement)");
     }
-    skinbrdf_samples::write_samples(out.join(stages::SAMPLES_FILE), &header, &samples)?;
-    if args.csv {
-        skinbrdf_samples::write_csv(out.join("samples.csv"), &samples)?;
-    }
-    let mut run = run;
-    run.report.samples = std::mem::take(&mut samples);
-    if args.figures {
-        write_figures(&args, &out, &session, &run)?;
-    }
-    let json = serde_json::to_string_pretty(&run)?;
-    skinbrdf_session::write_atomic(&out.join("derender.json"), json.as_bytes())?;
+    let run = written.run;
     if args.json {
-        println!("{json}");
+        println!("{}", std::fs::read_to_string(&written.report_file)?);
         return Ok(());
     }
     let r = &run.report;
@@ -343,6 +277,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             e.samples
         );
     }
-    println!("  wrote {}", out.join("samples.skbs").display());
+    println!("  wrote {}", written.samples_file.display());
     Ok(())
 }

@@ -13,8 +13,7 @@
 
 use anyhow::Context;
 use skinbrdf_poses::session::{compare_truth, median};
-use skinbrdf_poses::{estimate_session, PoseConfig};
-use skinbrdf_session::write_json_atomic;
+use skinbrdf_poses::PoseConfig;
 use std::path::PathBuf;
 
 /// Flags of `skinbrdf poses`.
@@ -76,18 +75,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         recalibrate: args.recalibrate,
         ..PoseConfig::default()
     };
-    let est = estimate_session(&session, &cfg).context("estimating poses")?;
     let out = args
         .out
         .clone()
-        .unwrap_or_else(|| dir.join("out").join("poses.json"));
-    if let Some(dir) = out.parent() {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    write_json_atomic(&out, &est)?;
-    if let Some(cal) = &est.calibration {
-        let path = out.with_file_name("camera.toml");
-        write_camera_file(&path, cal, &dir)?;
+        .unwrap_or_else(|| dir.join("out").join(skinbrdf_pipeline::stages::POSES_FILE));
+    let (est, files) = skinbrdf_pipeline::stages::estimate_and_write_poses(&session, &cfg, &out)?;
+    if let Some(path) = &files.camera {
         eprintln!(
             "camera calibration written to {} (`skinbrdf ingest --camera`)",
             path.display()
@@ -281,30 +274,5 @@ fn bench_scenes(list: &str, args: &Args) -> anyhow::Result<()> {
     } else {
         print!("{}", skinbrdf_pipeline::scenes::markdown(&rows));
     }
-    Ok(())
-}
-
-/// Writes a calibration as a `[camera]` table (the `session.toml` format), the file
-/// `skinbrdf ingest --camera` reads.
-fn write_camera_file(
-    path: &std::path::Path,
-    cal: &skinbrdf_poses::calib::Calibration,
-    session: &std::path::Path,
-) -> anyhow::Result<()> {
-    #[derive(serde::Serialize)]
-    struct CameraFile {
-        camera: skinbrdf_session::CameraSpec,
-    }
-    let body = toml::to_string(&CameraFile {
-        camera: skinbrdf_session::CameraSpec::Calibrated(cal.camera),
-    })
-    .context("serialising the calibration")?;
-    let text = format!(
-        "# Camera calibration from the reference targets of {} ({} points, reprojection RMS {:.3} px).\n# The image size is the images' as loaded (2x2 superpixels for raw files).\n{body}",
-        session.display(),
-        cal.points,
-        cal.rms_px,
-    );
-    skinbrdf_session::write_atomic(path, text.as_bytes())?;
     Ok(())
 }

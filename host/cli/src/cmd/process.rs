@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use skinbrdf_pipeline::process::{process, Event, ProcessConfig};
 use skinbrdf_pipeline::report::StageStatus;
 use skinbrdf_pipeline::PlanOptions;
@@ -107,8 +106,8 @@ pub(crate) fn print_event(progress: &mut super::StageProgress, e: Event<'_>) {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let cfg = config(&args)?;
     let mut progress = super::StageProgress::default();
-    let out = process(&args.session, &cfg, &mut |e| print_event(&mut progress, e))
-        .with_context(|| format!("processing {}", args.session.display()))?;
+    // The errors name the session directory or the file at fault themselves.
+    let out = process(&args.session, &cfg, &mut |e| print_event(&mut progress, e))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&out.report)?);
     } else {

@@ -1,4 +1,4 @@
-//! Image formation.
+//! The synthetic photographer: image formation of the studio photographs.
 //!
 //! For every pixel, `n x n` stratified jittered rays (n = ceil(sqrt(samples_per_pixel)); one ray
 //! through the pixel centre when n = 1) are traced through the true camera (pinhole + Brown-
