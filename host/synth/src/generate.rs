@@ -354,6 +354,28 @@ fn generate_into(
         });
     }
     let renderer = Renderer::new(&scene, &rig)?;
+    // A target that moves mid-session: the shots from the move on see a second rig (and a
+    // renderer built from it); the per-image truth follows the rig each shot was rendered with.
+    let moved = match (&scene.studio.moved_target, opts.studio) {
+        (Some(m), true) => {
+            if !rig.reference.iter().any(|t| t.id == m.id) {
+                return Err(SynthError::Invalid {
+                    field: "studio.moved_target.id",
+                    problem: format!("{} is not a reference target", m.id),
+                });
+            }
+            let r = m.apply(&rig);
+            let ren = Renderer::new(&scene, &r)?;
+            Some((m.from_shot, r, ren))
+        }
+        _ => None,
+    };
+    let rig_of = |i: usize| -> (&Rig, &Renderer) {
+        match &moved {
+            Some((from, r, ren)) if i >= *from => (r, ren),
+            _ => (&rig, &renderer),
+        }
+    };
     std::fs::create_dir_all(dir).map_err(|source| skinbrdf_session::FileError::Io {
         path: dir.to_path_buf(),
         source,
@@ -472,15 +494,19 @@ fn generate_into(
             forehead_mask: mask("forehead", &r.forehead)?,
             targets_mask: mask("targets", &r.targets)?,
             standard_mask: mask("standard", &r.standard)?,
-            targets: target_truths(&renderer, &rig, shot, &rig.camera),
+            targets: {
+                let (rig_i, renderer_i) = rig_of(i);
+                target_truths(renderer_i, rig_i, shot, &rig.camera)
+            },
         };
         Ok((truth, t1.elapsed().as_secs_f64()))
     };
     let render_one = |i: usize| -> (Rendered, f64) {
         let t0 = Instant::now();
-        let r = renderer.render(
+        let (rig_i, renderer_i) = rig_of(i);
+        let r = renderer_i.render(
             &shots[i],
-            &rig,
+            rig_i,
             scene.seed.wrapping_mul(1000).wrapping_add(i as u64),
             true,
         );

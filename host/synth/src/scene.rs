@@ -36,6 +36,10 @@ pub const BUILTIN_SCENES: &[(&str, &str)] = &[
         "head-motion",
         include_str!("../../../scenes/head-motion.toml"),
     ),
+    (
+        "survey-moved",
+        include_str!("../../../scenes/survey-moved.toml"),
+    ),
 ];
 
 /// Largest image side, pixels (a 100-megapixel frame is 12000 px wide).

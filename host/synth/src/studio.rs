@@ -117,6 +117,9 @@ pub struct StudioScene {
     pub misfired_exposures: Vec<u32>,
     /// One exposure shot at another ISO (a photographer's slip), if any.
     pub exposure_change: Option<ExposureChange>,
+    /// One reference target whose tape slipped during the session, if any: rendered at its
+    /// placement up to `from_shot`, then moved (the survey must name it, not average it in).
+    pub moved_target: Option<MovedTarget>,
     /// File number of the first file on the card.
     pub first_file_number: u32,
     /// Shutter count of the first file on the card.
@@ -151,6 +154,35 @@ pub struct ExposureChange {
     pub iso: u32,
 }
 
+/// A reference target that moves during the session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MovedTarget {
+    /// Its tag36h11 id (a reference target that is not one of the declared origin targets).
+    pub id: u32,
+    /// The first shot (index in the rendered shot list) that sees it moved.
+    pub from_shot: usize,
+    /// Its centre's displacement, world frame, millimetres.
+    pub shift_mm: [f64; 3],
+    /// Its rotation about its own normal, degrees.
+    pub rotate_deg: f64,
+}
+
+impl MovedTarget {
+    /// The rig after the move: the target's corners shifted and turned about its centre.
+    pub fn apply(&self, rig: &Rig) -> Rig {
+        let mut moved = rig.clone();
+        for t in moved.reference.iter_mut().filter(|t| t.id == self.id) {
+            let c = t.centre();
+            let turn =
+                glam::DQuat::from_axis_angle(t.outward_normal(), self.rotate_deg.to_radians());
+            let shift = glam::DVec3::from_array(self.shift_mm) * 1e-3;
+            t.corners_m = t.corners_m.map(|p| c + shift + turn * (p - c));
+        }
+        moved
+    }
+}
+
 impl StudioScene {
     /// Every invariant violation, as `field: problem` strings.
     pub fn problems(&self) -> Vec<String> {
@@ -181,6 +213,11 @@ impl StudioScene {
                 "`studio.channel_gains` must be positive, got {:?}",
                 self.channel_gains
             ));
+        }
+        if let Some(m) = &self.moved_target {
+            if !(m.shift_mm.iter().all(|v| v.is_finite()) && m.rotate_deg.is_finite()) {
+                out.push("`studio.moved_target` shift and rotation must be finite".into());
+            }
         }
         if self.subsec_digits > 6 {
             out.push(format!(
