@@ -206,18 +206,7 @@ pub fn run_demo(
         on_event(DemoEvent::Step(
             "ingest: the card's raw files, the controller's record, the rig and the scan",
         ));
-        let studio = generated_dir.join(STUDIO_DIR);
-        let mut icfg = IngestConfig::new(
-            studio.join("card"),
-            studio.join("capture.json"),
-            studio.join("rig.toml"),
-            studio.join("scan").join("head.obj"),
-            session_dir.clone(),
-        );
-        // The lens calibration a studio holds from its own calibration shoot: the generated
-        // session's `[camera]` table (ingest reads nothing else of that file).
-        icfg.camera = Some(generated_dir.join("session.toml"));
-        icfg.scan_units = Some(scene.geometry.scan_units);
+        let mut icfg = studio_ingest_config(&generated_dir, &scene, session_dir.clone());
         icfg.overwrite = true;
         let report = ingest(&icfg)?;
         on_event(DemoEvent::Ingested(&report));
@@ -266,6 +255,24 @@ pub fn run_demo(
         report_path,
         total_s,
     })
+}
+
+/// The ingest of a synthetic studio from what a studio holds: the card, the controller's
+/// record, the rig nobody measured (`rig.toml`) and the textured scan in its scanner's frame,
+/// with the lens calibration a studio keeps from its own calibration shoot (the generated
+/// session's `[camera]` table: ingest reads nothing else of that file) and the scan's unit.
+pub fn studio_ingest_config(generated_dir: &Path, scene: &Scene, out_dir: PathBuf) -> IngestConfig {
+    let studio = generated_dir.join(STUDIO_DIR);
+    let mut cfg = IngestConfig::new(
+        studio.join("card"),
+        studio.join("capture.json"),
+        studio.join("rig.toml"),
+        studio.join("scan").join("head.obj"),
+        out_dir,
+    );
+    cfg.camera = Some(generated_dir.join("session.toml"));
+    cfg.scan_units = Some(scene.geometry.scan_units);
+    cfg
 }
 
 /// The record as the controller would have written it had the simulated session run in real

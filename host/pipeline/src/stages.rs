@@ -622,20 +622,6 @@ pub fn derender_stage(
     Ok((run, samples))
 }
 
-/// The poses `skinbrdf derender` was asked to use (`--poses`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum PoseRequest {
-    /// The session's when it gives every pose, else the pose stage's (as `process` does).
-    #[default]
-    Auto,
-    /// Only the session's.
-    Session,
-    /// The pose stage's output.
-    Estimated,
-    /// The ground truth of a synthetic session (a check of derendering alone).
-    Truth,
-}
-
 /// Where derendering takes its poses from, once chosen.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum PoseSourceChoice {
@@ -647,23 +633,23 @@ pub enum PoseSourceChoice {
     Truth,
 }
 
-/// Chooses the pose source for a request: `Auto` takes the session's poses when it gives every
+/// Chooses the pose source for `skinbrdf derender --poses`: `Auto` takes the session's poses when it gives every
 /// one (camera poses, and head poses or a stationary sample), else the pose stage's
 /// `poses_file`; `Estimated` needs `poses_file`. A missing pose-stage file is
 /// [`ProcessError::NoPoses`], which says which command to run.
 pub fn choose_pose_source(
     session: &Session,
-    request: PoseRequest,
+    request: PoseChoice,
     poses_file: &Path,
 ) -> Result<PoseSourceChoice, ProcessError> {
     let facts = crate::process::scene_facts(session);
     let session_has_poses =
         facts.camera_poses_known && (facts.head_poses_known || facts.stationary_sample);
     match request {
-        PoseRequest::Truth => Ok(PoseSourceChoice::Truth),
-        PoseRequest::Session => Ok(PoseSourceChoice::Session),
-        PoseRequest::Auto if session_has_poses => Ok(PoseSourceChoice::Session),
-        PoseRequest::Auto | PoseRequest::Estimated => {
+        PoseChoice::Truth => Ok(PoseSourceChoice::Truth),
+        PoseChoice::Session => Ok(PoseSourceChoice::Session),
+        PoseChoice::Auto if session_has_poses => Ok(PoseSourceChoice::Session),
+        PoseChoice::Auto | PoseChoice::Estimated => {
             if poses_file.is_file() {
                 Ok(PoseSourceChoice::Estimated(poses_file.to_path_buf()))
             } else {
@@ -1235,7 +1221,7 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let file = dir.path().join(POSES_FILE);
         let s = session(KnownQuantities::default());
-        match choose_pose_source(&s, PoseRequest::Auto, &file) {
+        match choose_pose_source(&s, PoseChoice::Auto, &file) {
             Err(ProcessError::NoPoses { dir, poses }) => {
                 assert_eq!(dir, s.dir);
                 assert_eq!(poses, file);
@@ -1243,7 +1229,7 @@ mod tests {
             other => panic!("expected NoPoses, got {other:?}"),
         }
         std::fs::write(&file, "{}").expect("write");
-        for request in [PoseRequest::Auto, PoseRequest::Estimated] {
+        for request in [PoseChoice::Auto, PoseChoice::Estimated] {
             assert_eq!(
                 choose_pose_source(&s, request, &file).expect("a source"),
                 PoseSourceChoice::Estimated(file.clone())
@@ -1258,13 +1244,13 @@ mod tests {
         std::fs::write(&file, "{}").expect("write");
         let s = posed_session();
         let choose = |r| choose_pose_source(&s, r, &file).expect("a source");
-        assert_eq!(choose(PoseRequest::Auto), PoseSourceChoice::Session);
-        assert_eq!(choose(PoseRequest::Session), PoseSourceChoice::Session);
+        assert_eq!(choose(PoseChoice::Auto), PoseSourceChoice::Session);
+        assert_eq!(choose(PoseChoice::Session), PoseSourceChoice::Session);
         assert_eq!(
-            choose(PoseRequest::Estimated),
+            choose(PoseChoice::Estimated),
             PoseSourceChoice::Estimated(file.clone())
         );
-        assert_eq!(choose(PoseRequest::Truth), PoseSourceChoice::Truth);
+        assert_eq!(choose(PoseChoice::Truth), PoseSourceChoice::Truth);
     }
 
     #[test]

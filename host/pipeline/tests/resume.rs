@@ -211,7 +211,8 @@ fn assert_report_matches_files(out: &ProcessOutput) {
 #[test]
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn resume_sees_the_scan_a_mask_and_a_hand_run_derender() {
-    use skinbrdf_pipeline::stages::{self, DerenderOutputOptions, PoseRequest};
+    use skinbrdf_pipeline::pose_inputs::PoseChoice;
+    use skinbrdf_pipeline::stages::{self, DerenderOutputOptions};
     use skinbrdf_pipeline::{Plan, PlanOptions};
 
     let dir = tempfile::tempdir().expect("tempdir");
@@ -265,7 +266,7 @@ fn resume_sees_the_scan_a_mask_and_a_hand_run_derender() {
     dcfg.stride = 4;
     let dcfg = stages::planned_derender_config(&dcfg, &plan, &plan_opts);
     let source =
-        stages::choose_pose_source(&loaded, PoseRequest::Auto, &out.join(stages::POSES_FILE))
+        stages::choose_pose_source(&loaded, PoseChoice::Auto, &out.join(stages::POSES_FILE))
             .expect("the pose stage's poses");
     let by_hand = stages::derender_chosen(
         &loaded,

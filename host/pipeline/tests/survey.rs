@@ -10,7 +10,8 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use glam::DVec3;
-use skinbrdf_ingest::{ingest, IngestConfig};
+use skinbrdf_ingest::ingest;
+use skinbrdf_pipeline::demo::studio_ingest_config;
 use skinbrdf_pipeline::process::{bounds, process, ProcessConfig};
 use skinbrdf_poses::{HeadGauge, Survey};
 use skinbrdf_session::{Session, TargetGroup};
@@ -82,15 +83,7 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
     let s2 = dir.path().join("S2");
     // What a studio holds: the card, the record, a rig nobody measured and the textured scan
     // in its scanner's frame. The camera's calibration is the PNG session's.
-    let mut cfg = IngestConfig::new(
-        st.join("card"),
-        st.join("capture.json"),
-        st.join("rig.toml"),
-        st.join("scan").join("head.obj"),
-        s2.clone(),
-    );
-    cfg.camera = Some(s.join("session.toml"));
-    cfg.scan_units = Some(scene.geometry.scan_units);
+    let cfg = studio_ingest_config(&s, &scene, s2.clone());
     ingest(&cfg).expect("ingest");
     let session = Session::load(&s2).expect("session");
     assert!(!session.file.targets.unplaced.is_empty());

@@ -10,7 +10,8 @@
 use std::collections::HashMap;
 
 use glam::DVec3;
-use skinbrdf_ingest::{ingest, IngestConfig};
+use skinbrdf_ingest::ingest;
+use skinbrdf_pipeline::demo::studio_ingest_config;
 use skinbrdf_poses::{survey, SurveyConfig, SurveyIssue};
 use skinbrdf_session::{Session, TargetGroup};
 use skinbrdf_synth::studio::STUDIO_DIR;
@@ -47,15 +48,7 @@ fn a_target_moved_mid_session_is_named_and_left_out() {
     .expect("synthesis");
     let st = s.join(STUDIO_DIR);
     let s2 = dir.path().join("S2");
-    let mut cfg = IngestConfig::new(
-        st.join("card"),
-        st.join("capture.json"),
-        st.join("rig.toml"),
-        st.join("scan").join("head.obj"),
-        s2.clone(),
-    );
-    cfg.camera = Some(s.join("session.toml"));
-    cfg.scan_units = Some(scene.geometry.scan_units);
+    let cfg = studio_ingest_config(&s, &scene, s2.clone());
     ingest(&cfg).expect("ingest");
     let session = Session::load(&s2).expect("session");
     let sv = survey(&session, &SurveyConfig::default()).expect("survey");

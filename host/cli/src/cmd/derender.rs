@@ -5,8 +5,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use skinbrdf_derender::{CEstimator, DerenderConfig, ShadowMode};
 use skinbrdf_mesh::NormalMethod;
+use skinbrdf_pipeline::pose_inputs::PoseChoice;
 use skinbrdf_pipeline::process::scene_facts;
-use skinbrdf_pipeline::stages::{DerenderOutputOptions, PoseRequest, PoseSourceChoice};
+use skinbrdf_pipeline::stages::{DerenderOutputOptions, PoseSourceChoice};
 use skinbrdf_pipeline::{stages, Plan, PlanOptions};
 
 /// Flags of `skinbrdf derender`.
@@ -174,10 +175,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("--no-target-mask is only for --poses truth (a check of the mask itself)");
     }
     let request = match choice {
-        Poses::Auto => PoseRequest::Auto,
-        Poses::Session => PoseRequest::Session,
-        Poses::Estimated => PoseRequest::Estimated,
-        Poses::Truth => PoseRequest::Truth,
+        Poses::Auto => PoseChoice::Auto,
+        Poses::Session => PoseChoice::Session,
+        Poses::Estimated => PoseChoice::Estimated,
+        Poses::Truth => PoseChoice::Truth,
     };
     let source = stages::choose_pose_source(&session, request, &poses_file)?;
     let opts = DerenderOutputOptions {
