@@ -218,6 +218,14 @@ fn validate_group(_index: usize, g: &ShotGroup) -> Result<(), (&'static str, Str
             ),
         ));
     }
+    if !g.role.fired_by_controller() {
+        return Err((
+            "role",
+            "survey images are taken by hand before the subject sits (room light, no \
+             flash), not fired by the controller: give them to `skinbrdf ingest --survey DIR`"
+                .into(),
+        ));
+    }
     if g.count == 0 {
         return Err(("count", "a group must have at least one shot".into()));
     }
@@ -393,6 +401,14 @@ flash_mode = "controller-on-xsync"
         let text = GOOD.replace("count = 30", "count = 0");
         let msg = parse_plan(&text, origin()).expect_err("zero").to_string();
         assert!(msg.contains("groups[0] (\"measurement\").count"), "{msg}");
+    }
+
+    #[test]
+    fn a_survey_group_is_refused_naming_the_group() {
+        let text = GOOD.replace("role = \"measurement\"", "role = \"survey\"");
+        let msg = parse_plan(&text, origin()).expect_err("survey").to_string();
+        assert!(msg.contains("groups[0] (\"measurement\").role"), "{msg}");
+        assert!(msg.contains("--survey"), "{msg}");
     }
 
     #[test]

@@ -375,6 +375,14 @@ pub fn to_protocol_plan(
                 ImageRole::LightPosition => proto::ImageRole::LightPosition,
                 ImageRole::ReferenceStandard => proto::ImageRole::ReferenceStandard,
                 ImageRole::StandardPosition => proto::ImageRole::StandardPosition,
+                // `validate_plan` refuses such a group; kept an error here too.
+                ImageRole::Survey => {
+                    return Err(PlanError::Invalid {
+                        path: origin.to_path_buf(),
+                        location: format!("group {:?}.role", g.label),
+                        problem: "survey images are not fired by the controller".into(),
+                    })
+                }
             },
             count: g.count,
             min_interval_us: g.min_interval_us,

@@ -4,7 +4,9 @@
 //! # Steps
 //!
 //! 1. **Read the inputs**: `capture.json`, the rig file ([`skinbrdf_session::Rig`]), the scan
-//!    (PLY or OBJ, loaded once to check it; an OBJ's material and texture files come along),
+//!    (PLY, OBJ, binary glTF or `.gltf`, loaded once to check it; an OBJ's material and texture
+//!    files and a `.gltf`'s external buffers and images come along, at the same relative
+//!    paths),
 //!    the camera calibration when one is given.
 //! 2. **List the card**: every file under the card directory, by content
 //!    ([`skinbrdf_raw::sniff`]): camera raw files, JPEG and TIFF are photographs; anything else
@@ -28,19 +30,32 @@
 //!    with `overwrite`, and kept until the new one is in place). On any error nothing is
 //!    written.
 //!
+//! **Survey images** (`survey_dir`, `skinbrdf ingest --survey DIR`): shots taken by hand
+//! before the subject sits (room light, no flash, not fired by the controller, so not in the
+//! record) to strengthen the placement survey's geometry. Every photograph in the folder (the
+//! card's content sniffing and metadata) becomes an image with role `survey` and no exposure
+//! index. They must come from the session's camera body (a known serial other than the
+//! session's is refused naming the file) with its lens and focal length (the intrinsics are
+//! shared), and load at the session's image size; their exposure is not compared with the
+//! flash images' (they serve the geometry only, never the radiometry). The session lists the
+//! images in the order they were taken (camera time): the survey images taken before the
+//! session's first file, then the session's, then any taken after; the placement survey reads
+//! a body's views in that order.
+//!
 //! Images are referenced where they are (a path relative to the session directory) unless
-//! `copy` is set; they are never converted.
+//! `copy` is set (survey images then go to [`SURVEY_IMAGES_DIR`]: a survey file may share a
+//! card file's name); they are never converted.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Component, Path, PathBuf};
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use skinbrdf_raw::{ExposureMeta, FileKind, RawError};
+use skinbrdf_raw::{CaptureTime, ExposureMeta, FileKind, RawError};
 use skinbrdf_session::capture::CaptureRecord;
 use skinbrdf_session::{
-    CameraSpec, GeometrySpec, ImageEntry, ImageRole, LengthUnit, Linearization, Rig, Session,
-    SessionErrors, SessionFile, SESSION_FORMAT_VERSION,
+    CameraSpec, GeometrySpec, ImageEntry, ImageRole, LengthUnit, Linearization, RegistrationFit,
+    RegistrationSpec, Rig, Session, SessionErrors, SessionFile, SESSION_FORMAT_VERSION,
 };
 
 use crate::matching::{
@@ -67,10 +82,18 @@ pub struct IngestConfig {
     pub capture: PathBuf,
     /// The rig file.
     pub rig: PathBuf,
-    /// The head scan (PLY or OBJ).
-    pub scan: PathBuf,
-    /// The scan's length unit; `None`: from the PLY header's comment, else an error.
+    /// The head scan (PLY, OBJ, `.glb` or `.gltf`); `None` when the rig states the sample's
+    /// ideal shape (a calibration sphere or cylinder).
+    pub scan: Option<PathBuf>,
+    /// The scan's length unit; `None`: from the PLY or OBJ header's comment (glTF: metres, by
+    /// specification), else an error.
     pub scan_units: Option<LengthUnit>,
+    /// Hand-picked target corners on the scan (a `[[points]]` file, see
+    /// `skinbrdf_register::points`): the survey's headdress is registered to the scan by them
+    /// instead of by the scan's texture (a scan without one).
+    pub scan_points: Option<PathBuf>,
+    /// The registration's fit: rigid, or a similarity.
+    pub registration_fit: RegistrationFit,
     /// A camera calibration (a TOML file with a `[camera]` table as in `session.toml`).
     pub camera: Option<PathBuf>,
     /// The session directory to write.
@@ -83,6 +106,8 @@ pub struct IngestConfig {
     pub exposure: ExposurePolicy,
     /// Matching tolerances.
     pub matching: MatchOptions,
+    /// A folder of survey images (see the module docs), searched recursively.
+    pub survey_dir: Option<PathBuf>,
 }
 
 impl IngestConfig {
@@ -91,21 +116,24 @@ impl IngestConfig {
         card_dir: PathBuf,
         capture: PathBuf,
         rig: PathBuf,
-        scan: PathBuf,
+        scan: impl Into<Option<PathBuf>>,
         out_dir: PathBuf,
     ) -> Self {
         Self {
             card_dir,
             capture,
             rig,
-            scan,
+            scan: scan.into(),
             scan_units: None,
+            scan_points: None,
+            registration_fit: RegistrationFit::Rigid,
             camera: None,
             out_dir,
             copy: false,
             overwrite: false,
             exposure: ExposurePolicy::Refuse,
             matching: MatchOptions::default(),
+            survey_dir: None,
         }
     }
 }
@@ -169,6 +197,20 @@ pub struct IngestedImage {
     pub time_residual_s: f64,
 }
 
+/// One survey image of the written session (role `survey`, no exposure).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IngestedSurveyImage {
+    /// The file as `session.toml` names it.
+    pub file: String,
+    /// The photograph in the survey folder.
+    pub source_file: PathBuf,
+    /// Its exposure settings, when the metadata has them (not compared with the session's).
+    pub settings: Option<ExposureSettings>,
+    /// Whether it was taken before the session's first file (by the camera's clock; one
+    /// without a time counts as before).
+    pub before_session: bool,
+}
+
 /// Where the camera's intrinsics come from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", tag = "source")]
@@ -189,6 +231,9 @@ pub struct IngestReport {
     pub session_dir: PathBuf,
     /// The session's images, in exposure order.
     pub images: Vec<IngestedImage>,
+    /// The survey images (`--survey`), in the order they were taken.
+    #[serde(default)]
+    pub survey_images: Vec<IngestedSurveyImage>,
     /// The matching: the camera clock fit, extra files, missing exposures.
     pub matching: Matching,
     /// Files on the card that are not photographs, with what they are.
@@ -295,6 +340,24 @@ pub enum IngestError {
         /// The directory.
         dir: PathBuf,
     },
+    /// A survey image was taken with another camera body than the session's.
+    #[error("{}: a survey image from body {serial}, but the session's body is {expected}: survey images must come from the session's camera (its intrinsics)", file.display())]
+    SurveyFromAnotherBody {
+        /// The survey image.
+        file: PathBuf,
+        /// Its body serial.
+        serial: String,
+        /// The session's.
+        expected: String,
+    },
+    /// A survey image is one of the session's own files.
+    #[error("{}: given as a survey image, but it is the card's file of exposure {exposure_index}", file.display())]
+    SurveyIsSessionFile {
+        /// The file.
+        file: PathBuf,
+        /// The exposure it was matched to.
+        exposure_index: u32,
+    },
     /// The written session does not load (a bug: the ingest's own output must load).
     #[error("the written session does not load")]
     Session {
@@ -317,7 +380,45 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     let record = read_capture(&cfg.capture)?;
     let rig = Rig::load(&cfg.rig).map_err(|source| IngestError::Rig { source })?;
     let parts = rig.session_parts();
-    let (scan_units, scan_files) = check_scan(&cfg.scan, cfg.scan_units)?;
+    let shape = match (&cfg.scan, &rig.file.geometry) {
+        (Some(scan), None) => {
+            let (units, files) = check_scan(scan, cfg.scan_units)?;
+            Shape::Scan {
+                path: scan.clone(),
+                units,
+                files,
+            }
+        }
+        (None, Some(g)) => Shape::Ideal(g.clone()),
+        (Some(_), Some(_)) => {
+            return Err(IngestError::Input {
+                path: cfg.rig.clone(),
+                problem: "the rig states the sample's ideal shape ([geometry]) and a scan was \
+                          given: give one of them"
+                    .into(),
+            })
+        }
+        (None, None) => {
+            return Err(IngestError::Input {
+                path: cfg.rig.clone(),
+                problem: "no scan was given and the rig states no ideal shape ([geometry]): \
+                          give the head scan"
+                    .into(),
+            })
+        }
+    };
+    if let Some(p) = &cfg.scan_points {
+        if cfg.scan.is_none() {
+            return Err(IngestError::Input {
+                path: p.clone(),
+                problem: "registration points are corners on a scan, and no scan was given".into(),
+            });
+        }
+        skinbrdf_register::load_point_pairs(p).map_err(|e| IngestError::Input {
+            path: p.clone(),
+            problem: skinbrdf_core::error_text(&e),
+        })?;
+    }
     let camera_file = cfg.camera.as_deref().map(read_camera).transpose()?;
     if cfg.out_dir.join("session.toml").exists() && !cfg.overwrite {
         return Err(IngestError::OutputExists {
@@ -347,8 +448,14 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
         .filter_map(|pair| by_name.get(pair.file.as_str()).map(|p| (pair, *p)))
         .collect();
 
-    // 5. One camera.
+    // 5. One camera, the survey images' included.
     check_one_camera(&m, &matched, &shots)?;
+    let (survey, survey_skipped) = match &cfg.survey_dir {
+        Some(dir) => survey_photos(dir, &matched)?,
+        None => (Vec::new(), Vec::new()),
+    };
+    let mut skipped_files = skipped_files;
+    skipped_files.extend(survey_skipped);
 
     // 6. Exposure.
     let reference = matched
@@ -392,9 +499,18 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
         .par_iter()
         .map(|(_, p)| decoded_size(&p.path))
         .collect::<Result<_, _>>()?;
+    let survey_sizes: Vec<(u32, u32)> = survey
+        .par_iter()
+        .map(|p| decoded_size(&p.path))
+        .collect::<Result<_, _>>()?;
     let decode_s = t_decode.elapsed().as_secs_f64();
     let image_size_px = sizes.first().copied().unwrap_or((0, 0));
-    if let Some((k, s)) = sizes.iter().enumerate().find(|(_, s)| **s != image_size_px) {
+    let all_paths = matched
+        .iter()
+        .map(|(_, p)| &p.path)
+        .chain(survey.iter().map(|p| &p.path));
+    let all_sizes = sizes.iter().chain(&survey_sizes);
+    if let Some((path, s)) = all_paths.zip(all_sizes).find(|(_, s)| **s != image_size_px) {
         return Err(IngestError::CameraChanged {
             what: "image size",
             files: vec![
@@ -404,7 +520,7 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
                     image_size_px.0,
                     image_size_px.1
                 ),
-                format!("  {}: {}x{}", matched[k].1.path.display(), s.0, s.1),
+                format!("  {}: {}x{}", path.display(), s.0, s.1),
             ],
         });
     }
@@ -442,18 +558,9 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     };
     let staging = staging_dir(&cfg.out_dir)?;
     let result = write_session(
-        cfg,
-        &staging,
-        &record,
-        &rig,
-        parts,
-        &matched,
-        &scales,
-        camera,
-        scan_units,
-        &scan_files,
+        cfg, &staging, &record, &rig, parts, &matched, &scales, &survey, camera, &shape,
     );
-    let images = match result {
+    let (images, survey_images) = match result {
         Ok(images) => images,
         Err(e) => {
             let _ = std::fs::remove_dir_all(&staging);
@@ -464,6 +571,7 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     let mut report = IngestReport {
         session_dir: cfg.out_dir.clone(),
         images,
+        survey_images,
         matching: m,
         skipped_files,
         camera_body: body
@@ -574,19 +682,28 @@ fn read_capture(path: &Path) -> Result<CaptureRecord, IngestError> {
     Ok(rec)
 }
 
-/// The scan's unit and the files that come with it (an OBJ's material library and textures).
+/// A file that comes with the scan: where it is, and where it goes relative to the session
+/// directory (beside the scan, so the scan's own references still resolve).
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct ScanCompanion {
+    source: PathBuf,
+    relative: PathBuf,
+}
+
+/// The scan's unit and the files that come with it (an OBJ's material library and textures, a
+/// glTF's external buffers and images).
 fn check_scan(
     path: &Path,
     units: Option<LengthUnit>,
-) -> Result<(LengthUnit, Vec<PathBuf>), IngestError> {
+) -> Result<(LengthUnit, Vec<ScanCompanion>), IngestError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
-    if !matches!(ext.as_deref(), Some("ply" | "obj")) {
+    if !matches!(ext.as_deref(), Some("ply" | "obj" | "glb" | "gltf")) {
         return Err(IngestError::Input {
             path: path.to_path_buf(),
-            problem: "a scan must be a .ply or .obj file".into(),
+            problem: "a scan must be a .ply, .obj, .glb or .gltf file".into(),
         });
     }
     skinbrdf_mesh::load_mesh(path, &skinbrdf_mesh::LoadOptions::default()).map_err(|source| {
@@ -595,6 +712,46 @@ fn check_scan(
             source,
         }
     })?;
+    if matches!(ext.as_deref(), Some("glb" | "gltf")) {
+        // glTF states its unit: metres, unless the caller says the exporter did otherwise.
+        let mut extra = Vec::new();
+        let files =
+            skinbrdf_mesh::gltf_external_files(path).map_err(|source| IngestError::Scan {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        for (uri, file) in files {
+            let relative = PathBuf::from(&uri);
+            // A relative path below the scan's folder (not `file:` nor climbing out with `..`).
+            let inside = !uri.contains(':')
+                && relative
+                    .components()
+                    .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+            if !inside {
+                return Err(IngestError::Input {
+                    path: path.to_path_buf(),
+                    problem: format!(
+                        "the glTF refers to `{uri}`, outside its folder: a session holds its \
+                         scan's files beside it (move the file next to the scan and edit the uri)"
+                    ),
+                });
+            }
+            if !file.is_file() {
+                return Err(IngestError::Input {
+                    path: path.to_path_buf(),
+                    problem: format!(
+                        "the glTF refers to `{}`, which does not exist",
+                        file.display()
+                    ),
+                });
+            }
+            extra.push(ScanCompanion {
+                source: file,
+                relative,
+            });
+        }
+        return Ok((units.unwrap_or(LengthUnit::M), extra));
+    }
     let head = std::fs::read(path).map_err(io(path))?;
     let text = String::from_utf8_lossy(&head[..head.len().min(64 * 1024)]).into_owned();
     let stated = units.or_else(|| units_in_header(&text));
@@ -605,13 +762,17 @@ fn check_scan(
         });
     };
     let mut extra = Vec::new();
+    let beside = |p: &Path| ScanCompanion {
+        source: p.to_path_buf(),
+        relative: p.file_name().map(PathBuf::from).unwrap_or_default(),
+    };
     if ext.as_deref() == Some("obj") {
         let dir = path.parent().unwrap_or(Path::new("."));
         for line in text.lines() {
             if let Some(mtl) = line.strip_prefix("mtllib ") {
                 let mtl_path = dir.join(mtl.trim());
                 let mtl_text = std::fs::read_to_string(&mtl_path).map_err(io(&mtl_path))?;
-                extra.push(mtl_path.clone());
+                extra.push(beside(&mtl_path));
                 for l in mtl_text.lines() {
                     let l = l.trim();
                     if let Some(rest) = l.strip_prefix("map_Kd ") {
@@ -622,7 +783,7 @@ fn check_scan(
                                 problem: format!("texture `{}` does not exist", tex.display()),
                             });
                         }
-                        extra.push(tex);
+                        extra.push(beside(&tex));
                     }
                 }
             }
@@ -821,6 +982,12 @@ fn check_one_camera(
             files: during,
         });
     }
+    check_same_camera(&matched.iter().map(|(_, p)| *p).collect::<Vec<_>>())
+}
+
+/// A body, lens or focal-length difference among `photos` is refused, listing each value with
+/// its files.
+fn check_same_camera(photos: &[&CardPhoto]) -> Result<(), IngestError> {
     type Field = fn(&ExposureMeta) -> Option<String>;
     let fields: [(&'static str, Field); 4] = [
         ("body", |m| {
@@ -839,7 +1006,7 @@ fn check_one_camera(
     ];
     for (what, field) in fields {
         let mut values: BTreeMap<String, Vec<&str>> = BTreeMap::new();
-        for (_, p) in matched {
+        for p in photos {
             if let Some(v) = field(&p.meta) {
                 values.entry(v).or_default().push(p.name.as_str());
             }
@@ -855,6 +1022,64 @@ fn check_one_camera(
         }
     }
     Ok(())
+}
+
+/// The survey folder's photographs, in the order they were taken (camera time; one without a
+/// time first), with its other files: each from the session's body (a known serial other than
+/// the matched files' is refused naming the file) with the same lens and focal length, and none
+/// of them a file matched to an exposure.
+fn survey_photos(
+    dir: &Path,
+    matched: &[(&matching::MatchedPair, &CardPhoto)],
+) -> Result<(Vec<CardPhoto>, SkippedFiles), IngestError> {
+    let (mut photos, skipped) = list_card(dir)?;
+    let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    for p in &photos {
+        let c = canonical(&p.path);
+        if let Some((pair, _)) = matched.iter().find(|(_, m)| canonical(&m.path) == c) {
+            return Err(IngestError::SurveyIsSessionFile {
+                file: p.path.clone(),
+                exposure_index: pair.exposure_index,
+            });
+        }
+    }
+    if let Some(expected) = matched.iter().find_map(|(_, p)| p.meta.body_serial.clone()) {
+        if let Some((p, serial)) = photos.iter().find_map(|p| {
+            p.meta
+                .body_serial
+                .as_ref()
+                .filter(|s| **s != expected)
+                .map(|s| (p, s.clone()))
+        }) {
+            return Err(IngestError::SurveyFromAnotherBody {
+                file: p.path.clone(),
+                serial,
+                expected,
+            });
+        }
+    }
+    let all: Vec<&CardPhoto> = matched
+        .iter()
+        .map(|(_, p)| *p)
+        .chain(photos.iter())
+        .collect();
+    check_same_camera(&all)?;
+    photos.sort_by(|a, b| {
+        taken_s(a)
+            .unwrap_or(f64::NEG_INFINITY)
+            .total_cmp(&taken_s(b).unwrap_or(f64::NEG_INFINITY))
+            .then_with(|| a.name.cmp(&b.name))
+    });
+    let skipped = skipped
+        .into_iter()
+        .map(|(f, why)| (format!("survey: {f}"), why))
+        .collect();
+    Ok((photos, skipped))
+}
+
+/// When a photograph was taken, seconds on the camera's own clock.
+fn taken_s(p: &CardPhoto) -> Option<f64> {
+    p.meta.capture_time.as_ref().map(CaptureTime::naive_seconds)
 }
 
 /// The size of a photograph as the session loads it (superpixels for raw files).
@@ -906,25 +1131,15 @@ fn move_into_place(staging: &Path, out: &Path) -> Result<(), IngestError> {
     Ok(())
 }
 
-/// `target` as a path relative to `base` when they share a root (else `target` absolute).
-fn relative_to(target: &Path, base: &Path) -> PathBuf {
-    let (Ok(t), Ok(b)) = (std::fs::canonicalize(target), std::fs::canonicalize(base)) else {
-        return target.to_path_buf();
-    };
-    let tc: Vec<Component<'_>> = t.components().collect();
-    let bc: Vec<Component<'_>> = b.components().collect();
-    let common = tc.iter().zip(&bc).take_while(|(a, b)| a == b).count();
-    if common == 0 {
-        return t;
-    }
-    let mut rel = PathBuf::new();
-    for _ in common..bc.len() {
-        rel.push("..");
-    }
-    for c in &tc[common..] {
-        rel.push(c.as_os_str());
-    }
-    rel
+/// The sample's shape: a scan with its unit and companion files, or the rig's ideal shape.
+#[derive(Debug)]
+enum Shape {
+    Scan {
+        path: PathBuf,
+        units: LengthUnit,
+        files: Vec<ScanCompanion>,
+    },
+    Ideal(GeometrySpec),
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -936,10 +1151,10 @@ fn write_session(
     parts: skinbrdf_session::SessionParts,
     matched: &[(&matching::MatchedPair, &CardPhoto)],
     scales: &[f64],
+    survey: &[CardPhoto],
     camera: CameraSpec,
-    scan_units: LengthUnit,
-    scan_files: &[PathBuf],
-) -> Result<Vec<IngestedImage>, IngestError> {
+    shape: &Shape,
+) -> Result<(Vec<IngestedImage>, Vec<IngestedSurveyImage>), IngestError> {
     // The images: copied into images/, or referenced where they are, relative to the final
     // directory (a sibling of the staging directory, so the same relative path).
     let final_dir = cfg
@@ -952,28 +1167,69 @@ fn write_session(
     if cfg.copy {
         std::fs::create_dir_all(staging.join("images")).map_err(io(staging))?;
     }
-    for ((pair, photo), &scale) in matched.iter().zip(scales) {
-        let file = if cfg.copy {
+    // A photograph copied into `folder`, or referenced where it is.
+    let place = |photo: &CardPhoto, folder: &str| -> Result<String, IngestError> {
+        if cfg.copy {
             let base = photo
                 .path
                 .file_name()
                 .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_else(|| pair.file.clone());
-            let rel = format!("images/{base}");
+                .unwrap_or_else(|| photo.name.clone());
+            let rel = format!("{folder}/{base}");
             let dst = staging.join(&rel);
+            if let Some(parent) = dst.parent() {
+                std::fs::create_dir_all(parent).map_err(io(parent))?;
+            }
             std::fs::copy(&photo.path, &dst).map_err(io(&photo.path))?;
-            rel
+            Ok(rel)
         } else {
-            let rel_to_parent = relative_to(&photo.path, &final_dir);
-            if rel_to_parent.is_absolute() {
+            let rel_to_parent = skinbrdf_session::write::relative_path(&photo.path, &final_dir);
+            Ok(if rel_to_parent.is_absolute() {
                 rel_to_parent.to_string_lossy().into_owned()
             } else {
                 Path::new("..")
                     .join(rel_to_parent)
                     .to_string_lossy()
                     .replace('\\', "/")
-            }
+            })
+        }
+    };
+    // Survey images in the order taken: those before the session's first file lead.
+    let first_s = matched
+        .iter()
+        .filter_map(|(_, p)| taken_s(p))
+        .fold(f64::INFINITY, f64::min);
+    let mut survey_images = Vec::new();
+    let mut survey_entries = (Vec::new(), Vec::new());
+    for photo in survey {
+        let before = taken_s(photo).is_none_or(|t| t < first_s);
+        // Their own folder when copied: survey and card files may share a name.
+        let file = place(photo, SURVEY_IMAGES_DIR)?;
+        let entry = ImageEntry {
+            file: file.clone(),
+            role: ImageRole::Survey,
+            exposure_index: None,
+            linearization: None,
+            mask: None,
+            world_from_camera: None,
+            world_from_head: None,
+            exposure_scale: None,
         };
+        if before {
+            survey_entries.0.push(entry);
+        } else {
+            survey_entries.1.push(entry);
+        }
+        survey_images.push(IngestedSurveyImage {
+            file,
+            source_file: photo.path.clone(),
+            settings: settings_of(&photo.meta),
+            before_session: before,
+        });
+    }
+    entries.append(&mut survey_entries.0);
+    for ((pair, photo), &scale) in matched.iter().zip(scales) {
+        let file = place(photo, "images")?;
         entries.push(ImageEntry {
             file: file.clone(),
             role: pair.role,
@@ -994,18 +1250,47 @@ fn write_session(
             time_residual_s: pair.residual_s,
         });
     }
-    // The scan and what comes with it.
-    let scan_name = cfg
-        .scan
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "scan.ply".into());
-    std::fs::copy(&cfg.scan, staging.join(&scan_name)).map_err(io(&cfg.scan))?;
-    for f in scan_files {
-        if let Some(n) = f.file_name() {
-            std::fs::copy(f, staging.join(n)).map_err(io(f))?;
+    entries.append(&mut survey_entries.1);
+    // The scan and what comes with it, or the rig's ideal shape.
+    let geometry = match shape {
+        Shape::Scan { path, units, files } => {
+            let scan_name = path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "scan.ply".into());
+            std::fs::copy(path, staging.join(&scan_name)).map_err(io(path))?;
+            for f in files {
+                let to = staging.join(&f.relative);
+                if let Some(parent) = to.parent() {
+                    std::fs::create_dir_all(parent).map_err(io(parent))?;
+                }
+                std::fs::copy(&f.source, &to).map_err(io(&f.source))?;
+            }
+            GeometrySpec::Scan {
+                file: scan_name,
+                units: *units,
+                accept_repair_loss: None,
+            }
         }
-    }
+        Shape::Ideal(g) => g.clone(),
+    };
+    // The registration's points come along beside the scan.
+    let points = match &cfg.scan_points {
+        Some(p) => {
+            let name = p
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "scan-points.toml".into());
+            std::fs::copy(p, staging.join(&name)).map_err(io(p))?;
+            Some(name)
+        }
+        None => None,
+    };
+    let registration = (points.is_some() || cfg.registration_fit != RegistrationFit::Rigid)
+        .then_some(RegistrationSpec {
+            points,
+            fit: cfg.registration_fit,
+        });
     // The capture record, with each exposure's image.
     let mut rec = record.clone();
     for e in &mut rec.exposures {
@@ -1034,20 +1319,20 @@ fn write_session(
         targets: parts.targets,
         flash: parts.flash,
         standard: parts.standard,
-        geometry: GeometrySpec::Scan {
-            file: scan_name,
-            units: scan_units,
-            accept_repair_loss: None,
-        },
+        geometry,
         roi: rig.file.roi,
         known: Default::default(),
+        registration,
     };
     Session::write_file(staging, &session).map_err(|e| IngestError::Input {
         path: staging.join("session.toml"),
         problem: skinbrdf_core::error_text(&e),
     })?;
-    Ok(images)
+    Ok((images, survey_images))
 }
+
+/// Where `--copy` puts the survey images inside the session.
+pub const SURVEY_IMAGES_DIR: &str = "images/survey";
 
 #[cfg(test)]
 mod tests {
@@ -1080,15 +1365,5 @@ mod tests {
         assert!(!a.same_as(&c));
         assert!((c.factor() / a.factor() - 2.0).abs() < 1e-12);
         assert_eq!(a.to_string(), "1/125 s, f/11, ISO 100");
-    }
-
-    #[test]
-    fn relative_paths_climb_to_the_common_root() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let card = dir.path().join("S/studio/card");
-        std::fs::create_dir_all(&card).expect("mkdir");
-        std::fs::write(card.join("a.dng"), b"x").expect("write");
-        let rel = relative_to(&card.join("a.dng"), dir.path());
-        assert_eq!(rel, PathBuf::from("S/studio/card/a.dng"));
     }
 }

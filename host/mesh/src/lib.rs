@@ -1,15 +1,17 @@
 //! Head-scan meshes: loading with validation, normals by local planar fit, and an obvhs BVH for
 //! ray casting.
 //!
-//! * [`load`]: [`load_mesh`] reads PLY (ASCII, binary LE/BE) or OBJ, converts scanner units to
-//!   metres and validates/repairs ([`validate`]: NaN vertices, degenerate and duplicate
+//! * [`load`]: [`load_mesh`] reads PLY (ASCII, binary LE/BE), OBJ or glTF (`.glb`, `.gltf`),
+//!   converts scanner units to metres and validates/repairs ([`validate`]: NaN vertices, degenerate and duplicate
 //!   triangles, inconsistent winding — counted with examples).
 //! * [`ply`]: the PLY reader and the atomic binary writer [`write_ply_binary`].
 //! * [`normals`]: shading normals by a local planar fit over a radius (given or estimated from
 //!   the scan's noise) or vertex normals; interpolated at ray hits.
 //! * [`shapes`]: tessellated spheres and cylinders.
 //! * [`textured`]: [`load_textured`], scans with their colours (OBJ + MTL + PNG/JPEG texture,
-//!   PLY vertex colours) and [`TexturedMesh::colour_at`] at a ray hit.
+//!   PLY vertex colours, binary glTF or `.gltf` with its base-colour texture or vertex colours)
+//!   and [`TexturedMesh::colour_at`] at a ray hit.
+//! * [`gltf_scan`]: the glTF reader behind both, and [`write_glb`], a textured GLB writer.
 //! * [`bvh`]: [`MeshBvh`], build once and trace many (closest hit, occlusion, batched rays),
 //!   build presets [`BuildQuality`].
 //! * [`camera_rays`]: [`CameraRays`], per-pixel camera rays from a coarse exact undistortion
@@ -20,6 +22,7 @@
 pub mod bvh;
 pub mod camera_rays;
 pub mod coherent;
+pub mod gltf_scan;
 pub mod load;
 pub mod normals;
 pub mod ply;
@@ -31,9 +34,13 @@ pub mod validate;
 pub use bvh::{BuildQuality, Hit, MeshBvh, MeshRay};
 pub use camera_rays::CameraRays;
 pub use coherent::TraceScratch;
+pub use gltf_scan::{encode_glb, gltf_external_files, write_glb, GltfProblem};
 pub use load::{load_mesh, LengthUnit, LoadOptions, LoadedMesh};
 pub use normals::{estimate_noise, NoiseEstimate, NormalMethod, SurfaceNormals};
-pub use ply::{read_ply, read_ply_coloured, write_ply_binary, write_ply_binary_in};
+pub use ply::{
+    read_ply, read_ply_coloured, write_ply_binary, write_ply_binary_coloured_in,
+    write_ply_binary_in,
+};
 pub use shadow::{shadow_ray, ShadowScratch};
 pub use textured::{load_textured, Appearance, Material, TextureImage, TexturedMesh};
 pub use validate::{inspect, repair, repair_tracked, MeshReport, RepairMap, RepairPolicy};
@@ -124,6 +131,14 @@ pub enum MeshError {
         path: PathBuf,
         /// What is wrong, with the object and face.
         reason: String,
+    },
+    /// A glTF file is malformed or uses what the loader does not read.
+    #[error("{path}: glTF: {problem}")]
+    Gltf {
+        /// The `.glb` or `.gltf` file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: gltf_scan::GltfProblem,
     },
     /// A file is malformed.
     #[error("{path}: {reason}")]

@@ -1,10 +1,13 @@
-//! Loading a head scan: PLY or OBJ by extension, scanner units to metres, validation and repair.
+//! Loading a head scan: PLY, OBJ or glTF (`.glb`, `.gltf`) by extension, scanner units to
+//! metres, validation and repair.
 //!
 //! Units: scanners write millimetres (most structured-light and laser scanners), centimetres,
 //! inches or metres, and rarely say which. [`LengthUnit::Auto`] decides from the bounding box:
 //! a head (or a forehead patch) is 0.05 to 0.5 m across, so the largest extent `E` in file units
 //! picks metres for `E < 2`, centimetres for `2 <= E < 50` (a head is 5-50 cm), millimetres
 //! above. The chosen unit is reported; pass the unit explicitly when the scan is not a head.
+//! glTF is metres by specification: for `.glb` and `.gltf`, `Auto` means metres, no guess
+//! ([`crate::gltf_scan`]).
 
 use std::path::Path;
 
@@ -109,25 +112,43 @@ pub fn guess_unit(mesh: &TriMesh) -> LengthUnit {
     }
 }
 
-/// Loads `.ply` or `.obj`, converts to metres and validates/repairs per `opts`.
+/// Loads `.ply`, `.obj`, `.glb` or `.gltf`, converts to metres and validates/repairs per
+/// `opts`. A glTF's images are not decoded here (a texture that does not decode is no error
+/// for the geometry, as a missing MTL file is none for an OBJ).
 pub fn load_mesh(path: &Path, opts: &LoadOptions) -> Result<LoadedMesh, MeshError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
+    let mut unit = opts.unit;
     let mut mesh = match ext.as_deref() {
         Some("ply") => crate::ply::read_ply(path)?.0,
         Some("obj") => read_obj(path)?,
-        _ => {
-            return Err(MeshError::Parse {
-                path: path.to_path_buf(),
-                reason: "unknown mesh format (expected .ply or .obj)".into(),
-            })
+        Some("glb" | "gltf") => {
+            unit = gltf_unit(unit);
+            crate::gltf_scan::read_gltf(path, crate::gltf_scan::Detail::Geometry)?.mesh
         }
+        _ => return Err(unknown_format(path)),
     };
-    let unit = scale_to_metres(&mut mesh, opts.unit);
+    let unit = scale_to_metres(&mut mesh, unit);
     let (mesh, report) = repair(&mesh, opts.policy, &path.display().to_string())?;
     Ok(LoadedMesh { mesh, unit, report })
+}
+
+/// The error for a file whose extension names no format the crate reads.
+pub(crate) fn unknown_format(path: &Path) -> MeshError {
+    MeshError::Parse {
+        path: path.to_path_buf(),
+        reason: "unknown mesh format (expected .ply, .obj, .glb or .gltf)".into(),
+    }
+}
+
+/// The unit of a glTF file: metres by specification when the caller leaves it to the loader.
+pub(crate) fn gltf_unit(unit: LengthUnit) -> LengthUnit {
+    match unit {
+        LengthUnit::Auto => LengthUnit::Metres,
+        u => u,
+    }
 }
 
 /// Scales a mesh read in `unit` (guessed when `Auto`) to metres; returns the unit used.

@@ -589,6 +589,51 @@ fn write_ply_binary_units_to(out: &mut Vec<u8>, mesh: &TriMesh, units: &str) {
     }
 }
 
+/// Writes the mesh with an 8-bit colour per vertex (`red green blue` as `uchar`, display
+/// values as a scanner stores them) as binary little-endian PLY in `units` (named in the
+/// header's comment, as [`write_ply_binary_in`]), atomically. Normals are not written.
+pub fn write_ply_binary_coloured_in(
+    path: &Path,
+    mesh: &TriMesh,
+    colours: &[[u8; 3]],
+    units: &str,
+) -> Result<(), MeshError> {
+    if colours.len() != mesh.positions.len() {
+        return Err(MeshError::InvalidParameter {
+            field: "colours",
+            reason: format!(
+                "{} colours for {} vertices",
+                colours.len(),
+                mesh.positions.len()
+            ),
+        });
+    }
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment skinbrdf mesh, {units}\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\nproperty uchar red\n\
+         property uchar green\nproperty uchar blue\nelement face {}\n\
+         property list uchar int vertex_indices\nend_header\n",
+        mesh.positions.len(),
+        mesh.indices.len()
+    );
+    let mut out =
+        Vec::with_capacity(header.len() + mesh.positions.len() * 15 + mesh.indices.len() * 13);
+    out.extend_from_slice(header.as_bytes());
+    for (p, c) in mesh.positions.iter().zip(colours) {
+        for x in p.to_array() {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+        out.extend_from_slice(c);
+    }
+    for t in &mesh.indices {
+        out.push(3);
+        for &v in t {
+            out.extend_from_slice(&(v as i32).to_le_bytes());
+        }
+    }
+    write_atomic(path, &out)
+}
+
 /// Writes ASCII PLY (for tests and small hand-inspected meshes), atomically.
 pub fn write_ply_ascii(path: &Path, mesh: &TriMesh) -> Result<(), MeshError> {
     let mut s = format!(

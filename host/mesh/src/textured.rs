@@ -9,6 +9,13 @@
 //!   a face without `vt` shows its material's `Kd` colour.
 //! * **PLY with vertex colours** (`red green blue`, any scalar type, see
 //!   [`crate::ply::read_ply_coloured`]): colours interpolated barycentrically.
+//! * **glTF 2.0**, binary (`.glb`, images in its binary chunk) or `.gltf` (external or
+//!   data-URI buffers and images): every triangle primitive of the default scene with its node
+//!   transforms, coloured by its material's base-colour texture (`TEXCOORD_0`), else its
+//!   `COLOR_0` vertex colours (kept per triangle corner, so colours split at a seam stay
+//!   apart), else its `baseColorFactor`; coordinates as stored, metres unless the caller's
+//!   [`LengthUnit`] says otherwise (glTF is Y-up metres by specification). Details, and what is
+//!   refused, in [`crate::gltf_scan`].
 //!
 //! The geometry goes through exactly the path of [`crate::load_mesh`] (same reader, unit
 //! conversion and repair), so the mesh of a [`TexturedMesh`] equals the mesh `load_mesh` gives
@@ -22,7 +29,17 @@
 //! the texture is sampled bilinearly between the four nearest texel centres. OBJ puts `v = 0`
 //! at the bottom of the image, texel `(i, j)` (column, row from the top) has its centre at
 //! `((i + 0.5) / W, 1 - (j + 0.5) / H)`, and coordinates outside `[0, 1]` repeat (the OBJ
-//! default). Colours are the stored values scaled to 0..1 (no gamma conversion).
+//! default). glTF puts `v = 0` at the top: its coordinates are flipped to the OBJ convention
+//! on loading (`v = 1 - v_gltf`), so one lookup serves both.
+//!
+//! # Colour space
+//!
+//! Colours are display values, 0..1: what an OBJ's PNG or JPEG texture and a PLY's vertex
+//! colours store (sRGB-encoded), scaled, with no gamma conversion. A glTF base-colour texture
+//! is sRGB-encoded by specification and is kept as stored too; glTF's `COLOR_0` and
+//! `baseColorFactor` are linear by specification and are encoded to sRGB on loading, so the
+//! same print gives the same colour in every format. Finding targets needs only the print's
+//! contrast, which either encoding keeps; what matters is that all formats agree.
 
 use std::cell::RefCell;
 use std::io::BufReader;
@@ -57,13 +74,24 @@ impl TextureImage {
             path: path.to_path_buf(),
             reason: e.to_string(),
         })?;
+        Self::from_image(&img).map_err(|reason| MeshError::Texture {
+            path: path.to_path_buf(),
+            reason,
+        })
+    }
+
+    /// Decodes an encoded PNG or JPEG held in memory (a glTF's embedded image) exactly as
+    /// [`Self::load`] decodes a file; the error is the decoder's complaint.
+    pub fn decode(bytes: &[u8]) -> Result<Self, String> {
+        let img = image::load_from_memory(bytes).map_err(|e| e.to_string())?;
+        Self::from_image(&img)
+    }
+
+    fn from_image(img: &image::DynamicImage) -> Result<Self, String> {
         let rgb = img.to_rgb32f();
         let (width, height) = rgb.dimensions();
         if width == 0 || height == 0 {
-            return Err(MeshError::Texture {
-                path: path.to_path_buf(),
-                reason: "the image is empty".into(),
-            });
+            return Err("the image is empty".into());
         }
         Ok(Self {
             width,
@@ -97,31 +125,35 @@ impl TextureImage {
     }
 }
 
-/// One OBJ material: its flat colour and optional texture.
+/// One material: its flat colour and optional texture (an OBJ's MTL entry, a glTF material).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Material {
-    /// Name (`newmtl`).
+    /// Name (`newmtl`; glTF: `name`, else `material N`).
     pub name: String,
-    /// `Kd`, or [`UNTEXTURED_COLOUR`] when absent.
+    /// `Kd`, or [`UNTEXTURED_COLOUR`] when absent (glTF: `baseColorFactor`, sRGB-encoded).
     pub diffuse: [f32; 3],
-    /// The `map_Kd` image.
+    /// The `map_Kd` image (glTF: the base-colour texture, `baseColorFactor` multiplied in).
     pub texture: Option<TextureImage>,
-    /// Where the texture was read from.
+    /// Where the texture was read from (`None` for an image embedded in a glTF).
     pub texture_path: Option<PathBuf>,
 }
 
 /// How a scan's surface is coloured.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Appearance {
-    /// Texture-mapped (OBJ): per triangle its material and, when it has `vt`, the texture
-    /// coordinates of its three corners (in the order of the mesh's triangle).
+    /// Texture-mapped (OBJ, glTF): per triangle its material and, when it has `vt` (glTF:
+    /// texture coordinates for its material's texture), the texture coordinates of its three
+    /// corners (in the order of the mesh's triangle, OBJ convention).
     Texture {
         /// Texture coordinates per triangle corner (`None`: the face has no `vt`).
         uv: Vec<Option<[Vec2; 3]>>,
-        /// Material index per triangle (`None`: no `usemtl`).
+        /// Material index per triangle (`None`: no `usemtl`; glTF: no material).
         material: Vec<Option<u32>>,
         /// The materials.
         materials: Vec<Material>,
+        /// Colours per triangle corner, which win over the material (glTF `COLOR_0` on a
+        /// primitive without a base-colour texture); empty for OBJ.
+        corner_colours: Vec<Option<[[f32; 3]; 3]>>,
     },
     /// A colour per vertex (PLY `red green blue`).
     VertexColours(Vec<[f32; 3]>),
@@ -153,7 +185,13 @@ impl TexturedMesh {
                 uv,
                 material,
                 materials,
+                corner_colours,
             } => {
+                if let Some(c) = corner_colours.get(t).copied().flatten() {
+                    return std::array::from_fn(|k| {
+                        w[0] * c[0][k] + w[1] * c[1][k] + w[2] * c[2][k]
+                    });
+                }
                 let mat = material
                     .get(t)
                     .copied()
@@ -342,8 +380,9 @@ fn texture_file(dir: &Path, map_kd: &str) -> PathBuf {
     }
 }
 
-/// Loads a scan with its colours: `.obj` (with its MTL and textures) or `.ply` (with vertex
-/// colours when it has them), in metres, repaired per `opts` exactly as [`crate::load_mesh`].
+/// Loads a scan with its colours: `.obj` (with its MTL and textures), `.ply` (with vertex
+/// colours when it has them), `.glb` or `.gltf` (with its base-colour textures or vertex
+/// colours), in metres, repaired per `opts` exactly as [`crate::load_mesh`].
 pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, MeshError> {
     let ext = path
         .extension()
@@ -426,6 +465,7 @@ pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, Me
                     uv,
                     material,
                     materials: mats,
+                    corner_colours: Vec::new(),
                 }
             };
             Ok(TexturedMesh {
@@ -435,10 +475,41 @@ pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, Me
                 report,
             })
         }
-        _ => Err(MeshError::Parse {
-            path: path.to_path_buf(),
-            reason: "unknown mesh format (expected .ply or .obj)".into(),
-        }),
+        Some("glb" | "gltf") => {
+            let mut data = crate::gltf_scan::read_gltf(path, crate::gltf_scan::Detail::Appearance)?;
+            let unit = scale_to_metres(&mut data.mesh, crate::load::gltf_unit(opts.unit));
+            let (mesh, report, map) = repair_tracked(&data.mesh, opts.policy, &source)?;
+            let (uv, material) = follow_repair(&map, &data.uv, &data.material);
+            let corner_colours: Vec<Option<[[f32; 3]; 3]>> = map
+                .triangles
+                .iter()
+                .map(|&(t, flipped)| {
+                    data.corner_colours
+                        .get(t as usize)
+                        .copied()
+                        .flatten()
+                        .map(|c| std::array::from_fn(|k| c[RepairMap::input_corner(flipped, k)]))
+                })
+                .collect();
+            let appearance =
+                if data.materials.is_empty() && corner_colours.iter().all(Option::is_none) {
+                    Appearance::None
+                } else {
+                    Appearance::Texture {
+                        uv,
+                        material,
+                        materials: data.materials,
+                        corner_colours,
+                    }
+                };
+            Ok(TexturedMesh {
+                mesh,
+                appearance,
+                unit,
+                report,
+            })
+        }
+        _ => Err(crate::load::unknown_format(path)),
     }
 }
 

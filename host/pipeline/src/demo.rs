@@ -258,20 +258,27 @@ pub fn run_demo(
 }
 
 /// The ingest of a synthetic studio from what a studio holds: the card, the controller's
-/// record, the rig nobody measured (`rig.toml`) and the textured scan in its scanner's frame,
-/// with the lens calibration a studio keeps from its own calibration shoot (the generated
-/// session's `[camera]` table: ingest reads nothing else of that file) and the scan's unit.
+/// record, the rig nobody measured (`rig.toml`), the survey images when the studio took any
+/// (`studio/survey/`) and the textured scan in its scanner's frame (none for an ideal sample:
+/// its rig states its shape), with the lens calibration a studio
+/// keeps from its own calibration shoot (the generated session's `[camera]` table: ingest reads
+/// nothing else of that file) and the scan's unit.
 pub fn studio_ingest_config(generated_dir: &Path, scene: &Scene, out_dir: PathBuf) -> IngestConfig {
     let studio = generated_dir.join(STUDIO_DIR);
+    let scan = skinbrdf_synth::generate::analytic_geometry(scene)
+        .is_none()
+        .then(|| studio.join("scan").join("head.obj"));
     let mut cfg = IngestConfig::new(
         studio.join("card"),
         studio.join("capture.json"),
         studio.join("rig.toml"),
-        studio.join("scan").join("head.obj"),
+        scan.clone(),
         out_dir,
     );
     cfg.camera = Some(generated_dir.join("session.toml"));
-    cfg.scan_units = Some(scene.geometry.scan_units);
+    cfg.scan_units = scan.map(|_| scene.geometry.scan_units);
+    let survey = studio.join(skinbrdf_synth::studio::SURVEY_DIR);
+    cfg.survey_dir = survey.is_dir().then_some(survey);
     cfg
 }
 

@@ -41,6 +41,12 @@ pub struct SurveyMetrics {
     pub reprojection_rms_px: f64,
     /// Parameters of the adjustment.
     pub parameters: usize,
+    /// Images the adjustment used.
+    #[serde(default)]
+    pub images_used: usize,
+    /// Of those, survey images (role `survey`: taken before the subject sits).
+    #[serde(default)]
+    pub survey_images: usize,
     /// Reference targets against their true corners, RMS over targets, mm.
     pub reference_rms_error_mm: Option<f64>,
     /// Headdress targets against their true corners, RMS over targets, mm.
@@ -284,6 +290,13 @@ impl StageMetrics {
                     Quality,
                 ));
                 r.push(Metric::new("parameters", m.parameters as f64, "", Count));
+                r.push(Metric::new("images_used", m.images_used as f64, "", Count));
+                r.push(Metric::new(
+                    "survey_images",
+                    m.survey_images as f64,
+                    "",
+                    Count,
+                ));
                 bounded(
                     &mut r,
                     "reference_rms_error",

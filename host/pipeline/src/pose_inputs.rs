@@ -459,6 +459,7 @@ pub(crate) mod tests {
                 },
                 roi: None,
                 known,
+                registration: None,
             },
             capture: None,
             linearization_source: skinbrdf_session::LinearizationSource::Stated,

@@ -24,7 +24,7 @@ use crate::pose_inputs::{PoseChoice, SessionOptions};
 use skinbrdf_fit::report::{fit_and_report, FitReport, Input};
 use skinbrdf_poses::SessionPoses;
 use skinbrdf_samples::SampleHeader;
-use skinbrdf_session::{GeometrySpec, Session, Truth};
+use skinbrdf_session::{GeometrySpec, RegistrationFit, Session, Truth};
 
 use crate::ledger::{write_atomic, Fingerprint, FingerprintBuilder, Unit};
 use crate::metrics::{
@@ -226,6 +226,24 @@ fn register_to_scan(
     else {
         return Ok(None);
     };
+    let spec = session.file.registration.clone().unwrap_or_default();
+    let kind = match spec.fit {
+        RegistrationFit::Rigid => skinbrdf_register::AlignKind::Rigid,
+        RegistrationFit::Similarity => skinbrdf_register::AlignKind::Similarity,
+    };
+    let corners = survey.headdress_corners();
+    // Picked points, when the session gives them, else the scan's texture.
+    if let Some(points) = &spec.points {
+        let reg = skinbrdf_register::register_by_points(
+            &corners,
+            &session.path(points),
+            kind,
+            &skinbrdf_register::AlignConfig::default(),
+        )
+        .map_err(|source| ProcessError::Registration { source })?;
+        transform_head(survey, &reg, "points");
+        return Ok(Some(reg));
+    }
     let path = session.path(file);
     let scan = skinbrdf_mesh::load_textured(
         &path,
@@ -238,7 +256,6 @@ fn register_to_scan(
     if matches!(scan.appearance, skinbrdf_mesh::Appearance::None) {
         return Ok(None);
     }
-    let corners = survey.headdress_corners();
     let sizes: Vec<(u32, f64)> = survey
         .targets
         .iter()
@@ -249,13 +266,31 @@ fn register_to_scan(
         &corners,
         &sizes,
         &scan,
-        skinbrdf_register::AlignKind::Rigid,
+        kind,
         &skinbrdf_register::ScanTargetConfig::default(),
         &skinbrdf_register::AlignConfig::default(),
     )
     .map_err(|source| ProcessError::Registration { source })?;
-    survey.transform_head(&reg.alignment.scan_from_survey, "texture");
+    transform_head(survey, &reg, "texture");
     Ok(Some(reg))
+}
+
+/// Moves the surveyed headdress into the scan's frame by a registration, with its uncertainty.
+fn transform_head(
+    survey: &mut skinbrdf_poses::Survey,
+    reg: &skinbrdf_register::RegistrationReport,
+    method: &str,
+) {
+    let a = &reg.alignment;
+    survey.transform_head(
+        &a.scan_from_survey,
+        a.scale,
+        method,
+        &skinbrdf_poses::FrameUncertainty {
+            centroid_sd_mm: a.centroid_sd_mm,
+            rotation_sd_deg: a.rotation_sd_deg,
+        },
+    );
 }
 
 /// RMS over a group's surveyed targets of the mean corner distance to the truth, mm (`None`
@@ -296,7 +331,7 @@ pub fn survey_report(
     let mut r = StageReport::ran(Stage::PlacementSurvey, run_time_s).with_figures(
         StageMetrics::Survey(SurveyMetrics {
             targets_surveyed: survey.targets.len(),
-            targets_left_out: survey.issues.len(),
+            targets_left_out: survey.issues.iter().filter(|i| !i.is_warning()).count(),
             position_sigma_median_mm: median(
                 &survey
                     .targets
@@ -306,13 +341,28 @@ pub fn survey_report(
             ),
             reprojection_rms_px: survey.bundle.final_rms_px,
             parameters: survey.bundle.parameters,
+            images_used: survey.images_used,
+            survey_images: survey.survey_images_used,
             reference_rms_error_mm: err(TargetGroup::Reference),
             headdress_rms_error_mm: err(TargetGroup::Headdress),
         }),
     );
     r.notes.push(format!("head frame: {:?}", survey.head_gauge));
+    let helped = survey
+        .issues
+        .iter()
+        .filter(|i| i.survey_images_would_help())
+        .count();
+    if helped > 0 {
+        r.notes.push(format!(
+            "{helped} target(s) seen too rarely or placed too uncertainly: survey images that \
+             see them from other directions would place them (`skinbrdf ingest --survey`; {} \
+             survey image(s) used)",
+            survey.survey_images_used
+        ));
+    }
     for i in &survey.issues {
-        r.notes.push(format!("left out: {i:?}"));
+        r.notes.push(format!("{}: {i}", i.label()));
     }
     r
 }

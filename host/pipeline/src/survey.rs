@@ -115,7 +115,15 @@ pub fn survey(
                 path: w.rig.clone(),
                 source,
             })?;
-            let placed = s.survey.placed_rig(&loaded.file);
+            let dir_of = |p: &Path| {
+                p.parent()
+                    .filter(|d| !d.as_os_str().is_empty())
+                    .map_or_else(|| PathBuf::from("."), Path::to_path_buf)
+            };
+            let placed = s
+                .survey
+                .placed_rig(&loaded.file)
+                .moved(&dir_of(&w.rig), &dir_of(&w.out));
             Rig::write_file(&w.out, &placed).map_err(|source| SurveyRunError::WriteRig {
                 path: w.out.clone(),
                 source,

@@ -1,7 +1,10 @@
-//! `process` on every built-in scene: synthesize the scene, run the planned pipeline, and check
-//! that it printed its plan first, followed it (every stage reported once, in order, skipped
-//! exactly where the plan says with the plan's reason), wrote its products, and that every
-//! figure is finite and every error within the scene's stated bound.
+//! `process` on every built-in scene, on the studio's real path: synthesize the scene with its
+//! studio (the camera's card, the controller's record, a rig nobody measured and the textured
+//! head scan), ingest them, run the planned pipeline (the placement survey and the registration
+//! to the scan first), and check that it printed its plan first, followed it (every stage
+//! reported once, in order, skipped exactly where the plan says with the plan's reason), wrote
+//! its products, and that every figure is finite and every error within the scene's stated
+//! bound, scored against the studio's truth (which the path under test never reads).
 //!
 //! Each test renders its scene with the scene's own camera (field of view, distortion), geometry,
 //! BRDF, noise and anti-aliasing, with two stated reductions to keep CI affordable (run with
@@ -19,10 +22,13 @@
 
 use std::path::Path;
 
+use skinbrdf_ingest::ingest;
+use skinbrdf_pipeline::demo::studio_ingest_config;
 use skinbrdf_pipeline::plan::Action;
 use skinbrdf_pipeline::process::{process, Event, ProcessConfig};
 use skinbrdf_pipeline::report::{MetricKind, StageStatus};
 use skinbrdf_pipeline::Stage;
+use skinbrdf_synth::studio::STUDIO_DIR;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
 /// Measurement images per test session (the scenes have 30).
@@ -39,6 +45,8 @@ struct Bounds {
     model_pct: f64,
     /// Samples kept, at least.
     min_samples: f64,
+    /// Surveyed reference targets' RMS corner error against the truth, mm.
+    survey_reference_mm: f64,
 }
 
 /// The default scene's stated bounds (camera, samples and model).
@@ -47,10 +55,12 @@ const DEFAULT: Bounds = Bounds {
     samples_pct: 3.0,
     model_pct: 3.0,
     min_samples: 2_000.0,
+    survey_reference_mm: 0.3,
 };
 
 fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
     let dir = tempfile::tempdir().expect("tempdir");
+    let generated = dir.path().join("generated");
     let session = dir.path().join("session");
     let mut scene = Scene::load(name).expect("built-in scene");
     scene.session.measurement_images = MEASUREMENT_IMAGES;
@@ -62,16 +72,21 @@ fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
             capture: None,
             noise_free: false,
             samples_per_pixel: None,
-            studio: false,
+            studio: true,
         },
-        &session,
+        &generated,
     )
     .expect("synthesis");
+    // What the studio holds, ingested as a user would.
+    ingest(&studio_ingest_config(&generated, &scene, session.clone()))
+        .unwrap_or_else(|e| panic!("{name}: ingest failed: {e}"));
+    let mut cfg = ProcessConfig::new();
+    cfg.truth_file = Some(generated.join(STUDIO_DIR).join("truth.json"));
 
     // Record the events: the plan must come first and every stage must end exactly once.
     let mut plan_text = None;
     let mut order: Vec<Stage> = Vec::new();
-    let out = process(&session, &ProcessConfig::new(), &mut |e| match e {
+    let out = process(&session, &cfg, &mut |e| match e {
         Event::Plan(p) => {
             assert!(order.is_empty(), "{name}: the plan came after a stage");
             plan_text = Some(p.to_text());
@@ -114,6 +129,7 @@ fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
         );
     }
     for stage in [
+        Stage::PlacementSurvey,
         Stage::CameraPoses,
         Stage::Derender,
         Stage::SmoothIncidencePlane,
@@ -124,7 +140,16 @@ fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
     }
 
     // Products.
+    // A head's surveyed headdress is registered to its textured scan; an ideal sample's frame
+    // is its rig's declared headdress targets'.
+    if skinbrdf_synth::generate::analytic_geometry(&scene).is_none() {
+        assert!(
+            out.out_dir.join("registration.json").is_file(),
+            "{name}: missing out/registration.json"
+        );
+    }
     for f in [
+        "survey.json",
         "poses.json",
         "samples.skbs",
         "fit/params.json",
@@ -154,6 +179,16 @@ fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
             );
         }
     }
+    let sv = report
+        .survey()
+        .unwrap_or_else(|| panic!("{name}: no survey figures"));
+    let ref_mm = sv
+        .reference_rms_error_mm
+        .unwrap_or_else(|| panic!("{name}: the survey was not scored"));
+    assert!(
+        ref_mm <= bounds.survey_reference_mm,
+        "{name}: surveyed reference targets {ref_mm} mm"
+    );
     let cam = report
         .camera_poses()
         .and_then(|c| c.camera_position_error_median_mm)
@@ -174,6 +209,9 @@ fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
         .unwrap_or_else(|| panic!("{name}: no model error"));
     assert!(me <= bounds.model_pct, "{name}: model {me} %");
     assert!(Path::new(&report.session).ends_with("session"));
+    eprintln!(
+        "{name}: survey {ref_mm:.3} mm, camera {cam:.3} mm, samples {se:.2} %, model {me:.2} %"
+    );
 }
 
 #[test]
@@ -236,6 +274,7 @@ fn grazing() {
             samples_pct: 5.0,
             model_pct: 5.0,
             min_samples: 200.0,
+            ..DEFAULT
         },
         &[Stage::CameraCalibration],
     );
@@ -273,4 +312,46 @@ fn oily() {
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn strong_distortion() {
     run_scene("strong-distortion", DEFAULT, &[Stage::CameraCalibration]);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn studio_faults() {
+    // Clock far off, 12-bit BGGR raw, test shots, a deleted file, a misfire, an ISO slip:
+    // ingest leaves out what has no image and refuses the odd exposure unless normalised, so
+    // the session has fewer images than the plan.
+    run_scene("studio-faults", DEFAULT, &[Stage::CameraCalibration]);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn survey_moved() {
+    // A reference target moves half-way: the survey leaves it out (survey_faults.rs asserts it
+    // is named); the rest of the pipeline works on the others.
+    run_scene("survey-moved", DEFAULT, &[Stage::CameraCalibration]);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn survey_sheets() {
+    // The cage printed on tilted sheets, one printed 1.5 % large: each sheet one body with its
+    // print scale (survey_faults.rs asserts the scale).
+    run_scene("survey-sheets", DEFAULT, &[Stage::CameraCalibration]);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn survey_faults() {
+    // A bent sheet, the headdress stated as one flat band although wrapped, a duplicated id:
+    // the survey names them and places what it can target by target.
+    run_scene("survey-faults", DEFAULT, &[Stage::CameraCalibration]);
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn survey_images() {
+    // Survey images taken before the subject sits (role survey, ingested with --survey): the
+    // survey and the poses use them; derendering, the radiometric calibration and head tracking
+    // never do (survey_images.rs asserts what they add to the survey).
+    run_scene("survey-images", DEFAULT, &[Stage::CameraCalibration]);
 }

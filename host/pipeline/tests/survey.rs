@@ -18,17 +18,18 @@ use skinbrdf_session::{Session, TargetGroup};
 use skinbrdf_synth::studio::STUDIO_DIR;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
-/// Reference targets surveyed within this RMS of the truth, mm (the issue's bound).
+/// Reference targets surveyed within this RMS of the truth, mm (the issue's bound), over every
+/// target the survey placed: it leaves out those it cannot place that well (`Uncertain`).
 const REFERENCE_RMS_MM: f64 = 0.3;
 /// Headdress targets within this RMS, mm (the issue's bound).
 const HEADDRESS_RMS_MM: f64 = 0.5;
-/// The issue's bounds apply to targets seen in at least this many images: a target seen in
-/// two to four images at half resolution is placed to a millimetre or two (its sigma says
-/// so), which the RMS over all targets reports.
-const WELL_SEEN_VIEWS: usize = 5;
-/// Every surveyed target together, RMS, mm: the half-resolution survey's few-view targets
-/// included (measured 0.64 mm for the reference group).
-const ALL_TARGETS_RMS_MM: f64 = 1.0;
+/// Every placed target's error within this many of its stated standard deviations: the sigmas
+/// are what decides which targets are placed, so they must cover the errors (a Gaussian 3-D
+/// error exceeds 4 sigma-of-the-trace with probability well under 1e-3).
+const SIGMA_COVERAGE: f64 = 4.0;
+/// At least this many reference targets placed (of the 52 the studio's cage and panel hold,
+/// 11 placed by the rig; the rest seen in at least two images).
+const MIN_REFERENCE_SURVEYED: usize = 30;
 /// The samples of the surveyed session against those of the same card ingested with every
 /// placement given (the measured rig and the registered scan), percentage points of median
 /// relative error (the issue's bound).
@@ -132,19 +133,12 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
         corner_rms_mm(&surveyed(TargetGroup::Reference, 0), &truth_ref);
     let (head_rms, head_worst, head_n) =
         corner_rms_mm(&surveyed(TargetGroup::Headdress, 0), &truth_head);
-    let (ref_well, _, ref_well_n) = corner_rms_mm(
-        &surveyed(TargetGroup::Reference, WELL_SEEN_VIEWS),
-        &truth_ref,
-    );
-    let (head_well, _, _) = corner_rms_mm(
-        &surveyed(TargetGroup::Headdress, WELL_SEEN_VIEWS),
-        &truth_head,
-    );
     eprintln!(
-        "survey: reference {ref_n} targets rms {ref_rms:.3} mm (worst {ref_worst:.3}), {ref_well_n} well seen {ref_well:.3} mm; \
-         headdress {head_n} targets rms {head_rms:.3} mm (worst {head_worst:.3}), well seen {head_well:.3} mm; {:?}",
+        "survey: reference {ref_n} targets rms {ref_rms:.3} mm (worst {ref_worst:.3}); \
+         headdress {head_n} targets rms {head_rms:.3} mm (worst {head_worst:.3}); {:?}",
         survey.timing
     );
+    let mut worst_ratio = 0.0f64;
     for t in &survey.targets {
         let truth = match t.group {
             TargetGroup::Headdress => truth_head.get(&t.id),
@@ -157,15 +151,20 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
             "  {:>3} {:?} views {:>2} rms {:.3} px sigma {:.3} mm {:.3} deg error {err_mm:.3} mm",
             t.id, t.group, t.views, t.rms_px, t.position_sigma_mm, t.orientation_sigma_deg
         );
+        worst_ratio = worst_ratio.max(err_mm / t.position_sigma_mm.max(1e-6));
     }
-    assert!(ref_n >= 40, "{ref_n} reference targets surveyed");
-    assert!(head_n >= 9, "{head_n} headdress targets surveyed");
-    // The issue's bounds over the targets the images determine; every target within the
-    // looser all-target bound.
-    assert!(ref_well < REFERENCE_RMS_MM, "reference rms {ref_well} mm");
-    assert!(head_well < HEADDRESS_RMS_MM, "headdress rms {head_well} mm");
-    assert!(ref_rms < ALL_TARGETS_RMS_MM, "reference rms {ref_rms} mm");
-    assert!(head_rms < ALL_TARGETS_RMS_MM, "headdress rms {head_rms} mm");
+    eprintln!("worst error over stated sigma: {worst_ratio:.2}");
+    assert!(
+        ref_n >= MIN_REFERENCE_SURVEYED,
+        "{ref_n} reference targets surveyed"
+    );
+    assert!(head_n >= 8, "{head_n} headdress targets surveyed");
+    assert!(ref_rms < REFERENCE_RMS_MM, "reference rms {ref_rms} mm");
+    assert!(head_rms < HEADDRESS_RMS_MM, "headdress rms {head_rms} mm");
+    assert!(
+        worst_ratio < SIGMA_COVERAGE,
+        "a target's error is {worst_ratio} of its stated sigma"
+    );
 
     let sv = out.report.survey().expect("the survey ran");
     assert!(sv.reference_rms_error_mm.is_some() && sv.headdress_rms_error_mm.is_some());
@@ -214,7 +213,7 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
     let s4 = dir.path().join("S4");
     let mut cfg4 = cfg.clone();
     cfg4.rig = st.join("rig-measured.toml");
-    cfg4.scan = st.join("scan.ply");
+    cfg4.scan = Some(st.join("scan.ply"));
     cfg4.scan_units = None;
     cfg4.out_dir = s4.clone();
     ingest(&cfg4).expect("ingest with the measured rig");

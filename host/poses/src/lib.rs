@@ -24,4 +24,4 @@ pub use bundle::{BundleConfig, BundleReport, RobustLoss};
 pub use error::{Diagnostic, PoseError};
 pub use pnp::{estimate_pose, PnpConfig, PointObs, PoseEstimate};
 pub use session::{estimate_session, PoseConfig, SessionPoses};
-pub use survey::{survey, HeadGauge, Survey, SurveyConfig, SurveyIssue};
+pub use survey::{survey, FrameUncertainty, HeadGauge, Survey, SurveyConfig, SurveyIssue};

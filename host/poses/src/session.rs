@@ -3,6 +3,11 @@
 //! (standard-position images), and, when the camera is not calibrated, its intrinsics from the
 //! reference field.
 //!
+//! Survey images (role `survey`: taken before the subject sits, without the flash) are posed
+//! like the others by their reference targets and serve the calibration and the joint
+//! adjustment; they have no head pose (a headdress seen in one is not on the head), and the
+//! flash and standard come only from their own roles' images.
+//!
 //! Known quantities in the session skip their stage and say so in [`SessionPoses::skipped`]:
 //! a known `world_from_camera`/`world_from_head` per image, `known.world_from_flash` or
 //! `known.light_position_m`, `known.world_from_standard`, `known.stationary_sample`.
@@ -509,8 +514,11 @@ pub fn estimate_session_stages(
                     }
                 }
             };
-            // Head.
-            let head = if let Some(p) = entry.world_from_head {
+            // Head: none in a survey image (taken before the subject sits; a headdress seen
+            // there is not on the head).
+            let head = if !entry.role.has_subject() {
+                None
+            } else if let Some(p) = entry.world_from_head {
                 Some(PoseWithCov::known(p))
             } else if stationary {
                 None

@@ -11,9 +11,11 @@
 //!
 //! Two ways to find the corners on the scan ([`RegistrationMethod`]):
 //!
-//! * **Texture** ([`find_scan_targets`]): the scan's texture is rendered from virtual pinhole
-//!   cameras, the tags are detected in the renderings with the project's detector, and each
-//!   detected corner is cast back onto the mesh (see [`scan_targets`]).
+//! * **Texture** ([`find_scan_targets`]): the scan's colours (any scan
+//!   [`skinbrdf_mesh::load_textured`] reads: OBJ + MTL + texture image, PLY with vertex
+//!   colours, binary glTF or `.gltf`) are rendered from virtual pinhole cameras, the tags are
+//!   detected in the renderings with the project's detector, and each detected corner is cast
+//!   back onto the mesh (see [`scan_targets`]).
 //! * **Points** ([`load_point_pairs`], [`align_points`]): for an untextured scan, an operator
 //!   picks at least three non-collinear target corners on the scan and lists them in a small
 //!   TOML file.

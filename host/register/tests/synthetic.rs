@@ -11,7 +11,7 @@ use skinbrdf_register::{
     ScanTargetConfig, ScanTargets,
 };
 use skinbrdf_synth::layout::{build_rig, Rig};
-use skinbrdf_synth::textured_scan::{write_textured_scan, ScanTruth};
+use skinbrdf_synth::textured_scan::{write_textured_scan_as, ScanFormat, ScanTruth};
 use skinbrdf_synth::Scene;
 
 /// A ray from 10 cm along a target's normal that meets it at 10 cm within this (1 mm) is
@@ -25,6 +25,12 @@ const ROTATION_MAX_DEG: f64 = 0.05;
 const TRANSLATION_MAX_MM: f64 = 0.3;
 /// A similarity between frames of equal units recovers a scale of 1 within this (0.2 %).
 const SCALE_TOL: f64 = 2e-3;
+/// Corners found on the GLB against those found on the OBJ of the same scan, mm: the two load
+/// to the same mesh and colours within f32 rounding, so the renderings and detections agree
+/// to far below the corner bound (1/25 of [`CORNER_MAX_MM`]).
+const FORMAT_PARITY_MM: f64 = 0.02;
+/// Registration from the GLB's corners against the OBJ's: rotation, degrees.
+const FORMAT_PARITY_DEG: f64 = 0.002;
 /// Rotation error from picked corners (a points file, picked to about a millimetre), degrees.
 const PICKED_ROTATION_MAX_DEG: f64 = 0.5;
 /// Translation error from picked corners, mm.
@@ -35,6 +41,9 @@ struct Fixture {
     truth: ScanTruth,
     found: ScanTargets,
     visible: Vec<u32>,
+    /// The same scan's files as binary glTF and as PLY with vertex colours.
+    glb: std::path::PathBuf,
+    ply: std::path::PathBuf,
     _dir: tempfile::TempDir,
 }
 
@@ -63,7 +72,13 @@ fn fixture() -> &'static Fixture {
         let scene = Scene::load("default").expect("scene");
         let rig = build_rig(&scene);
         let dir = tempfile::tempdir().expect("tempdir");
-        let files = write_textured_scan(dir.path(), &scene, &rig).expect("write scan");
+        let files = write_textured_scan_as(
+            dir.path(),
+            &scene,
+            &rig,
+            &[ScanFormat::Obj, ScanFormat::Glb, ScanFormat::Ply],
+        )
+        .expect("write scan");
         let truth: ScanTruth =
             serde_json::from_slice(&std::fs::read(&files.truth).expect("truth")).expect("json");
         let scan = skinbrdf_mesh::load_textured(&files.obj, &Default::default()).expect("load");
@@ -75,6 +90,8 @@ fn fixture() -> &'static Fixture {
             truth,
             found,
             visible,
+            glb: files.glb.expect("glb"),
+            ply: files.ply.expect("ply"),
             _dir: dir,
         }
     })
@@ -285,4 +302,76 @@ fn the_points_file_path_aligns_by_picked_corners() {
         .expect_err("absent")
         .to_string();
     assert!(e.contains("absent.toml"), "{e}");
+}
+
+#[test]
+fn the_glb_gives_the_same_targets_corners_and_registration_as_the_obj() {
+    let f = fixture();
+    let scan = skinbrdf_mesh::load_textured(&f.glb, &Default::default()).expect("load glb");
+    let wanted: Vec<(u32, f64)> = f.rig.headdress.iter().map(|t| (t.id, t.size_m)).collect();
+    let found = find_scan_targets(&scan, &wanted, &ScanTargetConfig::default()).expect("find");
+    let ids = |s: &ScanTargets| s.targets.iter().map(|t| t.id).collect::<Vec<_>>();
+    assert_eq!(ids(&found), ids(&f.found), "missing {:?}", found.missing);
+    let mut worst = 0.0f64;
+    for (a, b) in found.targets.iter().zip(&f.found.targets) {
+        for k in 0..4 {
+            worst = worst.max(a.corners_m[k].distance(b.corners_m[k]) * 1e3);
+        }
+    }
+    eprintln!(
+        "glb against obj: {} targets, corners differ by at most {worst:.5} mm",
+        found.targets.len()
+    );
+    assert!(worst < FORMAT_PARITY_MM, "{worst} mm");
+    let survey = survey_with_noise(&f.rig, 1e-4, 7);
+    let fit = |s: &ScanTargets| {
+        align(
+            &survey,
+            &scan_corners(s),
+            AlignKind::Rigid,
+            &AlignConfig::default(),
+        )
+        .expect("align")
+    };
+    let (a, b) = (fit(&found), fit(&f.found));
+    let deg = a
+        .scan_from_survey
+        .angle_to_rad(&b.scan_from_survey)
+        .to_degrees();
+    let mm = a.scan_from_survey.distance_to_m(&b.scan_from_survey) * 1e3;
+    assert!(deg < FORMAT_PARITY_DEG, "{deg} deg");
+    assert!(mm < FORMAT_PARITY_MM, "{mm} mm");
+    assert_eq!(a.dropped, b.dropped);
+}
+
+#[test]
+fn the_vertex_coloured_ply_gives_the_targets_within_the_corner_bound() {
+    let f = fixture();
+    let scan = skinbrdf_mesh::load_textured(&f.ply, &Default::default()).expect("load ply");
+    assert!(matches!(
+        scan.appearance,
+        skinbrdf_mesh::Appearance::VertexColours(_)
+    ));
+    let wanted: Vec<(u32, f64)> = f.rig.headdress.iter().map(|t| (t.id, t.size_m)).collect();
+    let found = find_scan_targets(&scan, &wanted, &ScanTargetConfig::default()).expect("find");
+    let mut errs = Vec::new();
+    for id in &f.visible {
+        let t = found
+            .targets
+            .iter()
+            .find(|t| t.id == *id)
+            .unwrap_or_else(|| panic!("target {id} not found; missing {:?}", found.missing));
+        let truth = f.truth.targets.iter().find(|x| x.id == *id).expect("truth");
+        for k in 0..4 {
+            errs.push(t.corners_m[k].distance(truth.corners_m[k]) * 1e3);
+        }
+    }
+    let max = errs.iter().copied().fold(0.0, f64::max);
+    let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64).sqrt();
+    eprintln!(
+        "ply vertex colours: {} of {} found, corner error max {max:.3} mm, rms {rms:.3} mm",
+        found.targets.len(),
+        f.rig.headdress.len()
+    );
+    assert!(max < CORNER_MAX_MM, "{max} mm");
 }

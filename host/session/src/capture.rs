@@ -24,6 +24,26 @@ pub enum ImageRole {
     ReferenceStandard,
     /// Images that locate the reference standard.
     StandardPosition,
+    /// Images that strengthen the placement survey's geometry: taken by hand without the
+    /// subject or the flash (room light), from wherever they see the targets the measurement
+    /// arc sees poorly. Used by the placement survey (and the camera calibration when the
+    /// camera is to be calibrated) only; never fired by the trigger controller, so never in a
+    /// capture record or a capture plan.
+    Survey,
+}
+
+impl ImageRole {
+    /// Whether the trigger controller fires images of this role (every role but
+    /// [`ImageRole::Survey`]: survey images are taken by hand, without the flash).
+    pub const fn fired_by_controller(self) -> bool {
+        !matches!(self, Self::Survey)
+    }
+
+    /// Whether the subject (head and headdress) is in images of this role: in every role but
+    /// [`ImageRole::Survey`], taken before the subject sits. Head tracking uses only these.
+    pub const fn has_subject(self) -> bool {
+        !matches!(self, Self::Survey)
+    }
 }
 
 /// How the flash is fired.

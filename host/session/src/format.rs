@@ -59,6 +59,36 @@ pub struct SessionFile {
     /// Quantities known in advance (each lets the pipeline skip a stage).
     #[serde(default)]
     pub known: KnownQuantities,
+    /// How the surveyed headdress is registered to the scan (absent: by the scan's texture,
+    /// rigidly).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub registration: Option<RegistrationSpec>,
+}
+
+/// How the placement survey's headdress is registered to the head scan (`[registration]`).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegistrationSpec {
+    /// Hand-picked target corners on the scan, relative to the session directory (the
+    /// `[[points]]` file of `skinbrdf_register::points`): for a scan without texture; when
+    /// given, used instead of the texture.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points: Option<String>,
+    /// The fit: rigid (default), or a similarity (also a scale, for a scan whose unit is not
+    /// trusted).
+    #[serde(default)]
+    pub fit: RegistrationFit,
+}
+
+/// The transform fitted between the survey's headdress and the scan's.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RegistrationFit {
+    /// Rotation and translation.
+    #[default]
+    Rigid,
+    /// Rotation, translation and one scale.
+    Similarity,
 }
 
 /// The camera: calibrated, or to be calibrated from the session's own targets.
@@ -395,7 +425,8 @@ impl LengthUnit {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum GeometrySpec {
-    /// A head scan (PLY or OBJ) whose frame is the head frame; load it with `skinbrdf-mesh`.
+    /// A head scan (PLY, OBJ, `.glb` or `.gltf`) whose frame is the head frame; load it with
+    /// `skinbrdf-mesh`.
     Scan {
         /// Scan file relative to the session directory.
         file: String,

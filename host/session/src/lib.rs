@@ -57,6 +57,7 @@ pub use load::{
 pub use parse::toml_unknown_keys;
 pub use rig::{LayoutFile, Rig, RigFile, SessionParts, RIG_FORMAT_VERSION};
 pub use truth::{
-    ImageTruth, PlacementTruth, RenderTruth, SurfaceTruth, TargetTruth, Truth, TRUTH_FORMAT_VERSION,
+    ImageTruth, PlacementTruth, RenderTruth, SheetTruth, SurfaceTruth, TargetTruth, Truth,
+    TRUTH_FORMAT_VERSION,
 };
 pub use write::{load_mask, write_atomic, write_json_atomic, write_mask_png, Mask};

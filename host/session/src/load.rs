@@ -386,6 +386,54 @@ pub(crate) fn check_id_and_size(
     true
 }
 
+/// Checks an analytic shape (sphere, cylinder): finite centre and axis, positive sizes. A scan
+/// is checked where its file is resolved.
+pub(crate) fn check_shape(g: &GeometrySpec, file: &Path, errs: &mut SessionErrors) {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    match g {
+        GeometrySpec::Scan { .. } => {}
+        GeometrySpec::Sphere { centre_m, radius_m } => {
+            if !centre_m.is_finite() {
+                errs.push(file, "geometry.centre_m", "non-finite coordinate");
+            }
+            if !positive(*radius_m) {
+                errs.push(
+                    file,
+                    "geometry.radius_m",
+                    format!("must be positive, got {radius_m}"),
+                );
+            }
+        }
+        GeometrySpec::Cylinder {
+            centre_m,
+            axis,
+            radius_m,
+            length_m,
+        } => {
+            if !centre_m.is_finite() {
+                errs.push(file, "geometry.centre_m", "non-finite coordinate");
+            }
+            if !axis.is_finite() || axis.length() < 1e-12 {
+                errs.push(file, "geometry.axis", "must be a finite non-zero vector");
+            }
+            if !positive(*radius_m) {
+                errs.push(
+                    file,
+                    "geometry.radius_m",
+                    format!("must be positive, got {radius_m}"),
+                );
+            }
+            if !positive(*length_m) {
+                errs.push(
+                    file,
+                    "geometry.length_m",
+                    format!("must be positive, got {length_m}"),
+                );
+            }
+        }
+    }
+}
+
 /// A placed target: id, size, finite corners forming a square of its size (edges within
 /// [`TARGET_SIZE_REL_TOL`]), coplanar, its centre at their mean.
 pub(crate) fn check_target(t: &Target, file: &Path, field: &str, errs: &mut SessionErrors) {
@@ -626,6 +674,14 @@ fn validate(
             check_pose(p, file, &format!("{field}.world_from_head"), errs);
         }
         match (im.exposure_index, &capture) {
+            (Some(x), _) if !im.role.fired_by_controller() => errs.push(
+                file,
+                format!("{field}.exposure_index"),
+                format!(
+                    "is {x}, but a survey image is taken by hand, never fired by the \
+                     controller: it has no exposure in the capture record"
+                ),
+            ),
             (Some(x), Some(c)) => match c.exposures.iter().find(|e| e.index == x) {
                 None => errs.push(
                     file,
@@ -743,6 +799,9 @@ fn validate(
         }
     }
 
+    if let Some(points) = s.registration.as_ref().and_then(|r| r.points.as_ref()) {
+        check_relative_file(dir, points, file, "registration.points", errs);
+    }
     // Geometry and region of interest.
     match &s.geometry {
         GeometrySpec::Scan {
@@ -764,54 +823,16 @@ fn validate(
                     .extension()
                     .map(|e| e.to_string_lossy().to_ascii_lowercase())
                     .unwrap_or_default();
-                if ext != "ply" && ext != "obj" {
+                if !matches!(ext.as_str(), "ply" | "obj" | "glb" | "gltf") {
                     errs.push(
                         file,
                         "geometry.file",
-                        format!("`{scan}`: scans must be .ply or .obj"),
+                        format!("`{scan}`: scans must be .ply, .obj, .glb or .gltf"),
                     );
                 }
             }
         }
-        GeometrySpec::Sphere { centre_m, radius_m } => {
-            if !centre_m.is_finite() {
-                errs.push(file, "geometry.centre_m", "non-finite coordinate");
-            }
-            if !positive(*radius_m) {
-                errs.push(
-                    file,
-                    "geometry.radius_m",
-                    format!("must be positive, got {radius_m}"),
-                );
-            }
-        }
-        GeometrySpec::Cylinder {
-            centre_m,
-            axis,
-            radius_m,
-            length_m,
-        } => {
-            if !centre_m.is_finite() {
-                errs.push(file, "geometry.centre_m", "non-finite coordinate");
-            }
-            if !axis.is_finite() || axis.length() < 1e-12 {
-                errs.push(file, "geometry.axis", "must be a finite non-zero vector");
-            }
-            if !positive(*radius_m) {
-                errs.push(
-                    file,
-                    "geometry.radius_m",
-                    format!("must be positive, got {radius_m}"),
-                );
-            }
-            if !positive(*length_m) {
-                errs.push(
-                    file,
-                    "geometry.length_m",
-                    format!("must be positive, got {length_m}"),
-                );
-            }
-        }
+        shape => check_shape(shape, file, errs),
     }
     if let Some(r) = &s.roi {
         if !r.centre_m.is_finite() {

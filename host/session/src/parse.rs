@@ -534,6 +534,10 @@ pub(crate) fn parse_session_toml(
         Some(v) => item::<KnownQuantities>(v, file, "known", errs),
         None => Some(KnownQuantities::default()),
     };
+    let registration = match root.remove("registration") {
+        Some(v) => item::<RegistrationSpec>(v, file, "registration", errs).map(Some),
+        None => Some(None),
+    };
     for k in root.keys() {
         errs.push(file, k.as_str(), "unknown field");
     }
@@ -559,6 +563,7 @@ pub(crate) fn parse_session_toml(
         geometry: geometry?,
         roi: roi?,
         known: known?,
+        registration: registration?,
     };
     report_missing_sections(&f.images, &f.known, Some(&f.camera), stated, file, errs);
     (errs.len() == n_before).then_some((f, stated))

@@ -38,6 +38,11 @@
 //! brdf = { model = "lambertian", albedo = [0.99, 0.99, 0.99] }
 //! size_m = [0.12, 0.12]
 //!
+//! # [geometry]                    # optional: an ideal sample instead of a scanned head
+//! # kind = "sphere"                (or "cylinder" with axis and length_m), head frame
+//! # centre_m = [0.0, 0.0, 0.0]
+//! # radius_m = 0.09
+//!
 //! [roi]                           # optional: the forehead region, head frame
 //! centre_m = [0.0, 0.09, 0.04]
 //! radius_m = 0.03
@@ -57,8 +62,8 @@ use skinbrdf_core::Pose;
 
 use crate::error::SessionErrors;
 use crate::format::{
-    FlashSpec, RegionOfInterest, StandardSpec, Target, TargetGroup, TargetLayouts, UnplacedTarget,
-    TAG_FAMILY,
+    FlashSpec, GeometrySpec, RegionOfInterest, StandardSpec, Target, TargetGroup, TargetLayouts,
+    UnplacedTarget, TAG_FAMILY,
 };
 use crate::load::{check_id_and_size, check_target};
 
@@ -162,6 +167,10 @@ pub struct RigFile {
     /// forehead fixes it); `None`: the whole scan.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub roi: Option<RegionOfInterest>,
+    /// The sample's shape when it is an ideal one (a calibration sphere or cylinder), head
+    /// frame: the session then needs no scan. A head's shape comes from its scan.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub geometry: Option<GeometrySpec>,
 }
 
 fn default_family() -> String {
@@ -189,6 +198,23 @@ pub struct SessionParts {
     pub flash: FlashSpec,
     /// The standard with its placed targets.
     pub standard: Option<StandardSpec>,
+}
+
+impl RigFile {
+    /// The same rig for a file written in `to_dir` instead of `from_dir`: every sheet's layout
+    /// file (named relative to the rig file) named relative to `to_dir`, or absolute when the
+    /// two share no root.
+    pub fn moved(&self, from_dir: &Path, to_dir: &Path) -> Self {
+        let mut out = self.clone();
+        for s in &mut out.sheets {
+            if let Some(l) = &s.layout {
+                let abs = from_dir.join(l);
+                let rel = crate::write::relative_path(&abs, to_dir);
+                s.layout = Some(rel.to_string_lossy().into_owned());
+            }
+        }
+        out
+    }
 }
 
 impl SessionParts {
@@ -226,6 +252,9 @@ impl Rig {
     }
 
     /// Writes a rig file atomically.
+    ///
+    /// The sheets' layout files are named relative to the rig file: [`RigFile::moved`] names
+    /// them for a rig written elsewhere.
     pub fn write_file(path: &Path, file: &RigFile) -> Result<(), crate::FileError> {
         let text = toml::to_string(file).map_err(|e| crate::FileError::Invalid {
             path: path.to_path_buf(),
@@ -377,6 +406,15 @@ fn validate(
                 format!("must be positive, got {:?}", s.size_m),
             );
         }
+    }
+    match &f.geometry {
+        Some(GeometrySpec::Scan { .. }) => errs.push(
+            path,
+            "geometry.kind",
+            "a rig states only an ideal shape (sphere or cylinder); a scan is given to ingest",
+        ),
+        Some(shape) => crate::load::check_shape(shape, path, errs),
+        None => {}
     }
     if let Some(r) = &f.roi {
         if !r.centre_m.is_finite() {
@@ -612,6 +650,7 @@ size_m = [0.12, 0.12]
             },
             standard: None,
             roi: None,
+            geometry: None,
         };
         let p = dir.path().join("rig.toml");
         Rig::write_file(&p, &file).expect("write");

@@ -52,6 +52,33 @@ pub struct Truth {
     /// `None`: the head frame's origin, which is the head's centre in synthetic sessions.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub head_point_m: Option<DVec3>,
+    /// Every printed sheet's truth (scores a survey's sheets; empty when every target is a
+    /// cut-out, and in older truth files).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sheets: Vec<SheetTruth>,
+}
+
+/// A printed sheet's truth: how its layout file relates to where its targets are.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SheetTruth {
+    /// Its name (as in the rig file's `[[sheets]]`).
+    pub name: String,
+    /// Its group (the frame of `group_from_sheet`).
+    pub group: crate::format::TargetGroup,
+    /// The ids printed on it (its layout's, and a target printed with another's code).
+    pub ids: Vec<u32>,
+    /// The flat sheet's pose, tilt included (`None`: wrapped, no pose places its layout).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub group_from_sheet: Option<skinbrdf_core::Pose>,
+    /// Printed size over the layout's nominal size.
+    pub print_scale: f64,
+    /// Its tilt about its horizontal axis, degrees (included in `group_from_sheet`).
+    pub tilt_deg: f64,
+    /// Its fold about its vertical centre line, degrees (0: flat).
+    pub bend_deg: f64,
+    /// Whether the layout placed by `group_from_sheet` and `print_scale` gives the true corners
+    /// (false for a folded or wrapped sheet).
+    pub rigid: bool,
 }
 
 /// A target's true placement.
@@ -186,6 +213,11 @@ impl Truth {
                 p.corners_m = p.corners_m.map(|c| new_from_head.transform_point(c));
             }
         }
+        for s in &mut self.sheets {
+            if s.group == crate::format::TargetGroup::Headdress {
+                s.group_from_sheet = s.group_from_sheet.map(|p| new_from_head * p);
+            }
+        }
         self
     }
 
@@ -193,7 +225,10 @@ impl Truth {
     /// each of `images` with an `exposure_index` takes the truth of the image rendered for that
     /// exposure, and the result holds only those, in `images`' order. The other session
     /// (written by `skinbrdf ingest` from a synthetic studio) names its files as the camera
-    /// did, so the file names cannot pair them. Errors (naming `path`) when no image pairs.
+    /// did, so the file names cannot pair them. A survey image has no exposure: it takes the
+    /// truth of the survey image whose file has the same name (the studio's truth names its
+    /// survey images by their raw files; the session may hold them in another folder).
+    /// Errors (naming `path`) when no image pairs.
     pub fn keyed_to(
         mut self,
         images: &[crate::format::ImageEntry],
@@ -203,9 +238,19 @@ impl Truth {
             return Ok(self);
         }
         let mut keyed = Vec::new();
+        let name = |f: &str| Path::new(f).file_name().map(std::ffi::OsStr::to_os_string);
         for e in images {
-            let Some(k) = e.exposure_index else { continue };
-            if let Some(t) = self.images.iter().find(|t| t.exposure_index == Some(k)) {
+            let found = match e.exposure_index {
+                Some(k) => self.images.iter().find(|t| t.exposure_index == Some(k)),
+                None if e.role == ImageRole::Survey => self.images.iter().find(|t| {
+                    t.role == ImageRole::Survey
+                        && t.exposure_index.is_none()
+                        && name(&t.file).is_some()
+                        && name(&t.file) == name(&e.file)
+                }),
+                None => None,
+            };
+            if let Some(t) = found {
                 keyed.push(ImageTruth {
                     file: e.file.clone(),
                     ..t.clone()

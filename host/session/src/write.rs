@@ -158,9 +158,42 @@ pub fn load_mask(path: &Path) -> Result<Mask, FileError> {
     })
 }
 
+/// `target` as a path relative to `base` when they share a root (else `target` absolute).
+pub fn relative_path(target: &Path, base: &Path) -> std::path::PathBuf {
+    let (Ok(t), Ok(b)) = (std::fs::canonicalize(target), std::fs::canonicalize(base)) else {
+        return target.to_path_buf();
+    };
+    let tc: Vec<std::path::Component<'_>> = t.components().collect();
+    let bc: Vec<std::path::Component<'_>> = b.components().collect();
+    let common = tc.iter().zip(&bc).take_while(|(a, b)| a == b).count();
+    if common == 0 {
+        return t;
+    }
+    let mut rel = std::path::PathBuf::new();
+    for _ in common..bc.len() {
+        rel.push("..");
+    }
+    for c in &tc[common..] {
+        rel.push(c.as_os_str());
+    }
+    rel
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn relative_paths_climb_to_the_common_root() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let card = dir.path().join("S/studio/card");
+        std::fs::create_dir_all(&card).expect("mkdir");
+        std::fs::write(card.join("a.dng"), b"x").expect("write");
+        let rel = relative_path(&card.join("a.dng"), dir.path());
+        assert_eq!(rel, std::path::PathBuf::from("S/studio/card/a.dng"));
+        let up = relative_path(dir.path(), &card);
+        assert_eq!(up, std::path::PathBuf::from("../../.."));
+    }
     use crate::linear::{load_linear_image, Linearization};
 
     #[test]

@@ -66,6 +66,7 @@ fn valid_file() -> SessionFile {
         },
         roi: None,
         known: KnownQuantities::default(),
+        registration: None,
     }
 }
 

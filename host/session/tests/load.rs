@@ -77,6 +77,7 @@ fn valid_file() -> SessionFile {
             world_from_standard: Some(Pose::IDENTITY),
             ..Default::default()
         },
+        registration: None,
     }
 }
 
@@ -102,6 +103,28 @@ fn a_valid_session_loads_and_its_images_linearize() {
     assert_eq!((img.width, img.height), (W, H));
     assert!((img.rgb[7][1] - 1000.0 / 65535.0).abs() < F32_DECODE_TOL);
     assert!(s.load_truth().is_none());
+}
+
+#[test]
+fn a_session_with_survey_images_loads_and_a_survey_image_has_no_exposure() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut f = valid_file();
+    let mut survey = f.images[0].clone();
+    survey.file = "images/survey0.png".into();
+    survey.role = ImageRole::Survey;
+    f.images.insert(0, survey);
+    write_dir(dir.path(), &f);
+    let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.images_with_role(ImageRole::Survey).count(), 1);
+    assert_eq!(s.images_with_role(ImageRole::Measurement).count(), 2);
+    let text = std::fs::read_to_string(dir.path().join("session.toml")).unwrap();
+    assert!(text.contains("role = \"survey\""), "{text}");
+    // A survey image is never fired by the controller: an exposure index is refused.
+    f.images[0].exposure_index = Some(3);
+    Session::write_file(dir.path(), &f).unwrap();
+    let errs = Session::load(dir.path()).unwrap_err();
+    assert!(errs.has_field("images[0].exposure_index"), "{errs}");
+    assert!(errs.to_string().contains("survey image"), "{errs}");
 }
 
 #[test]

@@ -80,6 +80,7 @@ fn session_file(ext: &str) -> SessionFile {
             world_from_standard: Some(Pose::IDENTITY),
             ..Default::default()
         },
+        registration: None,
     }
 }
 

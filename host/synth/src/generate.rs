@@ -13,10 +13,10 @@ use skinbrdf_core::{CameraModel, TriMesh};
 use skinbrdf_session::capture::CaptureRecord;
 use skinbrdf_session::write::{write_exr_rgb32f, write_png_rgb16, write_png_rgb8};
 use skinbrdf_session::{
-    CameraSpec, FlashSpec, GeometrySpec, ImageEntry, ImageTruth, KnownQuantities, Linearization,
-    RegionOfInterest, RenderTruth, SessionFile, StandardSpec, StoredFormat, SurfaceTruth,
-    TargetLayouts, TargetTruth, ToneCurve, Truth, SESSION_FORMAT_VERSION, TAG_FAMILY, TRUTH_FILE,
-    TRUTH_FORMAT_VERSION,
+    CameraSpec, FlashSpec, GeometrySpec, ImageEntry, ImageRole, ImageTruth, KnownQuantities,
+    Linearization, RegionOfInterest, RenderTruth, SessionFile, StandardSpec, StoredFormat,
+    SurfaceTruth, TargetLayouts, TargetTruth, ToneCurve, Truth, SESSION_FORMAT_VERSION, TAG_FAMILY,
+    TRUTH_FILE, TRUTH_FORMAT_VERSION,
 };
 
 use crate::layout::{build_rig, plan_shots, shots_from_capture, Layout, Rig, Shot};
@@ -328,6 +328,10 @@ fn generate_into(
     let t_start = Instant::now();
     let scene = apply_options(scene, opts)?;
     let rig = build_rig(&scene);
+    let problems = crate::studio::rig_problems(&scene, &rig);
+    if !problems.is_empty() {
+        return Err(SynthError::Scene { problems });
+    }
     let planned;
     let capture = match (&opts.capture, opts.studio) {
         (Some(rec), _) => Some(rec),
@@ -337,13 +341,7 @@ fn generate_into(
         }
         (None, false) => None,
     };
-    if opts.studio && scene.geometry.kind != GeometryKind::Head {
-        return Err(SynthError::Invalid {
-            field: "studio",
-            problem: "a studio holds a head scan: the scene's geometry must be `head`".into(),
-        });
-    }
-    let shots = match capture {
+    let mut shots = match capture {
         Some(rec) => shots_from_capture(&scene, &rig, rec),
         None => plan_shots(&scene, &rig),
     };
@@ -354,16 +352,17 @@ fn generate_into(
         });
     }
     let renderer = Renderer::new(&scene, &rig)?;
+    // Survey shots (taken before the session, without the subject) follow the capture's shots
+    // in the render order, so a shot index of the scene (`moved_target.from_shot`) keeps its
+    // meaning; the session lists them first, in the order they were taken.
+    let n_capture = shots.len();
+    let survey = crate::survey_shots::survey_shots(&scene, &rig, &renderer, &shots);
+    shots.extend(survey);
+    let capture_shots = &shots[..n_capture];
     // A target that moves mid-session: the shots from the move on see a second rig (and a
     // renderer built from it); the per-image truth follows the rig each shot was rendered with.
     let moved = match (&scene.studio.moved_target, opts.studio) {
         (Some(m), true) => {
-            if !rig.reference.iter().any(|t| t.id == m.id) {
-                return Err(SynthError::Invalid {
-                    field: "studio.moved_target.id",
-                    problem: format!("{} is not a reference target", m.id),
-                });
-            }
             let r = m.apply(&rig);
             let ren = Renderer::new(&scene, &r)?;
             Some((m.from_shot, r, ren))
@@ -372,7 +371,7 @@ fn generate_into(
     };
     let rig_of = |i: usize| -> (&Rig, &Renderer) {
         match &moved {
-            Some((from, r, ren)) if i >= *from => (r, ren),
+            Some((from, r, ren)) if i >= *from && i < n_capture => (r, ren),
             _ => (&rig, &renderer),
         }
     };
@@ -400,21 +399,11 @@ fn generate_into(
                 scene.geometry.scan_spacing_m,
             )
         }
-        GeometryKind::Sphere => (
-            GeometrySpec::Sphere {
-                centre_m: DVec3::ZERO,
-                radius_m: scene.geometry.sphere_radius_m,
-            },
-            0,
-            0.0,
-        ),
-        GeometryKind::Cylinder => (
-            GeometrySpec::Cylinder {
-                centre_m: DVec3::ZERO,
-                axis: DVec3::Z,
-                radius_m: scene.geometry.cylinder_radius_m,
-                length_m: scene.geometry.cylinder_length_m,
-            },
+        GeometryKind::Sphere | GeometryKind::Cylinder => (
+            analytic_geometry(&scene).ok_or(SynthError::Invalid {
+                field: "geometry.kind",
+                problem: "not an ideal shape".into(),
+            })?,
             0,
             0.0,
         ),
@@ -427,22 +416,16 @@ fn generate_into(
                 &rig,
                 rec,
                 &[
-                    crate::studio::most_seen(
-                        &renderer,
-                        &rig,
-                        &shots,
-                        Layout::Reference,
-                        scene.studio.origin_targets as usize,
-                    ),
+                    crate::studio::origin_ids(&renderer, &rig, capture_shots, &scene),
                     crate::studio::flash_panel_ids(&rig),
                 ]
                 .concat(),
                 &crate::studio::most_seen(
                     &renderer,
                     &rig,
-                    &shots,
+                    capture_shots,
                     Layout::Headdress,
-                    scene.studio.declared_headdress_targets as usize,
+                    crate::studio::declared_headdress_count(&scene),
                 ),
             )?,
             crate::studio::card_files(&scene, rec, &shots),
@@ -529,7 +512,16 @@ fn generate_into(
             pending = Some((i, r));
         }
     }
-    for shot in &shots {
+    // The order the images were taken: the survey before the session.
+    let order: Vec<usize> = (n_capture..shots.len()).chain(0..n_capture).collect();
+    let image_truths: Vec<ImageTruth> = {
+        let mut by_shot: Vec<Option<ImageTruth>> = image_truths.into_iter().map(Some).collect();
+        order
+            .iter()
+            .filter_map(|&i| by_shot.get_mut(i).and_then(Option::take))
+            .collect()
+    };
+    for shot in order.iter().map(|&i| &shots[i]) {
         entries.push(ImageEntry {
             file: shot.file.clone(),
             role: shot.role,
@@ -589,6 +581,7 @@ fn generate_into(
             radius_m: scene.geometry.roi_radius_m,
         }),
         known: KnownQuantities::default(),
+        registration: None,
     };
     skinbrdf_session::Session::write_file(dir, &session)?;
     let truth = Truth {
@@ -639,15 +632,24 @@ fn generate_into(
         })
         .collect(),
         head_point_m: None,
+        sheets: crate::studio::sheet_truths(&rig),
     };
     truth.write(&dir.join(TRUTH_FILE))?;
-    if studio.is_some() {
-        // The studio's head frame is its textured scan's: its truth says so.
-        let head_from_scanner = crate::textured_scan::scanner_from_head(&scene).inverse();
-        truth
-            .clone()
-            .with_head_frame(&head_from_scanner)
-            .write(&dir.join(crate::studio::STUDIO_DIR).join(TRUTH_FILE))?;
+    if let Some((_, card)) = &studio {
+        // The studio's head frame is its textured scan's: its truth says so. A survey image
+        // has no exposure to pair it with an ingested session's image by, so the studio's truth
+        // names it by its raw file (`Truth::keyed_to` pairs it by file name).
+        let head_from_scanner = crate::studio::scanner_from_head(&scene).inverse();
+        let mut studio_truth = truth.clone().with_head_frame(&head_from_scanner);
+        for t in &mut studio_truth.images {
+            let raw = card
+                .iter()
+                .find(|c| c.exposure_index.is_none() && shots[c.shot].file == t.file);
+            if let (ImageRole::Survey, Some(c)) = (t.role, raw) {
+                t.file = c.file.clone();
+            }
+        }
+        studio_truth.write(&dir.join(crate::studio::STUDIO_DIR).join(TRUTH_FILE))?;
     }
     write_s += t2.elapsed().as_secs_f64();
     Ok(SynthSummary {
@@ -662,4 +664,23 @@ fn generate_into(
         write_s,
         total_s: t_start.elapsed().as_secs_f64(),
     })
+}
+
+/// The sample's shape in the head frame when the scene's geometry is an ideal one (a
+/// calibration sphere or cylinder about the head frame's origin); `None` for a head.
+pub fn analytic_geometry(scene: &Scene) -> Option<GeometrySpec> {
+    let g = &scene.geometry;
+    match g.kind {
+        GeometryKind::Head => None,
+        GeometryKind::Sphere => Some(GeometrySpec::Sphere {
+            centre_m: DVec3::ZERO,
+            radius_m: g.sphere_radius_m,
+        }),
+        GeometryKind::Cylinder => Some(GeometrySpec::Cylinder {
+            centre_m: DVec3::ZERO,
+            axis: DVec3::Z,
+            radius_m: g.cylinder_radius_m,
+            length_m: g.cylinder_length_m,
+        }),
+    }
 }

@@ -16,10 +16,13 @@
 //! circle (2 m) from near the flash (retro-reflection) to the far side (grazing), always aimed
 //! at the forehead; then the six extra images: three of the flash (light position, from 1.4 m),
 //! one of the standard under the flash (reference standard) and two more of the standard
-//! (standard position), from 2 m. [`crate::visibility::usable_targets`] says which targets a shot can use; the
+//! (standard position), from 2 m. The cage's neighbours can be printed on shared sheets
+//! ([`crate::sheets`]). [`crate::visibility::usable_targets`] says which targets a shot can use; the
 //! tests check every shot of every built-in scene sees enough of them.
 
-use glam::DVec3;
+use std::collections::BTreeMap;
+
+use glam::{DVec2, DVec3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use skinbrdf_core::{CameraModel, Pose};
@@ -28,6 +31,7 @@ use skinbrdf_session::{ImageRole, Target};
 
 use crate::scene::{Encoding, Scene};
 use crate::shape::Shape;
+use crate::sheets::{CageTarget, PrintedSheet, SheetFaults, TagPrint};
 
 /// First id of each target group (tag36h11 ids are unique across the session).
 pub const REFERENCE_ID0: u32 = 0;
@@ -59,18 +63,24 @@ pub struct Rig {
     pub world_from_flash: Pose,
     /// World from standard (its surface is z = 0, normal +z).
     pub world_from_standard: Pose,
+    /// The printed sheets (reference sheets of the cage, the headdress band): each target of
+    /// a sheet is also in `reference` or `headdress` with its true corners.
+    pub sheets: Vec<PrintedSheet>,
+    /// Reference targets printed other than as a flat square of their own code (folded across
+    /// a sheet's fold, or printed with another target's code), by id.
+    pub prints: BTreeMap<u32, TagPrint>,
 }
 
 impl Rig {
     /// Every target group a shot sees, with the frame that places it in the world: the
-    /// reference structure, the headdress (the shot's head pose), the flash and, when the shot
-    /// has it, the standard.
+    /// reference structure, the headdress (the shot's head pose) when the subject sits, the
+    /// flash and, when the shot has it, the standard.
     pub fn target_groups(&self, shot: &Shot) -> Vec<(Layout, &Vec<Target>, Pose)> {
-        let mut groups = vec![
-            (Layout::Reference, &self.reference, Pose::IDENTITY),
-            (Layout::Headdress, &self.headdress, shot.world_from_head),
-            (Layout::Flash, &self.flash_targets, self.world_from_flash),
-        ];
+        let mut groups = vec![(Layout::Reference, &self.reference, Pose::IDENTITY)];
+        if shot.subject_present {
+            groups.push((Layout::Headdress, &self.headdress, shot.world_from_head));
+        }
+        groups.push((Layout::Flash, &self.flash_targets, self.world_from_flash));
         if shot.standard_present {
             groups.push((
                 Layout::Standard,
@@ -84,6 +94,36 @@ impl Rig {
     /// The flash's emitting point, world frame.
     pub fn light_position_m(&self) -> DVec3 {
         self.world_from_flash.translation_m
+    }
+
+    /// The sheet a target is printed on, if any.
+    pub fn sheet_of(&self, layout: Layout, id: u32) -> Option<&PrintedSheet> {
+        self.sheets
+            .iter()
+            .find(|s| s.layout == layout && s.targets.iter().any(|t| t.id == id))
+    }
+
+    /// The ids of the body a reference target belongs to: its sheet's, or its own.
+    pub fn reference_body(&self, id: u32) -> Vec<u32> {
+        self.sheet_of(Layout::Reference, id)
+            .map_or_else(|| vec![id], PrintedSheet::ids)
+    }
+
+    /// How a reference target is printed: its code and its flat pieces.
+    pub fn print_of(&self, t: &Target) -> TagPrint {
+        self.prints
+            .get(&t.id)
+            .cloned()
+            .unwrap_or_else(|| TagPrint::plain(t))
+    }
+
+    /// The sheet named so, or the `index`-th (in the rig's order).
+    pub fn find_sheet(&self, which: &crate::studio::SheetRef) -> Option<&PrintedSheet> {
+        self.sheets
+            .iter()
+            .enumerate()
+            .find(|(k, s)| which.names(&s.name, *k))
+            .map(|(_, s)| s)
     }
 }
 
@@ -108,6 +148,13 @@ pub struct Shot {
     pub ambient_on: bool,
     /// Whether the reflectance standard is in the scene.
     pub standard_present: bool,
+    /// Whether the subject sits in the scene: false for a survey shot, taken before the subject
+    /// sits (no head, no headdress: the renderer skips their geometry).
+    pub subject_present: bool,
+    /// The shot's exposure against the scene's (`t ISO / N²` over the scene's settings): every
+    /// rendered value is multiplied by it. 1 for the flash shots; a survey shot, lit by the room
+    /// light alone, is exposed longer ([`crate::survey_shots::SURVEY_EXPOSURE_GAIN`]).
+    pub exposure_gain: f64,
 }
 
 fn camera_model(scene: &Scene) -> CameraModel {
@@ -187,12 +234,19 @@ fn hides(eye: DVec3, c: DVec3, r: f64, protected: &[Protected]) -> bool {
 ///   below the forehead, every [`REFERENCE_STEP_DEG`]; each target leans towards
 ///   [`facing_azimuth_deg`] (lit by the flash, seen by the whole arc). A candidate that would
 ///   hide the forehead region, a headdress target, the flash or the standard from any nominal
-///   camera, or that collides with the standard, is left out. Plus a small panel of
-///   reference targets around the flash (at two depths, so not coplanar) for the light-position
+///   camera, or that collides with the standard, is left out. With
+///   `targets.reference_sheet_targets = N > 1`, neighbours along a row are printed N to a
+///   flat sheet with a layout file where that is safe ([`crate::sheets`]: the flattened
+///   targets pass the same occlusion checks, and no paper touches another), each sheet tilted,
+///   scaled or folded as the scene's `[studio]` says. Plus a small panel of reference targets
+///   around the flash (at two depths, so not coplanar, always cut-outs) for the light-position
 ///   images.
 /// * the **headdress**: rows of targets on the head above and beside the forehead region, one
 ///   pitch ([`target_pitch_m`]) apart, leaning towards the cameras and the flash, none within
-///   the region of interest.
+///   the region of interest; with `studio.headdress_band`, stated as one printed band whose
+///   layout is the headdress unrolled ([`crate::sheets::headdress_band`]).
+/// * a reference target of `studio.duplicate_id` printed with the other target's code
+///   ([`Rig::prints`]).
 pub fn build_rig(scene: &Scene) -> Rig {
     let shape = Shape::from_scene(&scene.geometry);
     let g = &scene.geometry;
@@ -210,7 +264,8 @@ pub fn build_rig(scene: &Scene) -> Rig {
         Pose::look_at(flash_pos, roi_centre_head, DVec3::Z).unwrap_or(Pose::IDENTITY);
 
     // Headdress: rows above and beside the forehead region.
-    let headdress = headdress_targets(scene, &shape, roi_centre_head, facing);
+    let head_tags = headdress_targets(scene, &shape, roi_centre_head, facing);
+    let headdress: Vec<Target> = head_tags.iter().map(|(t, _)| *t).collect();
 
     // Standard: in front of the head, towards the flash, facing between the flash and the
     // reference-standard camera.
@@ -254,10 +309,16 @@ pub fn build_rig(scene: &Scene) -> Rig {
         radius_m: paper_half_diagonal_m(t.headdress_size_m),
     }));
     let cams = nominal_cameras(scene, roi_centre_head, flash_pos, std_pos);
-    let mut reference = Vec::new();
+    let mut cage = Vec::new();
     let mut id = REFERENCE_ID0;
     let ref_r = paper_half_diagonal_m(t.reference_size_m) + 0.005;
-    for dz in REFERENCE_ROWS_M {
+    let safe = |centre: DVec3| {
+        centre.distance(std_pos) >= standard_radius_m + ref_r
+            && !cams
+                .iter()
+                .any(|eye| hides(*eye, centre, ref_r, &protected))
+    };
+    for (row, dz) in REFERENCE_ROWS_M.into_iter().enumerate() {
         let zc = roi_centre_head.z + dz;
         let mut b_deg = -180.0
             + if dz.abs() < 0.1 {
@@ -265,25 +326,46 @@ pub fn build_rig(scene: &Scene) -> Rig {
             } else {
                 0.0
             };
+        let mut step = 0i64;
         while b_deg < 180.0 - 1e-9 {
             let centre = crate::shape::direction(b_deg.to_radians(), 0.0) * REFERENCE_RADIUS_M
                 + DVec3::Z * zc;
             b_deg += REFERENCE_STEP_DEG;
-            if centre.distance(std_pos) < standard_radius_m + ref_r
-                || cams
-                    .iter()
-                    .any(|eye| hides(*eye, centre, ref_r, &protected))
-            {
+            step += 1;
+            if !safe(centre) {
                 continue;
             }
             // Lean towards the arc's height at 2 m.
             let out = (facing + DVec3::Z * ((s.camera_height_m - zc) / 2.0)).normalize();
             if let Some(tg) = Target::square(id, t.reference_size_m, centre, out, DVec3::Z) {
-                reference.push(tg);
+                cage.push(CageTarget {
+                    target: tg,
+                    row,
+                    step,
+                });
                 id += 1;
             }
         }
     }
+    // Groups of neighbours printed on sheets (crate::sheets), where that is safe.
+    let st = &scene.studio;
+    let printed = crate::sheets::print_cage(
+        &cage,
+        t.reference_sheet_targets as usize,
+        &SheetFaults {
+            tilt_deg: st.sheet_tilt_deg,
+            seed: scene.seed,
+            print_scale: st.print_scale.as_ref().map(|f| (f.sheet.clone(), f.scale)),
+            bend: st
+                .bent_sheet
+                .as_ref()
+                .map(|f| (f.sheet.clone(), f.bend_deg)),
+        },
+        &|tg: &Target| safe(tg.centre()),
+    );
+    let mut reference = printed.targets;
+    let mut sheets = printed.sheets;
+    let mut prints = printed.prints;
     // Reference panel around the flash, for the light-position images: two columns each side
     // of the flash's target ring, the outer ones on 4 cm stand-offs (not coplanar).
     // Smaller than the head cage's: the light-position cameras are closer.
@@ -350,6 +432,19 @@ pub fn build_rig(scene: &Scene) -> Rig {
     })
     .collect();
 
+    if scene.studio.headdress_band {
+        let tags: Vec<(&Target, DVec2)> = head_tags.iter().map(|(t, p)| (t, *p)).collect();
+        sheets.extend(crate::sheets::headdress_band(&tags));
+    }
+    if let Some(d) = &scene.studio.duplicate_id {
+        if let Some(x) = reference.iter().find(|r| r.id == d.id) {
+            prints
+                .entry(d.id)
+                .or_insert_with(|| TagPrint::plain(x))
+                .code = d.printed_as;
+        }
+    }
+
     Rig {
         camera: camera_model(scene),
         shape,
@@ -360,6 +455,8 @@ pub fn build_rig(scene: &Scene) -> Rig {
         standard_targets,
         world_from_flash,
         world_from_standard,
+        sheets,
+        prints,
     }
 }
 
@@ -367,12 +464,16 @@ pub fn build_rig(scene: &Scene) -> Rig {
 /// pitch apart along each row, rows staggered; a tag too close to an earlier one or to the
 /// region of interest is left out. Each leans half-way from the surface's outward direction
 /// towards `facing` and up (stand-off wedges keep the paper off the skin).
+///
+/// With each target its place on the headdress unrolled flat (the band's layout,
+/// `studio.headdress_band`): the arc length along its row's ring on the surface, and the arc
+/// length along the surface's front meridian from the lowest row up to its row.
 fn headdress_targets(
     scene: &Scene,
     shape: &Shape,
     roi_centre_head: DVec3,
     facing: DVec3,
-) -> Vec<Target> {
+) -> Vec<(Target, DVec2)> {
     let t = &scene.targets;
     let size = t.headdress_size_m;
     let pitch = target_pitch_m(size);
@@ -390,10 +491,12 @@ fn headdress_targets(
         }
         Shape::Star { .. } => vec![(12.0, 110.0), (38.0, 110.0), (60.0, 110.0)],
     };
-    let mut placed: Vec<Target> = Vec::new();
+    let mut placed: Vec<(Target, DVec2)> = Vec::new();
     let mut hid = HEADDRESS_ID0;
+    let el0 = rows.first().map_or(0.0, |r| r.0.to_radians());
     for (row, (el_deg, limit_deg)) in rows.into_iter().enumerate() {
         let el = el_deg.to_radians();
+        let up_arc = meridian_arc_m(shape, el0, el);
         let ring_r = shape.point(0.0, el).truncate().length().max(1e-3);
         let step = 2.0 * (0.5 * pitch / ring_r).min(1.0).asin();
         let limit = limit_deg.to_radians();
@@ -411,12 +514,12 @@ fn headdress_targets(
             let tilt = n_surf.dot(out).clamp(-1.0, 1.0).acos();
             let centre = p + n_surf * (0.002 + paper_half * tilt.sin());
             if centre.distance(roi_centre_head) < roi_clear
-                || placed.iter().any(|q| q.centre().distance(centre) < pitch)
+                || placed.iter().any(|q| q.0.centre().distance(centre) < pitch)
             {
                 continue;
             }
             if let Some(tg) = Target::square(hid, size, centre, out, DVec3::Z) {
-                placed.push(tg);
+                placed.push((tg, DVec2::new(az * ring_r, up_arc)));
                 hid += 1;
             }
         }
@@ -424,9 +527,27 @@ fn headdress_targets(
     placed
 }
 
+/// Arc length along the surface's front meridian (azimuth 0) between two elevations, metres.
+fn meridian_arc_m(shape: &Shape, el_from: f64, el_to: f64) -> f64 {
+    /// Chords per meridian arc: the rows are tens of degrees apart, the curvature mild.
+    const STEPS: usize = 64;
+    (0..STEPS)
+        .map(|k| {
+            let f = |k: usize| el_from + (el_to - el_from) * k as f64 / STEPS as f64;
+            shape.point(0.0, f(k)).distance(shape.point(0.0, f(k + 1)))
+        })
+        .sum::<f64>()
+        * (el_to - el_from).signum()
+}
+
 /// Nominal (jitter-free) camera centres of a scene: the arc's ends and points between, the
 /// light-position and the standard cameras.
-fn nominal_cameras(scene: &Scene, roi: DVec3, flash_pos: DVec3, std_pos: DVec3) -> Vec<DVec3> {
+pub(crate) fn nominal_cameras(
+    scene: &Scene,
+    roi: DVec3,
+    flash_pos: DVec3,
+    std_pos: DVec3,
+) -> Vec<DVec3> {
     let s = &scene.session;
     let mut cams: Vec<DVec3> = (0..=12)
         .map(|k| {
@@ -582,11 +703,14 @@ fn camera_for(
             let eye = standard_camera_eye(std_pos, az_deg, dz) + jitter(rng, 0.005);
             Pose::look_at(eye, standard_aim(std_pos), DVec3::Z).unwrap_or(fallback)
         }
+        // Never reached: no exposure has this role (`shots_from` skips them); survey shots are
+        // planned from the rig by `crate::survey_shots`.
+        ImageRole::Survey => fallback,
     }
 }
 
 /// The image file of shot `k` of a role, with the extension of the scene's encoding.
-fn file_name(role: ImageRole, k: usize, scene: &Scene) -> String {
+pub(crate) fn file_name(role: ImageRole, k: usize, scene: &Scene) -> String {
     let ext = match scene.sensor.encoding {
         Encoding::Png16 | Encoding::Png8 => "png",
         Encoding::Exr => "exr",
@@ -596,6 +720,7 @@ fn file_name(role: ImageRole, k: usize, scene: &Scene) -> String {
         ImageRole::LightPosition => format!("images/light{k}.{ext}"),
         ImageRole::ReferenceStandard => format!("images/standard{k}.{ext}"),
         ImageRole::StandardPosition => format!("images/standard_pos{k}.{ext}"),
+        ImageRole::Survey => format!("images/survey{k:02}.{ext}"),
     }
 }
 
@@ -647,6 +772,7 @@ fn shots_from(
     let mut seen = std::collections::HashMap::<ImageRole, usize>::new();
     exposures
         .iter()
+        .filter(|e| e.0.fired_by_controller())
         .map(|&(role, t_us, index, fired)| {
             let k = {
                 let c = seen.entry(role).or_insert(0);
@@ -668,6 +794,8 @@ fn shots_from(
                     role,
                     ImageRole::ReferenceStandard | ImageRole::StandardPosition
                 ),
+                subject_present: true,
+                exposure_gain: 1.0,
             }
         })
         .collect()

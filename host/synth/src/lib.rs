@@ -7,12 +7,16 @@
 //!   analytic normals, tessellation and an independent analytic ray intersection.
 //! * [`layout`]: the set-up (reference structure, headdress, flash, standard), the shot list
 //!   (30 measurement + 6 extra images, or one per exposure of a `capture.json`) and head motion.
+//! * [`sheets`]: printed sheets of the rig (cage targets flattened onto sheets, the headdress
+//!   band) and how a real sheet differs from its layout (tilt, print scale, fold, wrap).
 //! * [`photograph`]: the synthetic photographer: ray casting (obvhs through `skinbrdf-mesh`,
 //!   rayon over rows) and shading of the studio photographs.
 //! * [`generate`]: writes a session directory that `skinbrdf_session::Session::load` accepts,
 //!   with `truth.json` and truth masks. Entry point: [`generate::generate`].
 //! * [`studio`]: with `--studio`, what a studio holds after the capture: the camera's raw
 //!   files (DNG), the controller's record, the rig files and the scan.
+//! * [`survey_shots`]: survey shots (`[session] survey_images`): taken before the subject sits,
+//!   from positions chosen to see the reference targets the measurement arc sees poorly.
 //! * [`textured_scan`]: the head scan as a textured OBJ in a scanner frame, headdress papers
 //!   included, with its truth (`studio/scan/`).
 //!
@@ -25,7 +29,9 @@ pub mod layout;
 pub mod photograph;
 pub mod scene;
 pub mod shape;
+pub mod sheets;
 pub mod studio;
+pub mod survey_shots;
 pub mod textured_scan;
 pub mod visibility;
 

@@ -4,16 +4,21 @@
 //! through the pixel centre when n = 1) are traced through the true camera (pinhole + Brown-
 //! Conrady distortion, [`CameraModel::pixel_ray`], through the camera's undistortion table
 //! [`CameraRays`], equal to it within 1e-9 rad) against three obvhs BVHs ([`MeshBvh`]): the
-//! skin and the headdress targets (head frame, moved by the head pose), the reference and flash
+//! skin and the headdress targets (head frame, moved by the head pose; absent from a survey
+//! shot, taken before the subject sits, [`Shot::subject_present`]), the reference and flash
 //! targets and the flash diffuser (world frame), and the reflectance standard (its own frame,
-//! present only in the standard images). The pixel's value is the mean of the rays' values `V`:
+//! present only in the standard images). The pixel's value is the mean of the rays' values `V`
+//! times the shot's exposure against the scene's ([`Shot::exposure_gain`], 1 but for the longer
+//! exposure of a survey shot):
 //!
 //! * **skin**: `V = rho(w_i, w_e) cos(theta_i) / (C D²)` per channel (`rho` the true BRDF in the
 //!   local frame of the analytic normal at the hit, `D` the distance to the flash's emitting
 //!   point, `C` the calibration constant) when the flash fired and a shadow ray towards it (against
 //!   the skin) is free; plus `ambient * albedo_d` when the room light is on;
 //! * **printed targets**: Lambertian paper or ink (tag36h11 cells, white margin) lit the same way
-//!   (targets cast and receive no shadows);
+//!   (targets cast and receive no shadows), each as the rig prints it ([`Rig::prints`]: another
+//!   target's code, or two half-tags across a sheet's fold); a printed sheet's paper just behind
+//!   its targets ([`crate::sheets::PAPER_BACKING_OFFSET_M`]);
 //! * **standard**: its BRDF, lit the same way;
 //! * **flash diffuser**: an emitter well above white when it fires, white plastic otherwise;
 //! * **background**: black (0).
@@ -54,7 +59,9 @@ const BLOCK_PX: u32 = 16;
 const BAND_ROWS: u32 = 8;
 pub use crate::layout::{Layout, PAPER_HALF_EXTENT};
 
-/// A printed target ready for shading, in its BVH's frame.
+/// A printed target ready for shading, in its BVH's frame: the tag's square, of which the
+/// paper between `u_range` (tag half-edges along x) is printed (all of it but for half of a
+/// tag a sheet's fold crosses).
 #[derive(Debug, Clone)]
 struct PrintedTag {
     centre: DVec3,
@@ -63,16 +70,22 @@ struct PrintedTag {
     out: DVec3,
     half_m: f64,
     bits: [[bool; 10]; 10],
+    u_range: [f64; 2],
 }
 
 impl PrintedTag {
     fn new(t: &Target, frame: &Pose) -> Self {
+        Self::piece(t, t.id, [-PAPER_HALF_EXTENT, PAPER_HALF_EXTENT], frame)
+    }
+
+    /// The part `u_range` of the square `t` printed with the code `code`.
+    fn piece(t: &Target, code: u32, u_range: [f64; 2], frame: &Pose) -> Self {
         let c = t.corners_m.map(|p| frame.transform_point(p));
         let centre = frame.transform_point(t.centre());
         let x = (c[1] - c[0]).normalize();
         let y = (c[0] - c[3]).normalize();
         let out = -(x.cross(y)).normalize();
-        let bits = skinbrdf_targets::tag36h11::tag_bits(t.id as usize).unwrap_or([[true; 10]; 10]);
+        let bits = skinbrdf_targets::tag36h11::tag_bits(code as usize).unwrap_or([[true; 10]; 10]);
         Self {
             centre,
             x,
@@ -80,6 +93,7 @@ impl PrintedTag {
             out,
             half_m: 0.5 * t.size_m,
             bits,
+            u_range,
         }
     }
 
@@ -103,8 +117,9 @@ impl PrintedTag {
 
     fn push_quad(&self, mesh: &mut TriMesh) {
         let e = PAPER_HALF_EXTENT;
+        let [u0, u1] = self.u_range;
         let base = mesh.positions.len() as u32;
-        for (u, v) in [(-e, e), (e, e), (e, -e), (-e, -e)] {
+        for (u, v) in [(u0, e), (u1, e), (u1, -e), (u0, -e)] {
             mesh.positions.push(self.corner(u, v).as_vec3());
         }
         mesh.indices.push([base, base + 1, base + 2]);
@@ -117,6 +132,8 @@ impl PrintedTag {
 enum Surface {
     Skin,
     Tag(Layout, u32),
+    /// A printed sheet's paper (behind its targets), by index.
+    Paper(u32),
     Diffuser,
     Standard,
 }
@@ -153,6 +170,8 @@ pub struct Renderer {
     tags_head: Vec<PrintedTag>,
     tags_world: Vec<(Layout, PrintedTag)>,
     tags_standard: Vec<PrintedTag>,
+    /// The reference sheets' papers (world frame): corners and outward normal.
+    papers_world: Vec<([DVec3; 4], DVec3)>,
     target_ids: Vec<(Layout, u32)>,
     light_world: DVec3,
     flash_out_world: DVec3,
@@ -199,6 +218,8 @@ struct View {
     fired: bool,
     ambient: bool,
     standard_present: bool,
+    subject_present: bool,
+    exposure_gain: f64,
 }
 
 /// Moves a mesh hit near the surface along the ray `dir` (unit) onto the analytic surface:
@@ -277,17 +298,48 @@ impl Renderer {
         let head_tags = Group::build(&m, kinds)?;
 
         let mut tags_world = Vec::new();
+        let mut target_ids = Vec::new();
         for t in &rig.reference {
-            tags_world.push((Layout::Reference, PrintedTag::new(t, &Pose::IDENTITY)));
+            // A target is printed as its code on one or more flat pieces (crate::sheets).
+            let print = rig.print_of(t);
+            for piece in &print.pieces {
+                tags_world.push((
+                    Layout::Reference,
+                    PrintedTag::piece(&piece.square, print.code, piece.u_range, &Pose::IDENTITY),
+                ));
+                target_ids.push((Layout::Reference, t.id));
+            }
         }
         for t in &rig.flash_targets {
             tags_world.push((Layout::Flash, PrintedTag::new(t, &rig.world_from_flash)));
+            target_ids.push((Layout::Flash, t.id));
         }
         let mut m = TriMesh::default();
         let mut kinds = Vec::new();
         for (i, (_, t)) in tags_world.iter().enumerate() {
             t.push_quad(&mut m);
             kinds.extend([Surface::Tag(Layout::Reference, i as u32); 2]);
+        }
+        // The reference sheets' papers, just behind their printed targets.
+        let papers_world: Vec<([DVec3; 4], DVec3)> = rig
+            .sheets
+            .iter()
+            .filter(|s| s.layout == Layout::Reference)
+            .flat_map(|s| s.paper_quads())
+            .map(|q| {
+                let out = -((q[1] - q[0]).cross(q[3] - q[0])).normalize_or_zero();
+                (
+                    q.map(|p| p - out * crate::sheets::PAPER_BACKING_OFFSET_M),
+                    out,
+                )
+            })
+            .collect();
+        for (i, (q, _)) in papers_world.iter().enumerate() {
+            let base = m.positions.len() as u32;
+            m.positions.extend(q.iter().map(|p| p.as_vec3()));
+            m.indices.push([base, base + 1, base + 2]);
+            m.indices.push([base, base + 2, base + 3]);
+            kinds.extend([Surface::Paper(i as u32); 2]);
         }
         // The diffuser disc (a 32-gon fan, just in front of the flash plane).
         let f = rig.world_from_flash;
@@ -331,11 +383,6 @@ impl Renderer {
         }
         let standard = Group::build(&m, kinds)?;
 
-        let target_ids = tags_world
-            .iter()
-            .zip(rig.reference.iter().chain(&rig.flash_targets))
-            .map(|((l, _), t)| (*l, t.id))
-            .collect();
         let spp_side = (scene.sensor.samples_per_pixel as f64)
             .sqrt()
             .ceil()
@@ -350,6 +397,7 @@ impl Renderer {
             tags_head,
             tags_world,
             tags_standard,
+            papers_world,
             target_ids,
             light_world: rig.light_position_m(),
             flash_out_world: rig.world_from_flash.transform_vector(DVec3::Z),
@@ -377,7 +425,8 @@ impl Renderer {
         self.spp_side = (spp.max(1) as f64).sqrt().ceil() as u32;
     }
 
-    /// The tag36h11 ids of the world-frame targets (reference then flash), for tests.
+    /// The ids of the world-frame targets' printed pieces (reference then flash; a target a
+    /// sheet's fold crosses has two), for tests.
     pub fn world_target_ids(&self) -> &[(Layout, u32)] {
         &self.target_ids
     }
@@ -394,6 +443,8 @@ impl Renderer {
             fired: shot.flash_fired,
             ambient: shot.ambient_on,
             standard_present: shot.standard_present,
+            subject_present: shot.subject_present,
+            exposure_gain: shot.exposure_gain,
         }
     }
 
@@ -501,7 +552,7 @@ impl Renderer {
         .into_iter()
         .enumerate()
         {
-            if k == 3 && !view.standard_present {
+            if (k == 3 && !view.standard_present) || ((k == 1 || k == 2) && !view.subject_present) {
                 continue;
             }
             let hit = match pre {
@@ -561,6 +612,16 @@ impl Renderer {
                 };
                 Sample {
                     v: self.shade_paper(albedo, p, tag.out, d, light, view),
+                    skin_roi: false,
+                    target: true,
+                    standard: false,
+                }
+            }
+            Surface::Paper(i) => {
+                let p = o_w + d_w * t;
+                let out = self.papers_world[i as usize].1;
+                Sample {
+                    v: self.shade_paper(self.paper, p, out, d_w, self.light_world, view),
                     skin_roi: false,
                     target: true,
                     standard: false,
@@ -672,10 +733,19 @@ impl Renderer {
         let camera_from_world = view.world_from_camera.inverse();
         let world_from_head = view.head_from_world.inverse();
         let world_from_std = view.standard_from_world.inverse();
-        let mut sets: Vec<Vec<DVec3>> = vec![
-            Self::box_points(self.skin.lo, self.skin.hi, &world_from_head),
-            Self::box_points(self.head_tags.lo, self.head_tags.hi, &world_from_head),
-        ];
+        let mut sets: Vec<Vec<DVec3>> = Vec::new();
+        if view.subject_present {
+            sets.push(Self::box_points(
+                self.skin.lo,
+                self.skin.hi,
+                &world_from_head,
+            ));
+            sets.push(Self::box_points(
+                self.head_tags.lo,
+                self.head_tags.hi,
+                &world_from_head,
+            ));
+        }
         // World group: one set per target (they spread over the room) plus the diffuser.
         let e = PAPER_HALF_EXTENT;
         for (_, t) in &self.tags_world {
@@ -695,6 +765,13 @@ impl Renderer {
                 .map(|&(u, v)| t.corner(u, v))
                 .collect(),
             );
+        }
+        for (q, _) in &self.papers_world {
+            let mid = |a: DVec3, b: DVec3| 0.5 * (a + b);
+            let mut pts = q.to_vec();
+            pts.extend((0..4).map(|k| mid(q[k], q[(k + 1) % 4])));
+            pts.push(0.25 * (q[0] + q[1] + q[2] + q[3]));
+            sets.push(pts);
         }
         let r = 0.06;
         let f = self.light_world;
@@ -836,8 +913,10 @@ impl Renderer {
                         .intersect_grid_into(o.as_vec3(), d, gw, f32::INFINITY, out, sc);
                 };
                 trace_grid(&self.world, origin, &dirs_wf, hw, scratch);
-                trace_grid(&self.skin, origin_head, &dirs_h, hs, scratch);
-                trace_grid(&self.head_tags, origin_head, &dirs_h, ht, scratch);
+                if view.subject_present {
+                    trace_grid(&self.skin, origin_head, &dirs_h, hs, scratch);
+                    trace_grid(&self.head_tags, origin_head, &dirs_h, ht, scratch);
+                }
                 if view.standard_present {
                     trace_grid(&self.standard, origin_std, &dirs_s, hst, scratch);
                 }
@@ -876,7 +955,7 @@ impl Renderer {
                                     all_std &= s.standard;
                                 }
                             }
-                            v[x as usize] = acc.map(|a| (a * inv) as f32);
+                            v[x as usize] = acc.map(|a| (a * inv * view.exposure_gain) as f32);
                             fh[x as usize] = all_roi;
                             tg[x as usize] = any_tag;
                             st[x as usize] = all_std;
@@ -919,11 +998,11 @@ impl Renderer {
             view.standard_from_world.transform_point(o_w),
             view.standard_from_world.transform_vector(d_w),
         );
-        let mut groups: Vec<(&Group, DVec3, DVec3)> = vec![
-            (&self.world, o_w, d_w),
-            (&self.skin, oh, dh),
-            (&self.head_tags, oh, dh),
-        ];
+        let mut groups: Vec<(&Group, DVec3, DVec3)> = vec![(&self.world, o_w, d_w)];
+        if view.subject_present {
+            groups.push((&self.skin, oh, dh));
+            groups.push((&self.head_tags, oh, dh));
+        }
         if view.standard_present {
             groups.push((&self.standard, os, ds));
         }

@@ -40,6 +40,18 @@ pub const BUILTIN_SCENES: &[(&str, &str)] = &[
         "survey-moved",
         include_str!("../../../scenes/survey-moved.toml"),
     ),
+    (
+        "survey-sheets",
+        include_str!("../../../scenes/survey-sheets.toml"),
+    ),
+    (
+        "survey-faults",
+        include_str!("../../../scenes/survey-faults.toml"),
+    ),
+    (
+        "survey-images",
+        include_str!("../../../scenes/survey-images.toml"),
+    ),
 ];
 
 /// Largest image side, pixels (a 100-megapixel frame is 12000 px wide).
@@ -48,6 +60,12 @@ pub const MAX_SIDE_PX: f64 = 20000.0;
 pub const MAX_SAMPLES_PER_PIXEL: f64 = 1024.0;
 /// Most measurement images (the method takes about 30).
 pub const MAX_MEASUREMENT_IMAGES: f64 = 1000.0;
+/// Most survey images: the survey-shot planner chooses among a few hundred candidate positions,
+/// and a few dozen shots already see every reachable target from every direction it offers.
+pub const MAX_SURVEY_IMAGES: f64 = 64.0;
+/// Most reference targets on one printed sheet (a row of the cage holds about a dozen; a sheet
+/// wider than a few targets no longer fits the cage's curve).
+pub const MAX_SHEET_TARGETS: f64 = 6.0;
 /// Finest render or scan tessellation, metres (0.1 mm: finer than any pixel's footprint).
 pub const MIN_SPACING_M: f64 = 1e-4;
 
@@ -227,6 +245,11 @@ pub struct SessionScene {
     pub head_motion_deg: f64,
     /// Time between shots, seconds.
     pub shot_interval_s: f64,
+    /// Survey images: shots taken before the subject sits (no head, no flash, the room light
+    /// on) from positions that see the reference targets the measurement arc sees poorly
+    /// ([`crate::survey_shots`]); 0: none.
+    #[serde(default)]
+    pub survey_images: u32,
 }
 
 /// Printed targets.
@@ -241,6 +264,9 @@ pub struct TargetsScene {
     pub flash_size_m: f64,
     /// Standard target size, metres.
     pub standard_size_m: f64,
+    /// Reference cage targets printed per sheet: neighbours along a row in groups of this many
+    /// on one flat sheet with a layout file (1: every target a cut-out; see `crate::sheets`).
+    pub reference_sheet_targets: u32,
     /// Albedo of the paper (white cells).
     pub paper_albedo: f64,
     /// Albedo of the ink (black cells).
@@ -388,6 +414,12 @@ impl Scene {
         );
         within("camera.hfov_deg", self.camera.hfov_deg, 0.1, 170.0);
         within(
+            "targets.reference_sheet_targets",
+            f64::from(self.targets.reference_sheet_targets),
+            1.0,
+            MAX_SHEET_TARGETS,
+        );
+        within(
             "sensor.samples_per_pixel",
             self.sensor.samples_per_pixel as f64,
             1.0,
@@ -398,6 +430,12 @@ impl Scene {
             self.session.measurement_images as f64,
             1.0,
             MAX_MEASUREMENT_IMAGES,
+        );
+        within(
+            "session.survey_images",
+            f64::from(self.session.survey_images),
+            0.0,
+            MAX_SURVEY_IMAGES,
         );
         within(
             "geometry.render_spacing_m",

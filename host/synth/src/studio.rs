@@ -6,15 +6,26 @@
 //! ```text
 //! studio/
 //!   card/DCIM/100SKBRF/SKB_NNNN.DNG   the camera's raw files (Bayer CFA, EXIF)
+//!   survey/SKB_NNNN.DNG               the survey shots, when the scene takes any
+//!                                     (crate::survey_shots): same body, taken and numbered
+//!                                     before the card's first file, a longer exposure
 //!   capture.json                      the controller's record (no image names: it never knew them)
+//!   layouts/NAME.layout.toml          each printed sheet's layout (sheet frame, nominal print,
+//!                                     the format `skinbrdf targets` writes)
 //!   rig-measured.toml                 the rig with its true placements, head frame (a surveyed
-//!                                     rig, for scan.ply)
+//!                                     rig, for scan.ply): flat sheets by pose and print scale,
+//!                                     a folded sheet's and the headdress band's targets as
+//!                                     cut-outs (no pose places their flat layouts)
 //!   rig.toml                          what a studio states before any survey: the declared
 //!                                     origin, the printed flash and standard layouts, the flash
-//!                                     stand's panel and the ROI, in the textured scan's frame
+//!                                     stand's panel and the ROI, in the textured scan's frame;
+//!                                     every sheet by its layout, unplaced
 //!   scan.ply                          the head scan, head frame (already registered)
 //!   scan/head.obj, head.mtl, head.png the textured scan in the scanner's frame, headdress
-//!                                     included (crate::textured_scan), scan-truth.json
+//!                                     included (crate::textured_scan), scan-truth.json;
+//!                                     head.glb, head-colours.ply the same scan as binary glTF
+//!                                     and as PLY with vertex colours, when the scene's
+//!                                     `[studio] scan_formats` asks for them
 //!   truth.json                        the truth with the head frame the textured scan's (for
 //!                                     scoring a session ingested with scan/head.obj)
 //! ```
@@ -45,6 +56,17 @@
 //! number of digits (none: whole seconds, truncated as cameras do) and `OffsetTimeOriginal`.
 //! Test shots (before and after the session) and deleted files (an exposure whose file is
 //! missing from the card) advance the file number and the shutter count like real actuations.
+//!
+//! # What the rig files do not say
+//!
+//! A scene's `[studio]` can make the rig differ from what its files state, for the placement
+//! survey to find: a target that moves mid-session ([`MovedTarget`]), sheets taped on crooked
+//! (`sheet_tilt_deg`), a sheet printed at another scale ([`PrintScaleFault`]) or folded
+//! ([`BentSheet`]), the headdress stated as one flat band although it is wrapped
+//! (`headdress_band`), and a target printed with another's code ([`DuplicateId`]: the rig
+//! files list the code once and the misprinted target nowhere). The geometry is in
+//! [`crate::sheets`]; `truth.json` has every target's true corners and every sheet's truth
+//! (`sheets`: pose, print scale, tilt, fold, whether its layout is rigid).
 
 use std::path::{Path, PathBuf};
 
@@ -60,18 +82,24 @@ use skinbrdf_session::capture::{
     CapturePlan, CaptureRecord, ClockModel, DeviceIdentity, Exposure, FlashMode, ImageRole,
     ShotGroup, ShotOutcome, CAPTURE_FORMAT_VERSION,
 };
-use skinbrdf_session::rig::{RigFile, RigFlash, RigStandard, RigTarget, RIG_FORMAT_VERSION};
-use skinbrdf_session::{Rig as RigIo, Target, TargetGroup, TAG_FAMILY};
+use skinbrdf_session::rig::{
+    LayoutFile, RigFile, RigFlash, RigSheet, RigStandard, RigTarget, RIG_FORMAT_VERSION,
+};
+use skinbrdf_session::{Rig as RigIo, SheetTruth, Target, TargetGroup, TAG_FAMILY};
 
 use crate::generate::SynthError;
-use crate::layout::{Rig, Shot};
+use crate::layout::{Layout, Rig, Shot};
 use crate::photograph::Rendered;
 use crate::scene::Scene;
+use crate::sheets::{PrintedSheet, SheetShape};
 
 /// The studio directory inside a synthetic session.
 pub const STUDIO_DIR: &str = "studio";
 /// The card's image folder inside the studio directory.
 pub const CARD_FOLDER: &str = "card/DCIM/100SKBRF";
+/// The survey shots' folder inside the studio directory (`skinbrdf ingest --survey`): taken by
+/// hand before the session, copied off the camera apart from the session's card.
+pub const SURVEY_DIR: &str = "survey";
 
 /// How a scene's studio differs from the default (`[studio]` in a scene file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -119,7 +147,21 @@ pub struct StudioScene {
     pub exposure_change: Option<ExposureChange>,
     /// One reference target whose tape slipped during the session, if any: rendered at its
     /// placement up to `from_shot`, then moved (the survey must name it, not average it in).
+    /// A target printed on a sheet moves with its sheet.
     pub moved_target: Option<MovedTarget>,
+    /// Every reference sheet is taped on crooked: turned about its horizontal axis by an angle
+    /// drawn uniformly within ± this, degrees, from the seed (`crate::sheets`).
+    pub sheet_tilt_deg: f64,
+    /// One reference sheet printed at another scale than its layout's, if any.
+    pub print_scale: Option<PrintScaleFault>,
+    /// One reference sheet folded about its vertical centre line although its layout is flat,
+    /// if any.
+    pub bent_sheet: Option<BentSheet>,
+    /// The headdress targets are stated as one printed band (`[[sheets]]` with a flat layout:
+    /// the band unrolled) although on the head it is wrapped round the forehead.
+    pub headdress_band: bool,
+    /// One reference target printed with another target's code, if any.
+    pub duplicate_id: Option<DuplicateId>,
     /// File number of the first file on the card.
     pub first_file_number: u32,
     /// Shutter count of the first file on the card.
@@ -142,6 +184,14 @@ pub struct StudioScene {
     pub f_number: f64,
     /// ISO.
     pub iso: u32,
+    /// The formats the textured scan is written in (`scan/`): `obj` (always), `glb`
+    /// (`head.glb`), `ply` (`head-colours.ply`, vertex colours).
+    #[serde(default = "default_scan_formats")]
+    pub scan_formats: Vec<crate::textured_scan::ScanFormat>,
+}
+
+fn default_scan_formats() -> Vec<crate::textured_scan::ScanFormat> {
+    vec![crate::textured_scan::ScanFormat::Obj]
 }
 
 /// An exposure shot at another ISO.
@@ -153,6 +203,72 @@ pub struct ExposureChange {
     /// Its ISO.
     pub iso: u32,
 }
+
+/// Which sheet of the rig: its name, or its index in the rig's sheet list (the order of
+/// `rig.toml`'s `[[sheets]]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum SheetRef {
+    /// By index.
+    Index(usize),
+    /// By name.
+    Name(String),
+}
+
+impl SheetRef {
+    /// Whether this names the sheet `name` at `index`.
+    pub fn names(&self, name: &str, index: usize) -> bool {
+        match self {
+            Self::Index(k) => *k == index,
+            Self::Name(n) => n == name,
+        }
+    }
+}
+
+impl std::fmt::Display for SheetRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Index(k) => write!(f, "sheet #{k}"),
+            Self::Name(n) => write!(f, "sheet `{n}`"),
+        }
+    }
+}
+
+/// A sheet printed at another scale.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PrintScaleFault {
+    /// The sheet.
+    pub sheet: SheetRef,
+    /// Printed size over the layout's nominal size.
+    pub scale: f64,
+}
+
+/// A sheet folded about its vertical centre line.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BentSheet {
+    /// The sheet.
+    pub sheet: SheetRef,
+    /// The angle between its halves' normals, degrees (each half turned by half of it).
+    pub bend_deg: f64,
+}
+
+/// A reference target printed with another target's code.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DuplicateId {
+    /// The target misprinted (the rig files do not list it).
+    pub id: u32,
+    /// The code printed on it: another reference target's id.
+    pub printed_as: u32,
+}
+
+/// Largest sheet tilt a scene may ask for, degrees (a sheet taped on crooked, not turned
+/// away from the cameras).
+pub const MAX_SHEET_TILT_DEG: f64 = 30.0;
+/// Largest fold of a bent sheet, degrees.
+pub const MAX_BEND_DEG: f64 = 45.0;
 
 /// A reference target that moves during the session.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -169,15 +285,31 @@ pub struct MovedTarget {
 }
 
 impl MovedTarget {
-    /// The rig after the move: the target's corners shifted and turned about its centre.
+    /// The rig after the move: the target's corners shifted and turned about its centre, and
+    /// with it every target of its sheet (the sheet's tape slipped) and the sheet's paper.
     pub fn apply(&self, rig: &Rig) -> Rig {
         let mut moved = rig.clone();
-        for t in moved.reference.iter_mut().filter(|t| t.id == self.id) {
-            let c = t.centre();
-            let turn =
-                glam::DQuat::from_axis_angle(t.outward_normal(), self.rotate_deg.to_radians());
-            let shift = glam::DVec3::from_array(self.shift_mm) * 1e-3;
-            t.corners_m = t.corners_m.map(|p| c + shift + turn * (p - c));
+        let Some(t) = rig.reference.iter().find(|t| t.id == self.id) else {
+            return moved;
+        };
+        let c = t.centre();
+        let turn = glam::DQuat::from_axis_angle(t.outward_normal(), self.rotate_deg.to_radians());
+        let shift = glam::DVec3::from_array(self.shift_mm) * 1e-3;
+        // p -> c + shift + turn (p - c)
+        let by = Pose::new(turn, c + shift - turn * c);
+        let body = rig.reference_body(self.id);
+        for t in moved.reference.iter_mut().filter(|t| body.contains(&t.id)) {
+            *t = crate::sheets::move_target(t, &by);
+        }
+        for (_, p) in moved.prints.iter_mut().filter(|(id, _)| body.contains(id)) {
+            *p = p.moved(&by);
+        }
+        for s in moved
+            .sheets
+            .iter_mut()
+            .filter(|s| s.layout == crate::layout::Layout::Reference && s.ids().contains(&self.id))
+        {
+            s.group_from_sheet = by * s.group_from_sheet;
         }
         moved
     }
@@ -219,6 +351,45 @@ impl StudioScene {
                 out.push("`studio.moved_target` shift and rotation must be finite".into());
             }
         }
+        if !(self.sheet_tilt_deg.is_finite()
+            && (0.0..=MAX_SHEET_TILT_DEG).contains(&self.sheet_tilt_deg))
+        {
+            out.push(format!(
+                "`studio.sheet_tilt_deg` must be in [0, {MAX_SHEET_TILT_DEG}], got {}",
+                self.sheet_tilt_deg
+            ));
+        }
+        if let Some(p) = &self.print_scale {
+            if !(p.scale.is_finite() && (0.5..=2.0).contains(&p.scale)) {
+                out.push(format!(
+                    "`studio.print_scale.scale` must be in [0.5, 2] (a rig file's range), got {}",
+                    p.scale
+                ));
+            }
+        }
+        if let Some(b) = &self.bent_sheet {
+            if !(b.bend_deg.is_finite() && b.bend_deg != 0.0 && b.bend_deg.abs() <= MAX_BEND_DEG) {
+                out.push(format!(
+                    "`studio.bent_sheet.bend_deg` must be non-zero and within ±{MAX_BEND_DEG}, got {}",
+                    b.bend_deg
+                ));
+            }
+        }
+        if let Some(d) = &self.duplicate_id {
+            if d.id == d.printed_as {
+                out.push(format!(
+                    "`studio.duplicate_id`: `id` and `printed_as` are both {}",
+                    d.id
+                ));
+            }
+        }
+        if self.headdress_band && self.declared_headdress_targets > 0 {
+            out.push(
+                "`studio.headdress_band` states the headdress as one unplaced band: \
+                 `studio.declared_headdress_targets` must be 0"
+                    .into(),
+            );
+        }
         if self.subsec_digits > 6 {
             out.push(format!(
                 "`studio.subsec_digits` must be at most 6, got {}",
@@ -239,6 +410,15 @@ impl StudioScene {
         }
         if self.iso == 0 {
             out.push("`studio.iso` must be positive".into());
+        }
+        if !self
+            .scan_formats
+            .contains(&crate::textured_scan::ScanFormat::Obj)
+        {
+            out.push(format!(
+                "`studio.scan_formats` must include \"obj\" (the studio's scan), got {:?}",
+                self.scan_formats
+            ));
         }
         if self.origin_targets == 0 {
             out.push("`studio.origin_targets` must be at least 1 (the world's origin)".into());
@@ -367,14 +547,19 @@ pub struct CardFile {
     pub shutter_count: u32,
     /// ISO of the shot.
     pub iso: u32,
-    /// Exposure factor against the scene's settings.
+    /// Exposure factor against the scene's settings, applied to the render (a survey shot's
+    /// longer exposure is in its render already: 1 for it).
     pub exposure_factor: f64,
+    /// Exposure time written in the file's EXIF, seconds.
+    pub exposure_time_s: f64,
     /// False for a file deleted from the card (numbers used, nothing written).
     pub on_card: bool,
 }
 
-/// The card's files in the order the camera wrote them: test shots before, one per exposure
-/// that fired (in the record's order), test shots after.
+/// The camera's files in the order it wrote them: the survey shots (in [`SURVEY_DIR`], taken
+/// [`crate::survey_shots::SURVEY_LEAD_S`] and more before the session, numbered before the
+/// card's first file), then the card's: test shots before, one per exposure that fired (in the
+/// record's order), test shots after.
 pub fn card_files(scene: &Scene, rec: &CaptureRecord, shots: &[Shot]) -> Vec<CardFile> {
     let st = &scene.studio;
     let mut rng = ChaCha8Rng::seed_from_u64(scene.seed ^ 0x0ca3_d5e7);
@@ -417,6 +602,31 @@ pub fn card_files(scene: &Scene, rec: &CaptureRecord, shots: &[Shot]) -> Vec<Car
         }
     };
     let mut out = Vec::new();
+    // The survey shots, one file each: numbers and shutter counts just before the card's.
+    let survey: Vec<usize> = (0..shots.len())
+        .filter(|&k| shots[k].role == ImageRole::Survey)
+        .collect();
+    let n_survey = survey.len() as u32;
+    for (k, &shot) in survey.iter().enumerate() {
+        let back = n_survey - k as u32;
+        let h = h0_s
+            - crate::survey_shots::SURVEY_LEAD_S
+            - f64::from(back) * crate::survey_shots::SURVEY_INTERVAL_S;
+        out.push(CardFile {
+            file: format!(
+                "{SURVEY_DIR}/SKB_{:04}.DNG",
+                dcf_number_before(st.first_file_number, back)
+            ),
+            exposure_index: None,
+            shot,
+            time: camera_time(h, &mut rng),
+            shutter_count: st.first_shutter_count.saturating_sub(back),
+            iso: st.iso,
+            exposure_factor: 1.0,
+            exposure_time_s: st.exposure_time_s * shots[shot].exposure_gain,
+            on_card: true,
+        });
+    }
     let mut number = st.first_file_number;
     let mut count = st.first_shutter_count;
     let mut push = |exposure_index: Option<u32>, shot: usize, time: CaptureTime, on_card| {
@@ -429,6 +639,7 @@ pub fn card_files(scene: &Scene, rec: &CaptureRecord, shots: &[Shot]) -> Vec<Car
             shutter_count: count,
             iso,
             exposure_factor: factor,
+            exposure_time_s: st.exposure_time_s,
             on_card,
         });
         number = if number >= 9999 { 1 } else { number + 1 };
@@ -448,6 +659,13 @@ pub fn card_files(scene: &Scene, rec: &CaptureRecord, shots: &[Shot]) -> Vec<Car
         push(None, last_shot, camera_time(h, &mut rng), true);
     }
     out
+}
+
+/// The DCF file number `back` files before `first` (numbers run 1..=9999 and roll over).
+fn dcf_number_before(first: u32, back: u32) -> u32 {
+    /// DCF file numbers per roll-over.
+    const DCF_NUMBERS: i64 = 9999;
+    ((i64::from(first) - 1 - i64::from(back)).rem_euclid(DCF_NUMBERS) + 1) as u32
 }
 
 /// The mosaicked sensor image of a render (see the module docs), with the studio's metadata.
@@ -506,7 +724,7 @@ pub fn mosaic(
     img.unique_camera_model = format!("{} {}", st.make, st.model);
     img.body_serial = Some(st.body_serial.clone());
     img.lens_model = Some(st.lens_model.clone());
-    img.exposure_time_s = Some(st.exposure_time_s);
+    img.exposure_time_s = Some(card.exposure_time_s);
     img.f_number = Some(st.f_number);
     img.iso = Some(card.iso);
     img.focal_length_mm = Some(focal_length_mm(scene));
@@ -520,33 +738,70 @@ pub fn focal_length_mm(scene: &Scene) -> f64 {
     0.5 * scene.studio.sensor_width_mm / (0.5 * scene.camera.hfov_deg.to_radians()).tan()
 }
 
-/// The rig as the studio's files state it, with the true placements.
-pub fn rig_file(scene: &Scene, rig: &Rig) -> RigFile {
-    let mut targets = Vec::new();
-    let mut add = |group: TargetGroup, list: &[Target]| {
-        for t in list {
-            targets.push(RigTarget {
-                id: t.id,
-                size_m: t.size_m,
-                group,
-                sheet: None,
-                corners_m: Some(t.corners_m),
-            });
-        }
+/// Where the studio keeps its sheets' layout files, relative to the studio directory (and so
+/// to its rig files).
+pub const LAYOUTS_DIR: &str = "layouts";
+
+/// A sheet's layout file, relative to the studio directory.
+pub fn layout_path(sheet: &PrintedSheet) -> String {
+    format!("{LAYOUTS_DIR}/{}.layout.toml", sheet.name)
+}
+
+/// The rig-file group of a layout.
+fn group_of(l: Layout) -> TargetGroup {
+    match l {
+        Layout::Reference => TargetGroup::Reference,
+        Layout::Headdress => TargetGroup::Headdress,
+        Layout::Flash => TargetGroup::Flash,
+        Layout::Standard => TargetGroup::Standard,
+    }
+}
+
+/// The target a duplicated id hides: printed with another's code, so the studio does not
+/// know it exists and no rig file or layout lists it.
+fn misprinted(scene: &Scene) -> Option<u32> {
+    scene.studio.duplicate_id.as_ref().map(|d| d.id)
+}
+
+/// A sheet's layout file as the studio holds it: the nominal layout (printed sizes as
+/// designed, whatever the printer did), without a misprinted target.
+pub fn layout_file(scene: &Scene, sheet: &PrintedSheet) -> LayoutFile {
+    let section = match sheet.layout {
+        Layout::Headdress => "targets.headdress",
+        _ => "targets.reference",
     };
-    add(TargetGroup::Reference, &rig.reference);
-    add(TargetGroup::Headdress, &rig.headdress);
-    add(TargetGroup::Flash, &rig.flash_targets);
-    add(TargetGroup::Standard, &rig.standard_targets);
+    LayoutFile {
+        section: section.into(),
+        targets: sheet
+            .targets
+            .iter()
+            .filter(|t| Some(t.id) != misprinted(scene))
+            .cloned()
+            .collect(),
+    }
+}
+
+/// The layout file's text: a header like `skinbrdf targets` writes, then the layout.
+pub fn layout_text(scene: &Scene, sheet: &PrintedSheet) -> Result<String, SynthError> {
+    let text = toml::to_string(&layout_file(scene, sheet)).map_err(|e| SynthError::Invalid {
+        field: "studio layout",
+        problem: format!("cannot serialise the layout of sheet `{}`: {e}", sheet.name),
+    })?;
+    Ok(format!(
+        "# Target layout of sheet `{}` of scene `{}` (sheet frame: origin at the sheet centre, x right,\n\
+         # y up on the page, z out of the paper, metres; nominal printed sizes).\n{text}",
+        sheet.name, scene.name
+    ))
+}
+
+/// The parts every rig file of the scene shares: flash, standard, region of interest.
+fn rig_base(scene: &Scene, rig: &Rig, description: String) -> RigFile {
     RigFile {
         format_version: RIG_FORMAT_VERSION,
-        description: format!(
-            "synthetic studio rig of scene `{}`: every target a cut-out",
-            scene.name
-        ),
+        description,
         family: TAG_FAMILY.into(),
         sheets: Vec::new(),
-        targets,
+        targets: Vec::new(),
         flash: RigFlash {
             diameter_m: scene.session.flash_diameter_m,
             light_centre_m: glam::DVec3::ZERO,
@@ -559,41 +814,249 @@ pub fn rig_file(scene: &Scene, rig: &Rig) -> RigFile {
             centre_m: rig.roi_centre_head,
             radius_m: scene.geometry.roi_radius_m,
         }),
+        geometry: crate::generate::analytic_geometry(scene),
     }
 }
 
-/// The rig as a studio that measured nothing holds it: every placement removed except what
-/// the studio defines rather than measures: the world origin (the `origin` reference targets),
-/// the `declared_head` headdress targets, and the flash ring and the standard's frame (their
-/// printed layouts define their frames). The studio's head frame is its textured scan's
-/// (`scanner_from_head`): the region of interest and any declared headdress target are given
-/// in it.
+/// Every target of the rig by group, true corners, in rig order.
+fn all_targets(rig: &Rig) -> impl Iterator<Item = (Layout, &Target)> {
+    [
+        (Layout::Reference, &rig.reference),
+        (Layout::Headdress, &rig.headdress),
+        (Layout::Flash, &rig.flash_targets),
+        (Layout::Standard, &rig.standard_targets),
+    ]
+    .into_iter()
+    .flat_map(|(l, list)| list.iter().map(move |t| (l, t)))
+}
+
+/// The rig as a studio that surveyed everything holds it (`rig-measured.toml`): every flat
+/// sheet with its layout, its true pose and print scale; every other target a cut-out with its
+/// true corners, the targets of a folded sheet and of the wrapped headdress band included
+/// (their layouts do not describe them). A misprinted target is not listed.
+pub fn rig_file(scene: &Scene, rig: &Rig) -> RigFile {
+    let mut f = rig_base(
+        scene,
+        rig,
+        format!(
+            "synthetic studio rig of scene `{}`, surveyed: flat sheets placed by their layout, \
+             pose and print scale, every other target a cut-out",
+            scene.name
+        ),
+    );
+    let on_rigid_sheet = |l: Layout, id: u32| rig.sheet_of(l, id).is_some_and(|s| s.rigid());
+    for sheet in rig.sheets.iter().filter(|s| s.rigid()) {
+        f.sheets.push(RigSheet {
+            name: sheet.name.clone(),
+            group: group_of(sheet.layout),
+            layout: Some(layout_path(sheet)),
+            group_from_sheet: Some(sheet.group_from_sheet),
+            print_scale: Some(sheet.print_scale),
+        });
+    }
+    for (l, t) in all_targets(rig) {
+        if on_rigid_sheet(l, t.id) || (l == Layout::Reference && Some(t.id) == misprinted(scene)) {
+            continue;
+        }
+        f.targets.push(RigTarget {
+            id: t.id,
+            size_m: t.size_m,
+            group: group_of(l),
+            sheet: None,
+            corners_m: Some(t.corners_m),
+        });
+    }
+    f
+}
+
+/// The rig as a studio that measured nothing holds it (`rig.toml`): every sheet with its layout
+/// file and no placement, every other target with its printed size; placements only for what
+/// the studio defines rather than measures: the world origin (`origin`: reference targets, a
+/// sheet among them stated whole with its pose and print scale), the `declared_head` headdress
+/// targets, and the flash ring and the standard's frame (their printed layouts define their
+/// frames). The studio's head frame is its textured scan's (`scanner_from_head`): the region of
+/// interest and any declared headdress target are given in it. A misprinted target is not
+/// listed.
 pub fn unmeasured_rig(
-    measured: &RigFile,
+    scene: &Scene,
+    rig: &Rig,
     origin: &[u32],
     declared_head: &[u32],
     scanner_from_head: &Pose,
 ) -> RigFile {
-    let mut f = RigIo::without_placements(measured);
-    for (t, m) in f.targets.iter_mut().zip(&measured.targets) {
-        let keep = match t.group {
-            TargetGroup::Reference => origin.contains(&t.id),
-            TargetGroup::Headdress => declared_head.contains(&t.id),
-            TargetGroup::Flash | TargetGroup::Standard => true,
-        };
-        if keep {
-            t.corners_m = match t.group {
-                TargetGroup::Headdress => m
-                    .corners_m
-                    .map(|c| c.map(|p| scanner_from_head.transform_point(p))),
-                _ => m.corners_m,
-            };
-        }
-    }
+    let mut f = rig_base(
+        scene,
+        rig,
+        format!(
+            "synthetic studio rig of scene `{}`: the declared origin, the flash and the standard; \
+             every other placement to survey",
+            scene.name
+        ),
+    );
     if let Some(roi) = f.roi.as_mut() {
         roi.centre_m = scanner_from_head.transform_point(roi.centre_m);
     }
+    let declared_sheet = |s: &PrintedSheet| {
+        s.layout == Layout::Reference && s.rigid() && s.ids().iter().any(|id| origin.contains(id))
+    };
+    for sheet in &rig.sheets {
+        let declared = declared_sheet(sheet);
+        f.sheets.push(RigSheet {
+            name: sheet.name.clone(),
+            group: group_of(sheet.layout),
+            layout: Some(layout_path(sheet)),
+            group_from_sheet: declared.then_some(sheet.group_from_sheet),
+            print_scale: declared.then_some(sheet.print_scale),
+        });
+    }
+    for (l, t) in all_targets(rig) {
+        if rig.sheet_of(l, t.id).is_some()
+            || (l == Layout::Reference && Some(t.id) == misprinted(scene))
+        {
+            continue;
+        }
+        let corners_m = match l {
+            Layout::Reference => origin.contains(&t.id).then_some(t.corners_m),
+            Layout::Headdress => declared_head
+                .contains(&t.id)
+                .then(|| t.corners_m.map(|p| scanner_from_head.transform_point(p))),
+            Layout::Flash | Layout::Standard => Some(t.corners_m),
+        };
+        f.targets.push(RigTarget {
+            id: t.id,
+            size_m: t.size_m,
+            group: group_of(l),
+            sheet: None,
+            corners_m,
+        });
+    }
     f
+}
+
+/// Every sheet's truth (`truth.json`'s `sheets`).
+pub fn sheet_truths(rig: &Rig) -> Vec<SheetTruth> {
+    rig.sheets
+        .iter()
+        .map(|s| SheetTruth {
+            name: s.name.clone(),
+            group: group_of(s.layout),
+            ids: s.ids(),
+            group_from_sheet: (s.shape != SheetShape::Wrapped).then_some(s.group_from_sheet),
+            print_scale: s.print_scale,
+            tilt_deg: s.tilt_deg,
+            bend_deg: match s.shape {
+                SheetShape::Folded { bend_deg } => bend_deg,
+                _ => 0.0,
+            },
+            rigid: s.rigid(),
+        })
+        .collect()
+}
+
+/// The reference targets `rig.toml` places as the studio's world origin: the bodies (a sheet
+/// whole, or a cut-out) of the reference targets seen in the most shots, most-seen first, as
+/// long as they hold at most `studio.origin_targets` targets together (a sheet that would
+/// exceed it is passed over, so that a rig of sheets declares about as much as one of
+/// cut-outs and its best-seen sheets are left to the survey; the first body is taken whatever
+/// its size). A body the scene moves, misprints, folds or prints at another scale is never
+/// the origin (a studio that knew would not choose it; the survey is to find those).
+pub fn origin_ids(
+    renderer: &crate::photograph::Renderer,
+    rig: &Rig,
+    shots: &[Shot],
+    scene: &Scene,
+) -> Vec<u32> {
+    let st = &scene.studio;
+    let mut excluded: Vec<u32> = Vec::new();
+    if let Some(m) = &st.moved_target {
+        excluded.extend(rig.reference_body(m.id));
+    }
+    if let Some(d) = &st.duplicate_id {
+        excluded.extend(rig.reference_body(d.id));
+        excluded.extend(rig.reference_body(d.printed_as));
+    }
+    for s in &rig.sheets {
+        if !s.rigid() || s.print_scale != 1.0 {
+            excluded.extend(s.ids());
+        }
+    }
+    let want = st.origin_targets as usize;
+    let mut out: Vec<u32> = Vec::new();
+    for id in most_seen(renderer, rig, shots, Layout::Reference, usize::MAX) {
+        if out.len() >= want {
+            break;
+        }
+        if excluded.contains(&id) || out.contains(&id) {
+            continue;
+        }
+        let body = rig.reference_body(id);
+        if out.is_empty() || out.len() + body.len() <= want {
+            out.extend(body);
+        }
+    }
+    out
+}
+
+/// What of a scene's studio faults needs the rig to check: the sheets and targets they name
+/// exist and carry the fault.
+pub fn rig_problems(scene: &Scene, rig: &Rig) -> Vec<String> {
+    let st = &scene.studio;
+    let mut out = Vec::new();
+    let sheets = || {
+        let names: Vec<String> = rig
+            .sheets
+            .iter()
+            .filter(|s| s.layout == Layout::Reference)
+            .map(|s| s.name.clone())
+            .collect();
+        if names.is_empty() {
+            "the rig has no reference sheet (`targets.reference_sheet_targets` = 1?)".to_string()
+        } else {
+            format!("the reference sheets are {}", names.join(", "))
+        }
+    };
+    if let Some(p) = &st.print_scale {
+        if !rig
+            .find_sheet(&p.sheet)
+            .is_some_and(|s| s.layout == Layout::Reference && s.print_scale == p.scale)
+        {
+            out.push(format!(
+                "`studio.print_scale`: {} is not a reference sheet; {}",
+                p.sheet,
+                sheets()
+            ));
+        }
+    }
+    if let Some(b) = &st.bent_sheet {
+        if !rig
+            .find_sheet(&b.sheet)
+            .is_some_and(|s| s.layout == Layout::Reference && !s.rigid())
+        {
+            out.push(format!(
+                "`studio.bent_sheet`: {} is not a reference sheet; {}",
+                b.sheet,
+                sheets()
+            ));
+        }
+    }
+    if let Some(d) = &st.duplicate_id {
+        for (field, id) in [("id", d.id), ("printed_as", d.printed_as)] {
+            if !rig.reference.iter().any(|t| t.id == id) {
+                out.push(format!(
+                    "`studio.duplicate_id.{field}`: {id} is not a reference target"
+                ));
+            }
+        }
+    }
+    if let Some(m) = &st.moved_target {
+        if !rig.reference.iter().any(|t| t.id == m.id) {
+            out.push(format!(
+                "`studio.moved_target.id`: {} is not a reference target",
+                m.id
+            ));
+        }
+    }
+    out
 }
 
 /// The reference targets on the flash stand (the panel the light-position images see): the
@@ -635,8 +1098,9 @@ pub fn most_seen(
 }
 
 /// Writes the studio's files other than the raw images: the capture record (without image
-/// names), both rig files and the scan (copied from the session). `origin` and
-/// `declared_head` are the targets `rig.toml` keeps placed ([`unmeasured_rig`]).
+/// names), the sheets' layout files (`layouts/`), both rig files and the scan (copied from the
+/// session). `origin` and `declared_head` are the targets `rig.toml` keeps placed
+/// ([`unmeasured_rig`]).
 pub fn write_studio_files(
     session_dir: &Path,
     scene: &Scene,
@@ -656,23 +1120,56 @@ pub fn write_studio_files(
         e.image = None;
     }
     skinbrdf_session::write_json_atomic(&dir.join("capture.json"), &rec)?;
-    let measured = rig_file(scene, rig);
-    RigIo::write_file(&dir.join("rig-measured.toml"), &measured)?;
+    if !rig.sheets.is_empty() {
+        let layouts = dir.join(LAYOUTS_DIR);
+        std::fs::create_dir_all(&layouts).map_err(|e| io(&layouts, e))?;
+    }
+    for sheet in &rig.sheets {
+        skinbrdf_session::write_atomic(
+            &dir.join(layout_path(sheet)),
+            layout_text(scene, sheet)?.as_bytes(),
+        )?;
+    }
+    RigIo::write_file(&dir.join("rig-measured.toml"), &rig_file(scene, rig))?;
     RigIo::write_file(
         &dir.join("rig.toml"),
-        &unmeasured_rig(
-            &measured,
-            origin,
-            declared_head,
-            &crate::textured_scan::scanner_from_head(scene),
-        ),
+        &unmeasured_rig(scene, rig, origin, declared_head, &scanner_from_head(scene)),
     )?;
-    let scan = session_dir.join("scan.ply");
-    let bytes = std::fs::read(&scan).map_err(|e| io(&scan, e))?;
-    skinbrdf_session::write_atomic(&dir.join("scan.ply"), &bytes)?;
-    crate::textured_scan::write_textured_scan(&dir.join("scan"), scene, rig)?;
+    // A head is scanned (with its headdress, textured); an ideal sample's shape is in the rig.
+    if crate::generate::analytic_geometry(scene).is_none() {
+        let scan = session_dir.join("scan.ply");
+        let bytes = std::fs::read(&scan).map_err(|e| io(&scan, e))?;
+        skinbrdf_session::write_atomic(&dir.join("scan.ply"), &bytes)?;
+        crate::textured_scan::write_textured_scan(&dir.join("scan"), scene, rig)?;
+    }
     Ok(dir)
 }
+
+/// The frame the studio states head-frame placements in: the textured scan's (the scanner's
+/// own frame) for a head; the head frame itself for an ideal sample, which has no scan.
+pub fn scanner_from_head(scene: &Scene) -> Pose {
+    if crate::generate::analytic_geometry(scene).is_some() {
+        Pose::IDENTITY
+    } else {
+        crate::textured_scan::scanner_from_head(scene)
+    }
+}
+
+/// Headdress targets the studio's rig declares: the scene's number, and for an ideal sample
+/// (no scan to register the headdress to) at least [`IDEAL_SAMPLE_DECLARED_HEADDRESS`].
+pub fn declared_headdress_count(scene: &Scene) -> usize {
+    let n = scene.studio.declared_headdress_targets as usize;
+    if crate::generate::analytic_geometry(scene).is_some() {
+        n.max(IDEAL_SAMPLE_DECLARED_HEADDRESS)
+    } else {
+        n
+    }
+}
+
+/// Without a scan, the sample's frame is fixed by the headdress targets the rig places (a
+/// calibration sphere's mount with its printed targets): three spread ones fix it without a
+/// single tag's orientation error.
+pub const IDEAL_SAMPLE_DECLARED_HEADDRESS: usize = 3;
 
 /// Writes one card file's raw image (nothing for a deleted file).
 pub fn write_card_file(
@@ -694,6 +1191,31 @@ pub fn write_card_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_moved_target_is_printed_where_its_corners_are() {
+        let scene = Scene::load("default").expect("scene");
+        let rig = crate::layout::build_rig(&scene);
+        let id = rig.reference[5].id;
+        let m = MovedTarget {
+            id,
+            from_shot: 3,
+            shift_mm: [3.0, 0.0, -1.5],
+            rotate_deg: 2.0,
+        };
+        let before = rig.reference[5];
+        let after = m
+            .apply(&rig)
+            .reference
+            .into_iter()
+            .find(|t| t.id == id)
+            .expect("still there");
+        // The renderer prints the tag around `centre()`: it must be the corners' centre.
+        let mean = after.corners_m.iter().copied().sum::<glam::DVec3>() * 0.25;
+        assert!(after.centre().distance(mean) < 1e-12);
+        let shift = after.centre() - before.centre();
+        assert!((shift * 1e3 - glam::DVec3::new(3.0, 0.0, -1.5)).length() < 1e-9);
+    }
 
     #[test]
     fn the_card_numbers_every_actuation_and_keeps_deleted_numbers() {

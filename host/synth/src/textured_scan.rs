@@ -20,6 +20,13 @@
 //! seed, so nothing downstream can lean on the scan sharing the head frame. Coordinates are
 //! written in the scene's `geometry.scan_units`.
 //!
+//! The same scan in other formats, when the scene's `[studio] scan_formats` (or
+//! [`write_textured_scan_as`]) asks for them: `head.glb`, binary glTF in metres with the atlas
+//! embedded, which loads to the OBJ's mesh vertex for vertex
+//! ([`skinbrdf_mesh::write_glb`]); `head-colours.ply`, PLY with vertex colours, the same
+//! surface with each paper cell's triangles subdivided [`PLY_SUBDIVISION`] times per side on
+//! their own planes so that colours per vertex carry the print.
+//!
 //! `scan-truth.json` beside them ([`ScanTruth`]) holds `scanner_from_head` and each headdress
 //! target's true corners in the scanner frame (metres), for scoring only.
 
@@ -56,6 +63,11 @@ pub const SKIN_RGB8: [u8; 3] = [204, 156, 132];
 pub const PAPER_WHITE8: u8 = 235;
 /// See [`PAPER_WHITE8`].
 pub const INK_BLACK8: u8 = 20;
+/// Subdivisions per paper-cell side in `head-colours.ply`: a scan that stores its colour per
+/// vertex needs vertices as dense as the print's detail, so the papers' cells (about 4.7 mm
+/// for a 25 mm tag) are cut into 8 x 8 on their own triangles' planes (the same surface):
+/// colours about 0.6 mm apart, five per 3.1 mm tag cell.
+pub const PLY_SUBDIVISION: usize = 8;
 /// Seed salt of the scanner pose and the scan noise.
 const SEED_SALT: u64 = 0x5ca9_7e57;
 
@@ -68,6 +80,11 @@ pub struct TexturedScanFiles {
     pub mtl: PathBuf,
     /// The texture atlas.
     pub png: PathBuf,
+    /// The same scan as binary glTF (`head.glb`, metres, the atlas embedded), when asked for.
+    pub glb: Option<PathBuf>,
+    /// The same surface as PLY with vertex colours (`head-colours.ply`, the papers subdivided
+    /// by [`PLY_SUBDIVISION`]), when asked for.
+    pub ply: Option<PathBuf>,
     /// The scoring truth.
     pub truth: PathBuf,
     /// Vertices written.
@@ -145,12 +162,35 @@ struct Tile {
     y0: usize,
 }
 
+/// The formats a textured scan is written in (`[studio] scan_formats`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScanFormat {
+    /// `head.obj` + `head.mtl` + `head.png` (always written).
+    Obj,
+    /// `head.glb`: binary glTF, metres, the atlas embedded.
+    Glb,
+    /// `head-colours.ply`: PLY with vertex colours.
+    Ply,
+}
+
 /// Writes `head.obj`, `head.mtl`, `head.png` and `scan-truth.json` into `dir` (see the module
-/// docs).
+/// docs), and `head.glb` and `head-colours.ply` when the scene's `[studio] scan_formats` asks
+/// for them.
 pub fn write_textured_scan(
     dir: &Path,
     scene: &Scene,
     rig: &Rig,
+) -> Result<TexturedScanFiles, SynthError> {
+    write_textured_scan_as(dir, scene, rig, &scene.studio.scan_formats)
+}
+
+/// [`write_textured_scan`] with the formats given (the OBJ is written whatever they say).
+pub fn write_textured_scan_as(
+    dir: &Path,
+    scene: &Scene,
+    rig: &Rig,
+    formats: &[ScanFormat],
 ) -> Result<TexturedScanFiles, SynthError> {
     std::fs::create_dir_all(dir).map_err(|source| skinbrdf_session::FileError::Io {
         path: dir.to_path_buf(),
@@ -242,38 +282,22 @@ pub fn write_textured_scan(
     let png = dir.join("head.png");
     write_png_rgb8(&png, w as u32, h as u32, &rgb)?;
 
-    // Geometry.
+    // Geometry, scanner frame, metres: the head, then each paper's (PAPER_CELLS + 1)² grid.
     let head = rig.shape.tessellate(
         g.scan_spacing_m,
         (-80f64.to_radians(), 80f64.to_radians()),
         (-35f64.to_radians(), 75f64.to_radians()),
     );
-    let mut obj = String::with_capacity(64 * (head.positions.len() + 100 * n_tiles));
-    let mut vt_lines = String::new();
-    let _ = writeln!(
-        obj,
-        "# skinbrdf synthetic textured head scan, {} (scanner frame)",
-        unit_word(scene)
-    );
-    let _ = writeln!(obj, "mtllib head.mtl\no head");
-    let mut n_v = 0usize;
-    let mut n_vt = 0usize;
-    let mut faces = String::new();
-    let mut n_f = 0usize;
+    let mut model = ScanModel::default();
     let skin_uv = uv_of(tile(n_tiles - 1), 0.5, 0.5);
-    let _ = writeln!(vt_lines, "vt {:.7} {:.7}", skin_uv.x, skin_uv.y);
-    n_vt += 1;
-    let skin_vt = n_vt;
+    model.vt.push(skin_uv);
     for p in &head.positions {
-        let q = noisy(p.as_dvec3()) * scale;
-        let _ = writeln!(obj, "v {:.5} {:.5} {:.5}", q.x, q.y, q.z);
+        model.positions_m.push(noisy(p.as_dvec3()));
+        model.vertex_vt.push(0);
     }
     for tri in &head.indices {
-        let [a, b, c] = tri.map(|i| i as usize + 1 + n_v);
-        let _ = writeln!(faces, "f {a}/{skin_vt} {b}/{skin_vt} {c}/{skin_vt}");
-        n_f += 1;
+        model.triangles.push(*tri);
     }
-    n_v += head.positions.len();
     let e = PAPER_HALF_EXTENT;
     for (k, t) in rig.headdress.iter().enumerate() {
         let [c0, c1, _, c3] = t.corners_m;
@@ -284,53 +308,216 @@ pub fn write_textured_scan(
         let half = 0.5 * t.size_m;
         let tl = tile(k);
         let n = PAPER_CELLS + 1;
+        let v0 = model.positions_m.len();
         for j in 0..n {
             for i in 0..n {
                 let (fx, fy) = (i as f64 / PAPER_CELLS as f64, j as f64 / PAPER_CELLS as f64);
                 let (u, v) = ((2.0 * fx - 1.0) * e, (2.0 * fy - 1.0) * e);
                 let depth: f64 = StandardNormal.sample(&mut paper_rng);
                 let p = centre + x * (u * half) + y * (v * half) + out * (depth * noise_m);
-                let q = pose.transform_point(p) * scale;
-                let _ = writeln!(obj, "v {:.5} {:.5} {:.5}", q.x, q.y, q.z);
-                let uv = uv_of(tl, fx, fy);
-                let _ = writeln!(vt_lines, "vt {:.7} {:.7}", uv.x, uv.y);
+                model.positions_m.push(pose.transform_point(p));
+                model.vertex_vt.push(model.vt.len());
+                model.vt.push(uv_of(tl, fx, fy));
             }
         }
-        let vi = |i: usize, j: usize| (n_v + j * n + i + 1, n_vt + j * n + i + 1);
+        model.papers.push(PaperGrid {
+            first_vertex: v0,
+            first_triangle: model.triangles.len(),
+            uv_corner: [uv_of(tl, 0.0, 0.0), uv_of(tl, 1.0, 1.0)],
+        });
+        let vi = |i: usize, j: usize| (v0 + j * n + i) as u32;
         for j in 0..PAPER_CELLS {
             for i in 0..PAPER_CELLS {
                 let (a, b, c, d) = (vi(i, j), vi(i + 1, j), vi(i + 1, j + 1), vi(i, j + 1));
                 // Counter-clockwise seen from the printed side (x right, y down, out = -x×y).
-                for [p, q, r] in [[a, c, b], [a, d, c]] {
-                    let _ = writeln!(faces, "f {}/{} {}/{} {}/{}", p.0, p.1, q.0, q.1, r.0, r.1);
-                    n_f += 1;
-                }
+                model.triangles.push([a, c, b]);
+                model.triangles.push([a, d, c]);
             }
         }
-        n_v += n * n;
-        n_vt += n * n;
     }
-    obj.push_str(&vt_lines);
-    obj.push_str("usemtl scan\n");
-    obj.push_str(&faces);
     let obj_path = dir.join("head.obj");
-    skinbrdf_session::write_atomic(&obj_path, obj.as_bytes())?;
+    skinbrdf_session::write_atomic(
+        &obj_path,
+        model.obj_text(unit_word(scene), scale).as_bytes(),
+    )?;
     let mtl_path = dir.join("head.mtl");
     skinbrdf_session::write_atomic(
         &mtl_path,
         b"# skinbrdf synthetic textured head scan\nnewmtl scan\nKa 0 0 0\nKd 1 1 1\nKs 0 0 0\nmap_Kd head.png\n",
     )?;
+    let glb = if formats.contains(&ScanFormat::Glb) {
+        let path = dir.join("head.glb");
+        let png_bytes = std::fs::read(&png).map_err(|source| skinbrdf_session::FileError::Io {
+            path: png.clone(),
+            source,
+        })?;
+        let (mesh, uv) = model.mesh_with_corner_uv();
+        skinbrdf_mesh::write_glb(&path, &mesh, &uv, &png_bytes)?;
+        Some(path)
+    } else {
+        None
+    };
+    let ply = if formats.contains(&ScanFormat::Ply) {
+        let path = dir.join("head-colours.ply");
+        let texture = skinbrdf_mesh::TextureImage {
+            width: w as u32,
+            height: h as u32,
+            rgb: rgb
+                .chunks_exact(3)
+                .map(|c| std::array::from_fn(|k| f32::from(c[k]) / 255.0))
+                .collect(),
+        };
+        let (mesh, colours) = model.vertex_coloured(&texture, scale);
+        skinbrdf_mesh::write_ply_binary_coloured_in(&path, &mesh, &colours, unit_word(scene))?;
+        Some(path)
+    } else {
+        None
+    };
     let truth_path = dir.join("scan-truth.json");
     skinbrdf_session::write_json_atomic(&truth_path, &truth)?;
     Ok(TexturedScanFiles {
         obj: obj_path,
         mtl: mtl_path,
         png,
+        glb,
+        ply,
         truth: truth_path,
-        vertices: n_v,
-        triangles: n_f,
+        vertices: model.positions_m.len(),
+        triangles: model.triangles.len(),
         texture_px: (w as u32, h as u32),
     })
+}
+
+/// A paper's vertex grid in a [`ScanModel`].
+#[derive(Debug, Clone, Copy)]
+struct PaperGrid {
+    /// Its vertex (0, 0); the grid is (PAPER_CELLS + 1)² row-major.
+    first_vertex: usize,
+    /// Its first triangle; two per cell, row-major.
+    first_triangle: usize,
+    /// Texture coordinates of grid corners (0, 0) and (n, n) (linear in between).
+    uv_corner: [DVec2; 2],
+}
+
+/// The textured scan before it is written: positions in the scanner frame (metres), one
+/// texture coordinate per vertex (OBJ convention; the head's vertices share the skin's).
+#[derive(Debug, Default)]
+struct ScanModel {
+    positions_m: Vec<DVec3>,
+    /// Per vertex, its index into `vt`.
+    vertex_vt: Vec<usize>,
+    vt: Vec<DVec2>,
+    triangles: Vec<[u32; 3]>,
+    papers: Vec<PaperGrid>,
+}
+
+impl ScanModel {
+    /// The OBJ text: vertices in `scale` units per metre, then texture coordinates, then faces.
+    fn obj_text(&self, unit_word: &str, scale: f64) -> String {
+        let mut obj = String::with_capacity(64 * (self.positions_m.len() + 2 * self.vt.len()));
+        let _ = writeln!(
+            obj,
+            "# skinbrdf synthetic textured head scan, {unit_word} (scanner frame)"
+        );
+        let _ = writeln!(obj, "mtllib head.mtl\no head");
+        for p in &self.positions_m {
+            let q = *p * scale;
+            let _ = writeln!(obj, "v {:.5} {:.5} {:.5}", q.x, q.y, q.z);
+        }
+        for uv in &self.vt {
+            let _ = writeln!(obj, "vt {:.7} {:.7}", uv.x, uv.y);
+        }
+        obj.push_str("usemtl scan\n");
+        for t in &self.triangles {
+            let [a, b, c] = t.map(|v| (v as usize + 1, self.vertex_vt[v as usize] + 1));
+            let _ = writeln!(obj, "f {}/{} {}/{} {}/{}", a.0, a.1, b.0, b.1, c.0, c.1);
+        }
+        obj
+    }
+
+    /// The mesh in metres with each triangle's corners' texture coordinates (for GLB).
+    fn mesh_with_corner_uv(&self) -> (skinbrdf_core::TriMesh, Vec<[glam::Vec2; 3]>) {
+        let mesh = skinbrdf_core::TriMesh {
+            positions: self.positions_m.iter().map(|p| p.as_vec3()).collect(),
+            indices: self.triangles.clone(),
+            normals: None,
+        };
+        let uv = self
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| self.vt[self.vertex_vt[v as usize]].as_vec2()))
+            .collect();
+        (mesh, uv)
+    }
+
+    /// The same surface with a colour per vertex (in `scale` units per metre, for PLY): the
+    /// head as it is (its vertices the skin's colour), each paper cell's two triangles
+    /// subdivided [`PLY_SUBDIVISION`] times along each side on their own planes, each vertex
+    /// the texture's bilinear value at its texture coordinate.
+    fn vertex_coloured(
+        &self,
+        texture: &skinbrdf_mesh::TextureImage,
+        scale: f64,
+    ) -> (skinbrdf_core::TriMesh, Vec<[u8; 3]>) {
+        let to8 = |c: [f32; 3]| c.map(|x| (x * 255.0).round().clamp(0.0, 255.0) as u8);
+        let first_paper_vertex = self
+            .papers
+            .first()
+            .map_or(self.positions_m.len(), |p| p.first_vertex);
+        let first_paper_tri = self
+            .papers
+            .first()
+            .map_or(self.triangles.len(), |p| p.first_triangle);
+        let mut mesh = skinbrdf_core::TriMesh::default();
+        let mut colours = Vec::new();
+        for p in &self.positions_m[..first_paper_vertex] {
+            mesh.positions.push((*p * scale).as_vec3());
+            colours.push(SKIN_RGB8);
+        }
+        mesh.indices
+            .extend_from_slice(&self.triangles[..first_paper_tri]);
+        let n = PAPER_CELLS + 1;
+        let s = PLY_SUBDIVISION;
+        let fine = PAPER_CELLS * s + 1;
+        for paper in &self.papers {
+            let coarse = |i: usize, j: usize| self.positions_m[paper.first_vertex + j * n + i];
+            let base = mesh.positions.len() as u32;
+            for jj in 0..fine {
+                for ii in 0..fine {
+                    let (i, j) = ((ii / s).min(PAPER_CELLS - 1), (jj / s).min(PAPER_CELLS - 1));
+                    let (fs, ft) = (
+                        (ii - i * s) as f64 / s as f64,
+                        (jj - j * s) as f64 / s as f64,
+                    );
+                    let (a, b, c, d) = (
+                        coarse(i, j),
+                        coarse(i + 1, j),
+                        coarse(i + 1, j + 1),
+                        coarse(i, j + 1),
+                    );
+                    // The cell's triangles [a, c, b] (fs >= ft) and [a, d, c] (ft >= fs).
+                    let p = if fs >= ft {
+                        a + (b - a) * fs + (c - b) * ft
+                    } else {
+                        a + (d - a) * ft + (c - d) * fs
+                    };
+                    let f = DVec2::new(ii as f64, jj as f64) / (fine - 1) as f64;
+                    let uv = paper.uv_corner[0] + (paper.uv_corner[1] - paper.uv_corner[0]) * f;
+                    mesh.positions.push((p * scale).as_vec3());
+                    colours.push(to8(texture.bilinear(uv.as_vec2())));
+                }
+            }
+            let vi = |i: usize, j: usize| base + (j * fine + i) as u32;
+            for j in 0..fine - 1 {
+                for i in 0..fine - 1 {
+                    let (a, b, c, d) = (vi(i, j), vi(i + 1, j), vi(i + 1, j + 1), vi(i, j + 1));
+                    mesh.indices.push([a, c, b]);
+                    mesh.indices.push([a, d, c]);
+                }
+            }
+        }
+        (mesh, colours)
+    }
 }
 
 fn unit_word(scene: &Scene) -> &'static str {
@@ -346,28 +533,21 @@ fn unit_word(scene: &Scene) -> &'static str {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use skinbrdf_mesh::{Appearance, Hit, LoadOptions, TexturedMesh};
 
-    #[test]
-    fn the_scan_loads_textured_and_the_papers_show_their_tags() {
-        let scene = Scene::load("default").expect("scene");
-        let rig = crate::layout::build_rig(&scene);
-        let dir = tempfile::tempdir().expect("tempdir");
-        let t0 = std::time::Instant::now();
-        let files = write_textured_scan(dir.path(), &scene, &rig).expect("write");
-        let took = t0.elapsed();
-        let size: u64 = [&files.obj, &files.mtl, &files.png]
-            .iter()
-            .map(|p| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0))
-            .sum();
-        assert!(size < 30_000_000, "{size} bytes");
-        eprintln!("textured scan: {size} bytes, {took:?}, {files:?}");
-        let opts = skinbrdf_mesh::LoadOptions::default();
-        let scan = skinbrdf_mesh::load_textured(&files.obj, &opts).expect("load");
-        assert_eq!(scan.mesh.indices.len(), files.triangles);
-        let plain = skinbrdf_mesh::load_mesh(&files.obj, &opts).expect("load_mesh");
-        assert_eq!(plain.mesh, scan.mesh);
-        // A ray onto each paper's centre cell hits ink or paper as printed.
-        let truth = scan_truth(&scene, &rig);
+    /// OBJ and GLB positions agree within this, metres: the OBJ's 5 decimals of a millimetre
+    /// and the f32 rounding of both (a few 1e-8 m at the scan's 0.5 m from the scanner's
+    /// origin).
+    const PARITY_POS_M: f32 = 1e-6;
+    /// OBJ and GLB colours at the same hit agree within this: their texture coordinates differ
+    /// by f32 rounding (glTF stores `1 - v`), a 1e-4 texel shift at most in a ~1000-texel atlas
+    /// against a print contrast of 0.85.
+    const PARITY_COLOUR: f32 = 1e-3;
+
+    /// Probes three points of every target's print (a border cell near corner 0, the white ring
+    /// beyond it, a data cell) with rays along its normal; returns how many were seen, after
+    /// asserting each shows ink or paper as printed.
+    fn probe_prints(scan: &TexturedMesh, truth: &ScanTruth) -> usize {
         let bvh = skinbrdf_mesh::MeshBvh::build(&scan.mesh, skinbrdf_mesh::BuildQuality::Fast)
             .expect("bvh");
         let mut checked = 0;
@@ -375,7 +555,6 @@ mod tests {
             let [c0, c1, c2, c3] = t.corners_m;
             let out = -((c1 - c0).cross(c0 - c3)).normalize();
             let bits = skinbrdf_targets::tag36h11::tag_bits(t.id as usize).expect("id");
-            // Border cell near corner 0 (black) and the white ring beyond it.
             let centre = (c0 + c1 + c2 + c3) * 0.25;
             for (tag_uv, white) in [
                 (DVec2::new(-0.875, 0.875), false),
@@ -394,6 +573,34 @@ mod tests {
                 checked += 1;
             }
         }
+        checked
+    }
+
+    #[test]
+    fn the_scan_loads_textured_and_the_papers_show_their_tags() {
+        let scene = Scene::load("default").expect("scene");
+        let rig = crate::layout::build_rig(&scene);
+        let dir = tempfile::tempdir().expect("tempdir");
+        let t0 = std::time::Instant::now();
+        let files = write_textured_scan(dir.path(), &scene, &rig).expect("write");
+        let took = t0.elapsed();
+        assert!(
+            files.glb.is_none() && files.ply.is_none(),
+            "OBJ only by default"
+        );
+        let size: u64 = [&files.obj, &files.mtl, &files.png]
+            .iter()
+            .map(|p| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0))
+            .sum();
+        assert!(size < 30_000_000, "{size} bytes");
+        eprintln!("textured scan: {size} bytes, {took:?}, {files:?}");
+        let opts = LoadOptions::default();
+        let scan = skinbrdf_mesh::load_textured(&files.obj, &opts).expect("load");
+        assert_eq!(scan.mesh.indices.len(), files.triangles);
+        let plain = skinbrdf_mesh::load_mesh(&files.obj, &opts).expect("load_mesh");
+        assert_eq!(plain.mesh, scan.mesh);
+        let truth = scan_truth(&scene, &rig);
+        let checked = probe_prints(&scan, &truth);
         assert!(checked >= 3 * truth.targets.len() / 2, "{checked}");
         let back: ScanTruth =
             serde_json::from_slice(&std::fs::read(&files.truth).expect("read")).expect("json");
@@ -403,5 +610,111 @@ mod tests {
             .rotation
             .angle_between(DQuat::IDENTITY);
         assert!((20f64.to_radians()..60f64.to_radians()).contains(&angle));
+    }
+
+    #[test]
+    fn the_glb_and_the_obj_give_the_same_mesh_and_colours_and_the_ply_shows_the_print() {
+        let scene = Scene::load("default").expect("scene");
+        let rig = crate::layout::build_rig(&scene);
+        let dir = tempfile::tempdir().expect("tempdir");
+        let only_obj = tempfile::tempdir().expect("tempdir");
+        let t0 = std::time::Instant::now();
+        write_textured_scan_as(only_obj.path(), &scene, &rig, &[ScanFormat::Obj]).expect("obj");
+        let t_obj = t0.elapsed();
+        let t0 = std::time::Instant::now();
+        let files = write_textured_scan_as(
+            dir.path(),
+            &scene,
+            &rig,
+            &[ScanFormat::Obj, ScanFormat::Glb, ScanFormat::Ply],
+        )
+        .expect("write");
+        let t_all = t0.elapsed();
+        let (glb, ply) = (
+            files.glb.clone().expect("glb"),
+            files.ply.clone().expect("ply"),
+        );
+        let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+        // The OBJ is the same whatever else is written.
+        assert_eq!(
+            std::fs::read(&files.obj).expect("obj"),
+            std::fs::read(only_obj.path().join("head.obj")).expect("obj")
+        );
+        let opts = LoadOptions::default();
+        let time = |p: &Path| {
+            let t0 = std::time::Instant::now();
+            let s = skinbrdf_mesh::load_textured(p, &opts).expect("load");
+            (s, t0.elapsed())
+        };
+        let (from_obj, l_obj) = time(&files.obj);
+        let (from_glb, l_glb) = time(&glb);
+        let (from_ply, l_ply) = time(&ply);
+        eprintln!(
+            "write: obj+mtl+png {t_obj:?}, with glb and ply {t_all:?}; sizes: obj {} + png {}, \
+             glb {}, ply {}; load_textured: obj {l_obj:?}, glb {l_glb:?}, ply {l_ply:?}",
+            size(&files.obj),
+            size(&files.png),
+            size(&glb),
+            size(&ply)
+        );
+
+        // Vertex for vertex, triangle for triangle.
+        assert_eq!(from_glb.unit, skinbrdf_mesh::LengthUnit::Metres);
+        assert_eq!(from_obj.unit, skinbrdf_mesh::LengthUnit::Millimetres);
+        assert_eq!(from_glb.report, from_obj.report);
+        assert_eq!(from_glb.mesh.positions.len(), from_obj.mesh.positions.len());
+        assert_eq!(from_glb.mesh.indices.len(), from_obj.mesh.indices.len());
+        let differ = (0..from_obj.mesh.indices.len())
+            .find(|&t| from_glb.mesh.indices[t] != from_obj.mesh.indices[t]);
+        assert!(
+            differ.is_none(),
+            "triangle {differ:?}: glb {:?}, obj {:?}",
+            differ.map(|t| from_glb.mesh.indices[t]),
+            differ.map(|t| from_obj.mesh.indices[t])
+        );
+        let worst = from_glb
+            .mesh
+            .positions
+            .iter()
+            .zip(&from_obj.mesh.positions)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0f32, f32::max);
+        assert!(worst < PARITY_POS_M, "{worst} m");
+        let plain = skinbrdf_mesh::load_mesh(&glb, &opts).expect("load_mesh");
+        assert_eq!(plain.mesh, from_glb.mesh);
+
+        // The same colour at the same hits: every triangle at its centroid and at two other
+        // barycentrics near its corners.
+        let mut worst = 0.0f32;
+        let mut dark = 0;
+        for t in 0..from_obj.mesh.indices.len() as u32 {
+            for (u, v) in [(1.0 / 3.0, 1.0 / 3.0), (0.1, 0.05), (0.05, 0.85)] {
+                let hit = Hit {
+                    t_m: 1.0,
+                    triangle: t,
+                    u,
+                    v,
+                };
+                let (a, b) = (from_obj.colour_at(&hit), from_glb.colour_at(&hit));
+                for k in 0..3 {
+                    worst = worst.max((a[k] - b[k]).abs());
+                }
+                dark += usize::from(a[0] < 0.2);
+            }
+        }
+        assert!(worst < PARITY_COLOUR, "{worst}");
+        assert!(dark > 1000, "the hits sample the print's ink too ({dark})");
+
+        // The PLY: vertex colours, the same surface with the papers subdivided, the print
+        // where it is printed.
+        assert!(matches!(from_ply.appearance, Appearance::VertexColours(_)));
+        let head_tris = from_obj.mesh.indices.len() - rig.headdress.len() * 2 * PAPER_CELLS.pow(2);
+        assert_eq!(
+            from_ply.mesh.indices.len(),
+            head_tris + rig.headdress.len() * 2 * (PAPER_CELLS * PLY_SUBDIVISION).pow(2)
+        );
+        let truth = scan_truth(&scene, &rig);
+        assert!(probe_prints(&from_ply, &truth) >= 3 * truth.targets.len() / 2);
+        assert!(probe_prints(&from_glb, &truth) >= 3 * truth.targets.len() / 2);
     }
 }

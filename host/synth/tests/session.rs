@@ -89,6 +89,7 @@ fn default_scene_writes_a_valid_36_image_session_with_truth() {
                     visible("standard")
                 );
             }
+            ImageRole::Survey => panic!("{}: the default scene takes no survey images", it.file),
         }
     }
     // The images are not blank and the skin is brighter than the background.
@@ -109,7 +110,113 @@ fn every_builtin_scene_generates_a_loadable_session() {
         };
         generate(&scene, &opts, dir.path()).unwrap_or_else(|e| panic!("{name}: {e}"));
         let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert_eq!(s.file.images.len(), 9, "{name}");
+        assert_eq!(
+            s.file.images.len(),
+            9 + scene.session.survey_images as usize,
+            "{name}"
+        );
+    }
+}
+
+/// Paper under the room light at a survey shot's longer exposure is at least this bright
+/// (linear, 1.0 = white): mid-grey, for the detector.
+const MIN_SURVEY_PAPER: f32 = 0.35;
+
+#[test]
+fn survey_images_are_taken_without_the_subject_before_the_session() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = Scene::load("survey-images").unwrap();
+    scene.session.measurement_images = 3;
+    let n = scene.session.survey_images as usize;
+    assert!(n > 0);
+    // The studio's 14-bit rows need an even width of superpixels x 2 photosites.
+    let opts = SynthOptions {
+        studio: true,
+        resolution: Some((200, 133)),
+        ..small(1)
+    };
+    generate(&scene, &opts, dir.path()).unwrap();
+    let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    // Listed first (taken first), role survey, no exposure.
+    for (k, im) in s.file.images.iter().enumerate() {
+        assert_eq!(im.role == ImageRole::Survey, k < n, "{}", im.file);
+        if im.role == ImageRole::Survey {
+            assert!(im.exposure_index.is_none(), "{}", im.file);
+        }
+    }
+    let truth = s.load_truth().unwrap().unwrap();
+    for it in truth.images.iter().filter(|t| t.role == ImageRole::Survey) {
+        // No subject: no skin, no headdress; the cage is seen and lit by the room light.
+        assert!(it.forehead_mask.is_none(), "{}", it.file);
+        assert!(
+            it.targets.iter().all(|t| t.layout != "headdress"),
+            "{}",
+            it.file
+        );
+        let seen = it
+            .targets
+            .iter()
+            .filter(|t| t.layout == "reference" && t.fully_visible)
+            .count();
+        assert!(seen >= 5, "{}: {seen} reference targets", it.file);
+    }
+    for (i, _) in s.images_with_role(ImageRole::Survey) {
+        let img = s.load_image(i).unwrap();
+        let mut g: Vec<f32> = img.rgb.iter().map(|p| p[1]).collect();
+        g.sort_by(f32::total_cmp);
+        let p999 = g[g.len() * 999 / 1000];
+        assert!(
+            p999 > MIN_SURVEY_PAPER,
+            "{}: paper at {p999}",
+            s.file.images[i].file
+        );
+    }
+    // The studio's survey files: before the card's first file, the same body, a longer
+    // exposure; the studio's truth names them by their raw files.
+    let studio = dir.path().join("studio");
+    let card_first = std::fs::read_dir(studio.join("card/DCIM/100SKBRF"))
+        .unwrap()
+        .map(|e| skinbrdf_raw::read_metadata(&e.unwrap().path()).unwrap())
+        .map(|m| m.capture_time.unwrap().seconds())
+        .fold(f64::INFINITY, f64::min);
+    let mut survey: Vec<_> = std::fs::read_dir(studio.join("survey"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    survey.sort();
+    assert_eq!(survey.len(), n);
+    for p in &survey {
+        let m = skinbrdf_raw::read_metadata(p).unwrap();
+        assert!(
+            m.capture_time.unwrap().seconds() < card_first,
+            "{}",
+            p.display()
+        );
+        assert_eq!(
+            m.body_serial.as_deref(),
+            Some(scene.studio.body_serial.as_str())
+        );
+        let t = m.exposure_time_s.unwrap();
+        assert!(
+            t > scene.studio.exposure_time_s * 2.0,
+            "{}: {t} s",
+            p.display()
+        );
+    }
+    let studio_truth = skinbrdf_session::Truth::load(&studio.join("truth.json")).unwrap();
+    let names: Vec<String> = studio_truth
+        .images
+        .iter()
+        .filter(|t| t.role == ImageRole::Survey)
+        .map(|t| t.file.clone())
+        .collect();
+    assert_eq!(names.len(), n);
+    for p in &survey {
+        let name = p.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(
+            names.iter().any(|f| f == &format!("survey/{name}")),
+            "{name} not in {names:?}"
+        );
     }
 }
 

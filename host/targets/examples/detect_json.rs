@@ -34,6 +34,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     "sigma": d.corner_sigma_px(),
                     "hamming": d.hamming,
                     "margin": d.decision_margin,
+                    "occluded": d.occluded_corners,
                 })
             })
             .collect();

@@ -38,6 +38,22 @@
 //!    bits are matched against all 587 codes for each of the four corner orderings; the best
 //!    match within [`DetectorConfig::max_hamming`] wins. Quads whose black border is not dark are
 //!    rejected before decoding.
+//! 7. **Border width** (a side displaced by an occluding edge): the black border is exactly one
+//!    cell wide, and the decoded code says where a data cell behind it is white, i.e. where the
+//!    border's inner edge (or, behind a black data cell, the next one, two cells in) is visible.
+//!    Those edges are measured with the outer edges' estimator, along each side, through the
+//!    quad's homography, and compared with where the fitted outer edge puts them
+//!    (`displaced_sides`). A neighbouring target's white paper over part of a side's border
+//!    has an edge as straight and as contrasted as the white ring's and parallel to the side,
+//!    so the contrast, bend and cell tests all pass, and it moves both corners of that side
+//!    together; but it leaves the inner edge where it was, so the border measures too thin.
+//!    A side displaced by more than [`BORDER_WIDTH_SIGMAS`] of the edge fits' own scatter and
+//!    [`MIN_BORDER_DISPLACEMENT_PX`] has both its corners marked occluded and the displacement
+//!    added to their variance along that side's normal. What is common to all sides (ink
+//!    spread, a bloom of the white) is taken off first; sides whose cells are under
+//!    [`MIN_WIDTH_TEST_CELL_PX`] across are not tested (their edges are too close to tell a
+//!    fraction of a pixel); every side of the family has a white cell within
+//!    [`MAX_INNER_EDGE_DEPTH`] cells of its border, so no side is left untested by its code.
 //!
 //! [`DetectorConfig::corner_model`] can instead report the reference library's unrefined quad
 //! ([`CornerModel::BinaryBoundary`]: that library's quad stage, reimplemented in
@@ -200,9 +216,11 @@ pub struct Detection {
     /// RMS scatter of the edge points about the fitted sides, pixels.
     pub edge_rms_px: f64,
     /// Per corner (same order), whether it is partly hidden: the edge next to it lost its
-    /// contrast on either side (something covers the ring or the border), or cells of the grid
-    /// near it disagree with a whole tag (a bright border cell, a dark white-ring cell, a
-    /// corrected bit). Its covariance includes [`OCCLUDED_SIGMA_CELLS`] cells; the pose stage
+    /// contrast on either side (something covers the ring or the border), a side next to it
+    /// bends or is displaced against its own inner edges (an occluder's edge along the
+    /// border, [`BORDER_WIDTH_SIGMAS`]), or cells of the grid near it disagree with a whole tag
+    /// (a bright border cell, a dark white-ring cell, a corrected bit). Its covariance includes
+    /// [`OCCLUDED_SIGMA_CELLS`] cells (and a displaced side's displacement); the pose stage
     /// does not use it.
     #[serde(default)]
     pub occluded_corners: [bool; 4],
@@ -942,6 +960,10 @@ struct RefinedQuad {
     cell_px: f64,
     /// Per corner, whether a side next to it bends (see [`BEND_SIGMAS`]).
     bent: [bool; 4],
+    /// The fitted sides (side `k` from corner `k` to `k + 1`).
+    lines: [Line; 4],
+    /// The tag's median edge contrast (Michelson, white ring against black border).
+    median_contrast: f64,
 }
 
 /// Refines the sides on the grey image. `q` has positive signed area (clockwise on screen with y
@@ -966,6 +988,7 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
     let mut bend = [[(0.0f64, 0.0f64); 2]; 4];
     // Per side, the visible fraction next to its start and end corner.
     let mut visible_near = [[1.0f64; 2]; 4];
+    let mut median_contrast = 0.0;
     for pass in 0..3 {
         // The occlusion evidence (corner zones, bends) is gathered on the last pass.
         let last = pass == 2;
@@ -1050,6 +1073,7 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         if median <= 0.0 {
             return None;
         }
+        median_contrast = median;
         let visible_at = VISIBLE_CONTRAST * median;
         for k in 0..4 {
             let (pts, contrast) = &sides[k];
@@ -1167,6 +1191,7 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
     // Corner k ends side k - 1 and starts side k.
     let visible_near =
         std::array::from_fn(|k| visible_near[(k + 3) % 4][1].min(visible_near[k][0]));
+    let lines: [Line; 4] = lines.try_into().ok()?;
     Some(RefinedQuad {
         corners,
         cov,
@@ -1174,6 +1199,279 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         visible_near,
         cell_px: cell,
         bent,
+        lines,
+        median_contrast,
+    })
+}
+
+// ---------------------------------------------------------------------------------------------
+// Border width: a side displaced by an occluding edge
+
+/// Deepest edge measured by the border-width test, in cells from the outer edge: the border's
+/// inner edge (1) where the data cell next to the border is white, else the edge of the first
+/// white data cell behind a black one (2), so that a side whose first data row is all black
+/// (24 of the family's 2348 sides) is still measured. Deeper edges are not used: they depend
+/// more on the far side's corners through the homography.
+pub const MAX_INNER_EDGE_DEPTH: usize = 2;
+
+/// Inner-edge samples stay this far from the ends of a run of equal edges, pixels, where the
+/// edge turns round a white cell's corner (the blur and the gradient's span reach about this
+/// far); bounded in cells by [`RUN_END_MARGIN_CELLS`].
+const RUN_END_MARGIN_PX: f64 = 1.5;
+
+/// Bounds of the run-end margin in cells: at least a quarter cell however sharp the image, and
+/// never more than 0.45 cell so a single cell keeps its middle.
+const RUN_END_MARGIN_CELLS: (f64, f64) = (0.25, 0.45);
+
+/// Smallest cell across a side, pixels, for its border width to be tested: below it the
+/// border's two edges, the white cell's far edge and the white ring's are all within the blur's
+/// reach, and their pull on the gradient centroid depends on the code around each sample (it
+/// is not common to the tag's sides), as large as the displacements to find. The same size as
+/// [`SMALL_CELL_PX`], below which the outer edges also need a narrower gradient.
+pub const MIN_WIDTH_TEST_CELL_PX: f64 = SMALL_CELL_PX;
+
+/// Edge samples per independent one: the inner-edge samples are a pixel apart and each reads a
+/// central difference over up to ±1 px through bilinear interpolation, so neighbours share pixels and
+/// their noise; the scatter over the count is multiplied by this.
+const SAMPLES_PER_INDEPENDENT: f64 = 2.0;
+
+/// A side's outer edge is displaced (an occluder's edge along the border, see
+/// `displaced_sides`) when the displacement measured by its inner edges exceeds this many of
+/// its standard deviations from the edge fits' scatter: four, as for a bend ([`BEND_SIGMAS`]),
+/// so that Gaussian noise alone flags about one side in 16 000 (the two-sided 4-sigma tail).
+pub const BORDER_WIDTH_SIGMAS: f64 = 4.0;
+
+/// Smallest displacement of a side that counts, pixels: model error of comparing two edges that
+/// the scatter does not show. A gradient centroid sampled on the pixel grid is biased by a
+/// fraction of a pixel depending on the edge's sub-pixel phase, which is the same along a
+/// nearly axis-aligned edge (it does not average out over the samples) and independent between
+/// the outer edge and the inner ones; the displacement combines both and scales them by 8/7.
+/// Set just above what whole tags of the synthetic sessions reach, so that they are not marked
+/// while a paper over a third of a pixel of the border is (docs/benchmarks-poses.md).
+pub const MIN_BORDER_DISPLACEMENT_PX: f64 = 0.3;
+
+/// Step of the grey profile read across an inner edge, pixels (that of the outer edges'
+/// gradient window).
+const PROFILE_STEP_PX: f64 = 0.25;
+
+/// The tag square's corners in quad order (those of [`square_to_quad`]).
+const SQUARE: [(f64, f64); 4] = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+
+/// The inner edges measured along one side of the quad.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct InnerEdges {
+    /// Mean position of the inner edges along the inward normal, relative to where the quad's
+    /// homography puts them (one or two cells inside the fitted outer edge), pixels: positive
+    /// when the border is thicker than the quad predicts.
+    offset_px: f64,
+    /// Variance of `offset_px` from noise: the samples' scatter (or the outer line's, when
+    /// larger) over their independent count, plus the outer line's offset variance, px².
+    var_px2: f64,
+}
+
+/// Measures the edges behind the black border along each side of the quad (`h`: the quad's
+/// homography from the tag square, `white`: the decoded code's cells in the quad's frame)
+/// where the code puts a white data cell within [`MAX_INNER_EDGE_DEPTH`] cells of the outer
+/// edge: the centroid of the squared dark-to-light gradient along the edge's normal (the outer
+/// edges' estimator, step 4), in a window re-centred over three passes. Samples whose contrast
+/// is below [`VISIBLE_CONTRAST`] of the tag's median are left out (the white cell is hidden).
+/// `None` for a side with no sample (no white cell within reach, all hidden, or cells under
+/// [`MIN_WIDTH_TEST_CELL_PX`] across it).
+fn inner_edges(
+    img: &GrayF32,
+    h: &DMat3,
+    white: &[[bool; 10]; 10],
+    rq: &RefinedQuad,
+) -> [Option<InnerEdges>; 4] {
+    let cw = 2.0 / tag36h11::WIDTH_AT_BORDER as f64;
+    let probe = EdgeProbe {
+        gspan: if rq.cell_px < SMALL_CELL_PX {
+            0.5 * GRADIENT_HALF_SPAN_PX
+        } else {
+            GRADIENT_HALF_SPAN_PX
+        },
+        visible_at: VISIBLE_CONTRAST * rq.median_contrast,
+    };
+    std::array::from_fn(|k| {
+        let s = DVec2::from(SQUARE[k]);
+        let e = DVec2::from(SQUARE[(k + 1) % 4]);
+        let along = (e - s) * 0.5;
+        let inward = -(s + e) * 0.5;
+        // The tag-frame point `t` cells along the side from its start, `d` cells inward.
+        let at = |t: f64, d: f64| s + along * (t * cw) + inward * (d * cw);
+        let is_white = |t: f64, d: f64| {
+            let p = at(t, d);
+            let col = ((p.x + 1.0) / cw + 1.0).floor();
+            let row = ((p.y + 1.0) / cw + 1.0).floor();
+            (0.0..10.0).contains(&col)
+                && (0.0..10.0).contains(&row)
+                && white[row as usize][col as usize]
+        };
+        // Per data column along the side, the depth of its first white cell.
+        let depth: [Option<usize>; 6] = std::array::from_fn(|j| {
+            (1..=MAX_INNER_EDGE_DEPTH).find(|&m| is_white(j as f64 + 1.5, m as f64 + 0.5))
+        });
+        let mut samples: Vec<f64> = Vec::new();
+        let mut j = 0;
+        while j < 6 {
+            let Some(m) = depth[j] else {
+                j += 1;
+                continue;
+            };
+            // A run of columns with the same edge depth is one straight edge.
+            let mut j1 = j;
+            while j1 + 1 < 6 && depth[j1 + 1] == Some(m) {
+                j1 += 1;
+            }
+            let (t0, t1, d) = (j as f64 + 1.0, j1 as f64 + 2.0, m as f64);
+            j = j1 + 1;
+            let cell_along = apply_h(h, at(t1, d)).distance(apply_h(h, at(t0, d))) / (t1 - t0);
+            let margin = (RUN_END_MARGIN_PX / cell_along.max(1e-9))
+                .clamp(RUN_END_MARGIN_CELLS.0, RUN_END_MARGIN_CELLS.1);
+            let usable = (t1 - t0 - 2.0 * margin).max(0.0);
+            let n = ((usable * cell_along).round() as usize).max(1);
+            for i in 0..n {
+                let t = t0 + margin + usable * (i as f64 + 0.5) / n as f64;
+                if let Some(o) = probe.offset(img, h, &at, t, d) {
+                    samples.push(o);
+                }
+            }
+        }
+        if samples.is_empty() {
+            return None;
+        }
+        let n = samples.len() as f64;
+        let mean = samples.iter().sum::<f64>() / n;
+        let scatter2 = if samples.len() >= 4 {
+            samples.iter().map(|o| (o - mean) * (o - mean)).sum::<f64>() / (n - 1.0)
+        } else {
+            0.0
+        };
+        let line = &rq.lines[k];
+        let mid = apply_h(h, at(4.0, 0.0));
+        Some(InnerEdges {
+            offset_px: mean,
+            var_px2: scatter2.max(line.sigma * line.sigma) * SAMPLES_PER_INDEPENDENT / n
+                + line.offset_var_at(mid),
+        })
+    })
+}
+
+/// How an inner edge is sampled: the gradient's half span and the least visible contrast.
+struct EdgeProbe {
+    gspan: f64,
+    visible_at: f64,
+}
+
+impl EdgeProbe {
+    /// One sample of an inner edge at tag-frame point `at(t, d)` (`d` cells behind the outer
+    /// edge, dark in front, light behind): the offset of the edge from that point along the
+    /// inward normal, pixels; `None` when the edge is not there to see (out of the image, cells
+    /// under [`MIN_WIDTH_TEST_CELL_PX`] across it, no dark-to-light gradient, too little
+    /// contrast).
+    fn offset(
+        &self,
+        img: &GrayF32,
+        h: &DMat3,
+        at: &impl Fn(f64, f64) -> DVec2,
+        t: f64,
+        d: f64,
+    ) -> Option<f64> {
+        let p0 = apply_h(h, at(t, d));
+        let (front, behind) = (apply_h(h, at(t, d - 0.5)), apply_h(h, at(t, d + 0.5)));
+        let tangent = apply_h(h, at(t + 0.1, d)) - apply_h(h, at(t - 0.1, d));
+        let mut n = tangent.perp().normalize_or_zero();
+        if n.dot(behind - front) < 0.0 {
+            n = -n;
+        }
+        // The local cell across the edge, pixels.
+        let cell = (behind - front).dot(n);
+        if cell < MIN_WIDTH_TEST_CELL_PX || !img.contains(front, 2.0) || !img.contains(behind, 2.0)
+        {
+            return None;
+        }
+        // The window covers most of a cell: a displaced outer edge moves the prediction by up
+        // to about half a cell, and the neighbouring edges (the outer one in front, the white
+        // cell's far one behind) have the opposite gradient sign.
+        let range = (0.4 * cell).clamp(0.75, 2.5);
+        // The grey profile along the normal on a grid of PROFILE_STEP_PX, read once and shared by
+        // the three passes and by the two ends of each difference (the gradient's half span is
+        // a whole number of steps); each pass's window starts on the grid.
+        let max_centre = 0.75 * cell;
+        let half = ((max_centre + range + self.gspan) / PROFILE_STEP_PX).ceil() as i64 + 1;
+        let mut profile = vec![f64::NAN; (2 * half + 1) as usize];
+        let mut grey = |i: i64| -> f64 {
+            let slot = &mut profile[(i + half).clamp(0, 2 * half) as usize];
+            if slot.is_nan() {
+                *slot = img.bilinear(p0 + n * (i as f64 * PROFILE_STEP_PX));
+            }
+            *slot
+        };
+        let span = (self.gspan / PROFILE_STEP_PX).round() as i64;
+        let steps = (range / PROFILE_STEP_PX).floor() as i64;
+        let mut centre = 0.0;
+        for _ in 0..3 {
+            let c = (centre / PROFILE_STEP_PX).round() as i64;
+            let (mut mw, mut mn) = (0.0, 0.0);
+            for i in c - steps..=c + steps {
+                let g = grey(i + span) - grey(i - span);
+                if g > 0.0 {
+                    mw += g * g;
+                    mn += g * g * i as f64 * PROFILE_STEP_PX;
+                }
+            }
+            if mw <= 0.0 {
+                return None;
+            }
+            centre = mn / mw;
+            if centre.abs() > max_centre {
+                return None;
+            }
+        }
+        // Contrast across the edge found: the dark border in front, the white cell behind.
+        let (dark, light) = (
+            img.bilinear(p0 + n * (centre - 0.4 * cell)),
+            img.bilinear(p0 + n * (centre + 0.4 * cell)),
+        );
+        let m = (light - dark) / (light.abs() + dark.abs()).max(1e-9);
+        (m >= self.visible_at).then_some(centre)
+    }
+}
+
+/// Per side of the quad, how far its fitted outer edge lies inside where its inner edges put
+/// it (pixels, negative: outside) when that is more than noise and model error allow
+/// ([`BORDER_WIDTH_SIGMAS`], [`MIN_BORDER_DISPLACEMENT_PX`]), else `None`.
+///
+/// An occluder's edge along side `k` moves that side inward by `δ` while its inner edges stay:
+/// the homography then shrinks the cell by `δ/8` across the tag, so side `k`'s border measures
+/// `7δ/8` thinner than predicted and the opposite side's `δ/8` thicker. With both measured,
+/// `δₖ = -(7 oₖ + oₒₚₚ)/6` undoes that coupling (a displaced side does not flag the opposite
+/// one); with one, `δₖ = -8 oₖ/7`. What all sides share is not an occluder's: a printer's ink
+/// spread, a bloom of the white or a blur that moves every edge alike make every border
+/// thicker or thinner, so with three or four sides measured their median displacement is taken
+/// off each before the test.
+fn displaced_sides(e: &[Option<InnerEdges>; 4]) -> [Option<f64>; 4] {
+    let est: [Option<(f64, f64)>; 4] = std::array::from_fn(|k| {
+        let ek = e[k]?;
+        Some(match e[(k + 2) % 4] {
+            Some(eo) => (
+                -(7.0 * ek.offset_px + eo.offset_px) / 6.0,
+                (49.0 * ek.var_px2 + eo.var_px2).sqrt() / 6.0,
+            ),
+            None => (-8.0 * ek.offset_px / 7.0, 8.0 * ek.var_px2.sqrt() / 7.0),
+        })
+    });
+    let mut ds: Vec<f64> = est.iter().flatten().map(|d| d.0).collect();
+    ds.sort_by(f64::total_cmp);
+    let common = match ds.len() {
+        3 => ds[1],
+        4 => 0.5 * (ds[1] + ds[2]),
+        _ => 0.0,
+    };
+    est.map(|d| {
+        let (d, sd) = d?;
+        let d = d - common;
+        (d.abs() > (BORDER_WIDTH_SIGMAS * sd).max(MIN_BORDER_DISPLACEMENT_PX)).then_some(d)
     })
 }
 
@@ -1463,13 +1761,47 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
             evidence[quadrant(r, c)] += 1;
         }
     }
-    // A corner is occluded when the edge next to it is hidden on either side, or the cells of
-    // its quadrant disagree with a whole tag; its covariance then gets an isotropic term of
-    // OCCLUDED_SIGMA_CELLS cells.
+    // The code's cells in the quad's frame: the white ring, the black border and the data.
+    let mut white = [[false; 10]; 10];
+    for (r, row) in white.iter_mut().enumerate() {
+        for (c, v) in row.iter_mut().enumerate() {
+            *v = ring(r, c, 0);
+        }
+    }
+    for (i, &(r, c)) in cells.iter().enumerate() {
+        white[r][c] = (wrong >> (tag36h11::NBITS - 1 - i)) & 1 == 1;
+    }
+    // Border width: a side whose outer edge is displaced against its inner edges (an
+    // occluder's edge along the border) has both its corners occluded, and its displacement
+    // goes into their covariance along that side's normal.
+    let edges = inner_edges(img, &h, &white, rq);
+    let shifted = displaced_sides(&edges);
+    // A corner is occluded when the edge next to it is hidden on either side, a side next to it
+    // bends or is displaced, or the cells of its quadrant disagree with a whole tag; its
+    // covariance then gets an isotropic term of OCCLUDED_SIGMA_CELLS cells.
     let occluded_q: [bool; 4] = std::array::from_fn(|j| {
-        rq.visible_near[j] < MIN_VISIBLE_NEAR || evidence[j] > 0 || rq.bent[j]
+        rq.visible_near[j] < MIN_VISIBLE_NEAR
+            || evidence[j] > 0
+            || rq.bent[j]
+            || shifted[j].is_some()
+            || shifted[(j + 3) % 4].is_some()
     });
     let extra = (OCCLUDED_SIGMA_CELLS * rq.cell_px).powi(2);
+    // A displaced side `k` moves its corners along the other side through each: corner `k`
+    // along side `k - 1`, corner `k + 1` along side `k + 1`, by the displacement over the sine
+    // of their angle (floored as in the edge refinement's covariance).
+    let mut rq_cov = rq.cov;
+    for (k, d) in shifted.iter().enumerate() {
+        let Some(d) = d else { continue };
+        for (j, other) in [(k, (k + 3) % 4), ((k + 1) % 4, (k + 1) % 4)] {
+            let (u, n) = (rq.lines[other].dir(), rq.lines[k].n);
+            let sin2 = n.dot(u).powi(2).max(0.05 * 0.05);
+            let v = d * d / sin2;
+            rq_cov[j][0] += v * u.x * u.x;
+            rq_cov[j][1] += v * u.x * u.y;
+            rq_cov[j][2] += v * u.y * u.y;
+        }
+    }
     // Reorder corners so corner 0 is the tag's printed top-left. With the grid turned by
     // `shift` quarter turns, the tag's corner k is the quad's corner k - shift.
     let mut corners = [DVec2::ZERO; 4];
@@ -1478,7 +1810,7 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
     for k in 0..4 {
         let j = (k + shift) % 4;
         corners[k] = q[j];
-        cov[k] = rq.cov[j];
+        cov[k] = rq_cov[j];
         occluded[k] = occluded_q[j];
         if occluded[k] {
             cov[k][0] += extra;
@@ -1654,6 +1986,139 @@ mod tests {
             }
         }
         assert!(detect(&img, &DetectorConfig::default()).is_empty());
+    }
+
+    /// Paints white paper (level `v`, anti-aliased) over the half-plane beyond the line through
+    /// `p` with outward normal `n`, within `reach` px of `p`.
+    fn paper_edge(img: &mut GrayF32, p: DVec2, n: DVec2, reach: f64, v: f32) {
+        let (w, h) = (img.width as i64, img.height as i64);
+        for y in ((p.y - reach) as i64).max(0)..((p.y + reach) as i64).min(h) {
+            for x in ((p.x - reach) as i64).max(0)..((p.x + reach) as i64).min(w) {
+                let d = (DVec2::new(x as f64, y as f64) - p).dot(n);
+                let f = (d + 0.5).clamp(0.0, 1.0) as f32;
+                let i = (y * w + x) as usize;
+                img.data[i] = img.data[i] * (1.0 - f) + v * f;
+            }
+        }
+    }
+
+    /// 3 x 3 binomial blur (sigma about 0.7 px) and uniform noise of +-`noise`.
+    fn blur_and_noise(img: &mut GrayF32, noise: f32, seed: u64) {
+        let (w, h) = (img.width, img.height);
+        let src = img.data.clone();
+        let k = [0.25f32, 0.5, 0.25];
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                let mut acc = 0.0;
+                for (dy, ky) in k.iter().enumerate() {
+                    for (dx, kx) in k.iter().enumerate() {
+                        acc += ky * kx * src[(y + dy - 1) * w + x + dx - 1];
+                    }
+                }
+                img.data[y * w + x] = acc;
+            }
+        }
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        for v in img.data.iter_mut() {
+            *v += rng.random_range(-noise..noise);
+        }
+    }
+
+    /// A neighbouring target's white paper laid over the outer 1..2 px of one side's black
+    /// border, parallel to it: the paper's edge is as straight and as contrasted as the border's
+    /// own, so only the border's width gives it away. Both corners of that side must be marked
+    /// occluded with a sigma that covers their displacement; the other two, and every corner of
+    /// the same tags uncovered, must not be marked.
+    #[test]
+    fn a_paper_edge_over_one_side_of_the_border_marks_both_its_corners() {
+        // (id, centre, half side px, angle, perspective g, h, paper over the border px): cells
+        // of 5 px (the studio's reference targets at half resolution) and of 8 px.
+        let cases = [
+            (21usize, DVec2::new(90.0, 90.0), 20.0, 0.3, 0.0, 0.0, 1.0),
+            (52, DVec2::new(250.0, 90.0), 20.0, -0.5, 0.0008, 0.0, 1.6),
+            (3, DVec2::new(90.0, 250.0), 32.0, 2.0, 0.0, -0.0006, 1.5),
+            (44, DVec2::new(250.0, 250.0), 32.0, 4.0, 0.0005, 0.0005, 2.0),
+        ];
+        for covered in [false, true] {
+            let mut img = blank(340, 340, 0.45);
+            for (n, &(id, c, s, a, g, hh, over)) in cases.iter().enumerate() {
+                let hm = tag_h(c, s, a, g, hh);
+                assert!(paint_tag(&mut img, &hm, id, 0.06, 0.9, 8));
+                if covered {
+                    // Side k of the tag frame, from corner k to k + 1 (BL, BR, TR, TL).
+                    let k = n % 4;
+                    let t = truth_corners(&hm);
+                    let (p, q) = (t[k], t[(k + 1) % 4]);
+                    let centre = apply_h(&hm, DVec2::ZERO);
+                    let dir = (q - p).normalize();
+                    let mut out = DVec2::new(-dir.y, dir.x);
+                    if out.dot(p - centre) < 0.0 {
+                        out = -out;
+                    }
+                    paper_edge(&mut img, p - out * over, out, 2.0 * s, 0.9);
+                }
+            }
+            blur_and_noise(&mut img, 0.03, 11);
+            let dets = detect(&img, &DetectorConfig::default());
+            assert_eq!(dets.len(), cases.len(), "covered {covered}: {dets:?}");
+            for (n, &(id, c, s, a, g, hh, over)) in cases.iter().enumerate() {
+                let truth = truth_corners(&tag_h(c, s, a, g, hh));
+                let d = dets.iter().find(|d| d.id == id as u32).expect("tag found");
+                let sig = d.corner_sigma_px();
+                let k = n % 4;
+                for j in 0..4 {
+                    let e = d.corners_px[j].distance(truth[j]);
+                    let on_side = covered && (j == k || j == (k + 1) % 4);
+                    assert_eq!(
+                        d.occluded_corners[j], on_side,
+                        "tag {id} (covered {covered}, {over} px over side {k}) corner {j}: \
+                         error {e:.2} px, sigma {:.2}",
+                        sig[j]
+                    );
+                    assert!(
+                        e <= 3.0 * sig[j],
+                        "tag {id} (covered {covered}) corner {j}: error {e:.2} px, sigma {:.2}",
+                        sig[j]
+                    );
+                    if on_side {
+                        // The paper moved the corner by about its overlap.
+                        assert!(e > 0.5 * over, "tag {id} corner {j}: error {e:.2} px");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn border_width_flags_one_displaced_side_but_not_a_common_thickening() {
+        let side = |offset_px: f64| {
+            Some(InnerEdges {
+                offset_px,
+                var_px2: 0.03f64.powi(2),
+            })
+        };
+        // A side moved 1 px inward: its border is 7/8 px thinner than predicted, the opposite
+        // side's 1/8 px thicker; only the moved side is displaced, by about 1 px.
+        let one = displaced_sides(&[side(-0.875), side(0.0), side(0.125), side(0.0)]);
+        assert!(one[0].is_some_and(|d| (d - 1.0).abs() < 1e-9), "{one:?}");
+        assert_eq!(one[1..], [None, None, None]);
+        // Every border 0.4 px thicker (ink spread): nothing is displaced.
+        assert_eq!(displaced_sides(&[side(0.4); 4]), [None; 4]);
+        // Noise and model error: under the floor, or under four sigmas, nothing.
+        let small = displaced_sides(&[side(-0.2), side(0.0), side(0.0), side(0.0)]);
+        assert_eq!(small, [None; 4]);
+        let noisy = [
+            Some(InnerEdges {
+                offset_px: -0.6,
+                var_px2: 0.2f64.powi(2),
+            }),
+            side(0.0),
+            side(0.0),
+            side(0.0),
+        ];
+        assert_eq!(displaced_sides(&noisy), [None; 4]);
+        // Sides not measured are not tested.
+        assert_eq!(displaced_sides(&[None; 4]), [None; 4]);
     }
 
     #[test]

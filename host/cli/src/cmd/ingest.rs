@@ -1,14 +1,15 @@
-//! `skinbrdf ingest CARD_DIR --capture capture.json --rig RIG.toml --scan SCAN [--camera
-//! CAMERA.toml] --out SESSION`: the camera's card to a session (see `skinbrdf_ingest::ingest`
-//! and docs/ingest.md). Prints the camera clock fit with every pair's residual, the files left
-//! out and why, the exposures without a file, and what the session still needs.
+//! `skinbrdf ingest CARD_DIR --capture capture.json --rig RIG.toml [--scan SCAN [--scan-points
+//! POINTS.toml] [--similarity]] [--camera CAMERA.toml] [--survey DIR] --out SESSION`: the
+//! camera's card (and the survey images) to a session (see `skinbrdf_ingest::ingest` and
+//! docs/ingest.md). Prints the camera clock fit with every pair's residual, the survey images,
+//! the files left out and why, the exposures without a file, and what the session still needs.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use skinbrdf_ingest::matching::MatchOptions;
 use skinbrdf_ingest::{ingest, ExposurePolicy, IngestConfig};
-use skinbrdf_session::LengthUnit;
+use skinbrdf_session::{LengthUnit, RegistrationFit};
 
 /// Flags of `skinbrdf ingest`.
 #[derive(Debug, clap::Args)]
@@ -21,12 +22,21 @@ pub struct Args {
     /// The rig file: targets, flash, standard (with placements when surveyed).
     #[arg(long)]
     pub rig: PathBuf,
-    /// The head scan (PLY or OBJ).
+    /// The head scan (PLY, OBJ, binary glTF .glb or .gltf with its files); not needed when the
+    /// rig states an ideal sample's shape (`[geometry]`: a calibration sphere or cylinder).
     #[arg(long)]
-    pub scan: PathBuf,
-    /// The scan's length unit (default: from the file's header comment).
+    pub scan: Option<PathBuf>,
+    /// The scan's length unit (default: from the file's header comment; glTF: metres).
     #[arg(long, value_enum)]
     pub scan_units: Option<Units>,
+    /// Hand-picked target corners on the scan (a `[[points]]` TOML file, metres, scan frame):
+    /// the surveyed headdress is registered to the scan by them (a scan without texture).
+    #[arg(long)]
+    pub scan_points: Option<PathBuf>,
+    /// Register the headdress to the scan with a similarity (also a scale) instead of a rigid
+    /// motion (a scan whose unit is not trusted).
+    #[arg(long)]
+    pub similarity: bool,
     /// A camera calibration: a TOML file with a `[camera]` table as in session.toml.
     #[arg(long)]
     pub camera: Option<PathBuf>,
@@ -46,6 +56,11 @@ pub struct Args {
     /// The session's camera body serial (default: the one most files carry).
     #[arg(long)]
     pub body_serial: Option<String>,
+    /// A folder of survey images: shots taken by hand before the subject sits (room light, no
+    /// flash, not in the capture record), same camera body; they strengthen the placement
+    /// survey (role `survey`).
+    #[arg(long, value_name = "DIR")]
+    pub survey: Option<PathBuf>,
     /// Print the report as JSON on stdout.
     #[arg(long)]
     pub json: bool,
@@ -85,6 +100,12 @@ pub fn config(args: &Args) -> IngestConfig {
         args.out.clone(),
     );
     cfg.scan_units = args.scan_units.map(Into::into);
+    cfg.scan_points = args.scan_points.clone();
+    cfg.registration_fit = if args.similarity {
+        RegistrationFit::Similarity
+    } else {
+        RegistrationFit::Rigid
+    };
     cfg.camera = args.camera.clone();
     cfg.copy = args.copy;
     cfg.overwrite = args.overwrite;
@@ -97,6 +118,7 @@ pub fn config(args: &Args) -> IngestConfig {
         expected_body_serial: args.body_serial.clone(),
         ..MatchOptions::default()
     };
+    cfg.survey_dir = args.survey.clone();
     cfg
 }
 
@@ -136,6 +158,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             i.exposure_scale
         );
     }
+    if !r.survey_images.is_empty() {
+        println!(
+            "survey images: {} (role survey; exposure not compared: geometry only)",
+            r.survey_images.len()
+        );
+        for s in &r.survey_images {
+            println!(
+                "  {:<40} {:<24} {}",
+                s.source_file.display(),
+                s.settings.map_or("?".to_string(), |x| x.to_string()),
+                if s.before_session {
+                    "before the session"
+                } else {
+                    "after the session's first file"
+                }
+            );
+        }
+    }
     for (f, why) in &r.matching.extra_files {
         println!("left out: {f}: {why}");
     }
@@ -174,7 +214,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!(
         "session written to {} ({} images {}) in {:.2} s (metadata and matching {:.2} s, decoding {:.2} s)",
         r.session_dir.display(),
-        r.images.len(),
+        r.images.len() + r.survey_images.len(),
         if r.copied { "copied" } else { "referenced in place" },
         r.total_s,
         r.metadata_s,

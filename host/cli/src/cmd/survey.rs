@@ -10,7 +10,6 @@ use std::path::PathBuf;
 use anyhow::Context;
 use skinbrdf_pipeline::process::ProcessConfig;
 use skinbrdf_pipeline::survey::{survey, RigWriteBack};
-use skinbrdf_poses::SurveyIssue;
 
 /// Flags of `skinbrdf survey`.
 #[derive(Debug, clap::Args)]
@@ -97,13 +96,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     for i in &sv.issues {
-        println!("left out: {}", issue_text(i));
+        println!("{}: {i}", i.label());
     }
     println!("head frame: {:?}", sv.head_gauge);
     println!(
-        "{} targets from {} images: reprojection rms {:.3} px, {} parameters, {:.2} s",
+        "{} targets from {} images ({} survey images): reprojection rms {:.3} px, {} parameters, {:.2} s",
         sv.targets.len(),
         sv.images_used,
+        sv.survey_images_used,
         sv.bundle.final_rms_px,
         sv.bundle.parameters,
         sv.timing.total_ms / 1e3
@@ -113,34 +113,4 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("surveyed rig: {}", p.display());
     }
     Ok(())
-}
-
-/// One line per target the survey left out.
-fn issue_text(i: &SurveyIssue) -> String {
-    match i {
-        SurveyIssue::NotSeen { id, views } => {
-            format!("target {id}: seen in {views} image(s) with a camera pose, too few")
-        }
-        SurveyIssue::NoConsensus {
-            id,
-            candidates,
-            agreeing,
-        } => format!(
-            "target {id}: its {candidates} single-view placements do not agree (at most {agreeing})"
-        ),
-        SurveyIssue::Moved {
-            ids,
-            disagreeing_images,
-            agreeing,
-            worst_px,
-        } => format!(
-            "target(s) {ids:?} moved during the session: off by up to {worst_px:.1} px in {} \
-             image(s) ({}), in place in {agreeing}",
-            disagreeing_images.len(),
-            disagreeing_images.join(", ")
-        ),
-        SurveyIssue::Duplicated { id, image } => {
-            format!("target {id}: detected twice in {image}")
-        }
-    }
 }

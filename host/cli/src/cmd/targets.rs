@@ -95,6 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     "corner_sigma_px": d.corner_sigma_px(),
                     "hamming": d.hamming,
                     "decision_margin": d.decision_margin,
+                    "occluded_corners": d.occluded_corners,
                 })).collect::<Vec<_>>(),
             });
             println!("{line}");
