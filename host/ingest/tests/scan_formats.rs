@@ -33,6 +33,7 @@ fn studio(dir: &Path) -> PathBuf {
             noise_free: false,
             samples_per_pixel: None,
             studio: true,
+            studio_only: false,
         },
         &s,
     )

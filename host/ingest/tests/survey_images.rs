@@ -25,6 +25,7 @@ fn studio(dir: &Path) -> (PathBuf, usize) {
             noise_free: false,
             samples_per_pixel: Some(1),
             studio: true,
+            studio_only: false,
         },
         &s,
     )

@@ -460,6 +460,7 @@ pub fn run_bench(cfg: &BenchConfig, log: &mut dyn FnMut(&str)) -> Result<BenchOu
                     noise_free: false,
                     samples_per_pixel: None,
                     studio: false,
+                    studio_only: false,
                 },
                 &d,
             )?;

@@ -194,6 +194,9 @@ pub fn run_demo(
             noise_free: false,
             samples_per_pixel: None,
             studio: !cfg.given_layout,
+            // The studio's path reads only what the studio holds: the generator's own
+            // session (linear images, session.toml) would be written for nothing.
+            studio_only: !cfg.given_layout,
         },
         &generated_dir,
     )?;
@@ -275,7 +278,7 @@ pub fn studio_ingest_config(generated_dir: &Path, scene: &Scene, out_dir: PathBu
         scan.clone(),
         out_dir,
     );
-    cfg.camera = Some(generated_dir.join("session.toml"));
+    cfg.camera = Some(studio.join(skinbrdf_synth::studio::CAMERA_FILE));
     cfg.scan_units = scan.map(|_| scene.geometry.scan_units);
     let survey = studio.join(skinbrdf_synth::studio::SURVEY_DIR);
     cfg.survey_dir = survey.is_dir().then_some(survey);

@@ -552,6 +552,7 @@ pub(crate) mod tests {
                 facts,
                 plan: crate::plan::Plan::derive(&facts, &cfg.plan),
                 survey: None,
+                detections: None,
                 poses: None,
                 samples: None,
                 fit: None,

@@ -286,6 +286,7 @@ pub fn process(
         facts,
         plan,
         survey: None,
+        detections: surveyed.as_ref().and_then(|s| s.detections.clone()),
         poses: None,
         samples: None,
         fit: None,
@@ -355,6 +356,7 @@ pub(crate) fn survey_step(
         facts,
         plan: plan.clone(),
         survey: None,
+        detections: None,
         poses: None,
         samples: None,
         fit: None,
@@ -370,6 +372,7 @@ pub(crate) fn survey_step(
             Some(Surveyed {
                 survey: s,
                 session: surveyed,
+                detections: ctx.detections.take(),
             })
         }
         None => None,
@@ -384,6 +387,8 @@ pub struct Surveyed {
     pub survey: skinbrdf_poses::Survey,
     /// The session, every placement given.
     pub session: Session,
+    /// The tags found in the session's images, when the survey ran in this run.
+    pub detections: Option<std::sync::Arc<skinbrdf_poses::SessionDetections>>,
 }
 
 /// A run's session, truth, output directory, lock and ledger.

@@ -66,6 +66,9 @@ pub struct Ctx<'a> {
     pub plan: Plan,
     /// The placement survey's result, when it ran or was reused.
     pub survey: Option<skinbrdf_poses::Survey>,
+    /// The tags the survey found in the session's images, when it ran in this run (the pose
+    /// stage uses them instead of detecting again when they fit its session and detector).
+    pub detections: Option<std::sync::Arc<skinbrdf_poses::SessionDetections>>,
     /// The pose stage's result, when it ran or was reused.
     pub poses: Option<SessionPoses>,
     /// The derendered samples.
@@ -166,7 +169,9 @@ impl StageUnit for SurveyUnit {
     }
     fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
         let t = Instant::now();
-        let mut survey = skinbrdf_poses::survey(ctx.session, &ctx.cfg.survey)?;
+        let (mut survey, detections) =
+            skinbrdf_poses::survey_detected(ctx.session, &ctx.cfg.survey)?;
+        ctx.detections = Some(std::sync::Arc::new(detections));
         let mut files = vec![SURVEY_FILE.to_string()];
         let registration = register_to_scan(ctx.session, &mut survey)?;
         if let Some(reg) = &registration {
@@ -403,7 +408,10 @@ impl StageUnit for PoseUnit {
     }
     fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
         let t = Instant::now();
-        let poses = skinbrdf_poses::estimate_session(ctx.session, &ctx.cfg.poses)?;
+        let poses = match &ctx.detections {
+            Some(d) => skinbrdf_poses::estimate_session_detected(ctx.session, &ctx.cfg.poses, d)?,
+            None => skinbrdf_poses::estimate_session(ctx.session, &ctx.cfg.poses)?,
+        };
         let run_time_s = t.elapsed().as_secs_f64();
         let path = ctx.out_dir.join(POSES_FILE);
         write_atomic(&path, &json_bytes(&path, &poses)?)?;

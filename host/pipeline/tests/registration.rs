@@ -88,6 +88,7 @@ fn an_untextured_scan_is_registered_by_picked_points() {
             noise_free: false,
             samples_per_pixel: None,
             studio: true,
+            studio_only: false,
         },
         &s,
     )

@@ -48,6 +48,7 @@ fn resume_reuses_only_what_is_intact() {
             noise_free: false,
             samples_per_pixel: None,
             studio: false,
+            studio_only: false,
         },
         &session,
     )
@@ -191,6 +192,7 @@ fn small_scan_session(dir: &Path) -> std::path::PathBuf {
             noise_free: false,
             samples_per_pixel: Some(1),
             studio: false,
+            studio_only: false,
         },
         &session,
     )

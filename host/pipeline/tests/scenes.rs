@@ -73,6 +73,7 @@ fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
             noise_free: false,
             samples_per_pixel: None,
             studio: true,
+            studio_only: true,
         },
         &generated,
     )

@@ -35,6 +35,7 @@ fn a_stationary_sample_derenders_with_estimated_poses() {
             noise_free: false,
             samples_per_pixel: None,
             studio: false,
+            studio_only: false,
         },
         dir.path(),
     )

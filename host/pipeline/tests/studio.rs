@@ -82,6 +82,7 @@ fn synthesize(scene: &Scene, dir: &Path, resolution: (u32, u32)) -> PathBuf {
             noise_free: false,
             samples_per_pixel: None,
             studio: true,
+            studio_only: false,
         },
         &s,
     )

@@ -67,6 +67,7 @@ fn studio(dir: &Path, scene: &Scene) -> std::path::PathBuf {
             noise_free: false,
             samples_per_pixel: None,
             studio: true,
+            studio_only: false,
         },
         &s,
     )

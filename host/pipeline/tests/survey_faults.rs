@@ -38,6 +38,7 @@ fn studio_session(dir: &std::path::Path, scene: &Scene) -> (PathBuf, PathBuf) {
             noise_free: false,
             samples_per_pixel: None,
             studio: true,
+            studio_only: false,
         },
         &s,
     )
@@ -281,6 +282,7 @@ fn a_moved_target_and_targets_seen_apart_are_named_and_left_out() {
             noise_free: false,
             samples_per_pixel: None,
             studio: true,
+            studio_only: false,
         },
         &s,
     )

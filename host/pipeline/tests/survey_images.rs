@@ -38,6 +38,7 @@ fn studio_session(dir: &Path, scene: &Scene) -> (PathBuf, PathBuf) {
             noise_free: false,
             samples_per_pixel: None,
             studio: true,
+            studio_only: false,
         },
         &s,
     )

@@ -344,6 +344,58 @@ pub(crate) struct Detected {
     pub(crate) error: Option<String>,
 }
 
+/// The tags found in every image of a session by one detector configuration: detection
+/// depends only on the images, their linearization and the detector, so the survey's
+/// detections serve the pose stage on the surveyed session (the same images with placements
+/// written in) instead of decoding and detecting every image again.
+pub struct SessionDetections {
+    dir: std::path::PathBuf,
+    images: Vec<skinbrdf_session::ImageEntry>,
+    linearization: skinbrdf_session::Linearization,
+    detector: DetectorConfig,
+    pub(crate) detected: Vec<Detected>,
+}
+
+impl std::fmt::Debug for SessionDetections {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SessionDetections")
+            .field("dir", &self.dir)
+            .field("images", &self.images.len())
+            .field(
+                "tags",
+                &self.detected.iter().map(|d| d.dets.len()).sum::<usize>(),
+            )
+            .finish_non_exhaustive()
+    }
+}
+
+impl SessionDetections {
+    /// Detects the tags of every image of `session` with `detector` (parallel over images).
+    pub fn detect(session: &Session, detector: &DetectorConfig) -> Self {
+        Self {
+            dir: session.dir.clone(),
+            images: session.file.images.clone(),
+            linearization: session.file.linearization.clone(),
+            detector: *detector,
+            detected: detect_all(session, detector),
+        }
+    }
+
+    /// Whether these are the detections `detector` finds in `session`'s images: the same
+    /// directory, image entries (files, roles, linearizations) and default linearization.
+    pub fn fits(&self, session: &Session, detector: &DetectorConfig) -> bool {
+        self.dir == session.dir
+            && self.images == session.file.images
+            && self.linearization == session.file.linearization
+            && self.detector == *detector
+    }
+
+    /// Seconds spent decoding and detecting, summed over the images.
+    pub fn detect_s(&self) -> f64 {
+        self.detected.iter().map(|d| d.detect_ms).sum::<f64>() * 1e-3
+    }
+}
+
 /// Detects the tags of every image (parallel over images).
 pub(crate) fn detect_all(session: &Session, detector: &DetectorConfig) -> Vec<Detected> {
     (0..session.file.images.len())
@@ -381,6 +433,25 @@ pub fn estimate_session_stages(
     session: &Session,
     cfg: &PoseConfig,
 ) -> Result<(SessionPoses, SessionPoses), PoseError> {
+    estimate_session_stages_with(session, cfg, None)
+}
+
+/// Like [`estimate_session`], with the tags already found in the session's images (the
+/// survey's, say); detections that do not [fit](SessionDetections::fits) the session and the
+/// configuration's detector are not used: the images are detected again.
+pub fn estimate_session_detected(
+    session: &Session,
+    cfg: &PoseConfig,
+    detections: &SessionDetections,
+) -> Result<SessionPoses, PoseError> {
+    estimate_session_stages_with(session, cfg, Some(detections)).map(|(_, last)| last)
+}
+
+fn estimate_session_stages_with(
+    session: &Session,
+    cfg: &PoseConfig,
+    detections: Option<&SessionDetections>,
+) -> Result<(SessionPoses, SessionPoses), PoseError> {
     let t0 = Instant::now();
     let file = &session.file;
     let unsurveyed = file
@@ -396,8 +467,15 @@ pub fn estimate_session_stages(
     }
     let table = layout_table(session);
     let mut skipped = Vec::new();
-    // 1. Detection in every image (parallel).
-    let detected = detect_all(session, &cfg.detector);
+    // 1. Detection in every image (parallel), unless given.
+    let fresh;
+    let detected: &[Detected] = match detections.filter(|d| d.fits(session, &cfg.detector)) {
+        Some(d) => &d.detected,
+        None => {
+            fresh = detect_all(session, &cfg.detector);
+            &fresh
+        }
+    };
     // 2. The camera: given, or calibrated from the reference field.
     let (camera, calibration) = match (&file.camera, cfg.recalibrate) {
         (CameraSpec::Calibrated(m), false) => {

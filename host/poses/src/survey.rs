@@ -114,7 +114,7 @@ use crate::bundle::{
 use crate::calib::guess_camera;
 use crate::error::PoseError;
 use crate::pnp::{estimate_pose, target_points, PnpConfig, PointObs};
-use crate::session::{detect_all, Detected};
+use crate::session::{Detected, SessionDetections};
 
 /// The change-point test's threshold on the chi-square a split explains. Splitting a body's
 /// views adds 6 parameters (a second pose), so without a move the explained chi-square follows
@@ -994,11 +994,21 @@ enum Round {
 
 /// Surveys every unplaced reference and headdress target of the session (see the module docs).
 pub fn survey(session: &Session, cfg: &SurveyConfig) -> Result<Survey, PoseError> {
+    survey_detected(session, cfg).map(|(s, _)| s)
+}
+
+/// Like [`survey`], also returning the tags found in the session's images, for the pose
+/// stage on the surveyed session ([`crate::session::estimate_session_detected`]).
+pub fn survey_detected(
+    session: &Session,
+    cfg: &SurveyConfig,
+) -> Result<(Survey, SessionDetections), PoseError> {
     let t0 = Instant::now();
     let file = &session.file;
     // Every unplaced flash or standard target is refused before any image is read.
     bodies_of(file, &BTreeMap::new())?;
-    let detected = detect_all(session, &cfg.detector);
+    let detections = SessionDetections::detect(session, &cfg.detector);
+    let detected = &detections.detected;
     for (i, d) in detected.iter().enumerate() {
         if let Some(e) = &d.error {
             return Err(PoseError::Image {
@@ -1011,10 +1021,10 @@ pub fn survey(session: &Session, cfg: &SurveyConfig) -> Result<Survey, PoseError
     // more sheet, so the rounds end.
     let mut split: BTreeMap<String, SurveyIssue> = BTreeMap::new();
     loop {
-        match survey_with(session, cfg, &detected, &split, t0)? {
+        match survey_with(session, cfg, detected, &split, t0)? {
             Round::Done(mut s) => {
                 s.issues.extend(split.into_values());
-                return Ok(*s);
+                return Ok((*s, detections));
             }
             Round::NotRigid(found) => {
                 let before = split.len();

@@ -422,6 +422,56 @@ fn geometry(path: &Path, image: &RawImage) -> Result<Geometry, RawError> {
     })
 }
 
+/// The levels of the superpixel computation: per CFA position of a 2x2 quad, its black level
+/// and the scale to the white level; and where red, the two greens and blue sit in the quad.
+struct SuperpixelLevels {
+    black: [f64; 4],
+    scale: [f64; 4],
+    white: f64,
+    positions: [usize; 4],
+}
+
+impl SuperpixelLevels {
+    fn new(black: [f64; 4], white: f64, positions: [usize; 4]) -> Self {
+        Self {
+            black,
+            scale: black.map(|b| 1.0 / (white - b)),
+            white,
+            positions,
+        }
+    }
+
+    /// One RGB pixel per 2x2 quad of the active area (`w` x `h` quads from column `left`,
+    /// row `top` of a sensor `sw` samples wide): red, the mean of the greens and blue, each
+    /// black-subtracted and scaled to the white level; saturated where any sample reaches it.
+    /// Generic over the sample type so that the inner loop is monomorphic.
+    fn run<T: Copy + Into<f64>>(
+        &self,
+        data: &[T],
+        sw: usize,
+        left: usize,
+        top: usize,
+        w: usize,
+        h: usize,
+    ) -> (Vec<[f32; 3]>, Vec<bool>) {
+        let mut rgb = Vec::with_capacity(w * h);
+        let mut saturated = Vec::with_capacity(w * h);
+        let [pr, pg1, pg2, pb] = self.positions;
+        for v in 0..h {
+            let y = top + 2 * v;
+            let row0 = &data[y * sw + left..y * sw + left + 2 * w];
+            let row1 = &data[(y + 1) * sw + left..(y + 1) * sw + left + 2 * w];
+            for (a, b) in row0.chunks_exact(2).zip(row1.chunks_exact(2)) {
+                let q: [f64; 4] = [a[0].into(), a[1].into(), b[0].into(), b[1].into()];
+                let n = |k: usize| (q[k] - self.black[k]) * self.scale[k];
+                rgb.push([n(pr) as f32, (0.5 * (n(pg1) + n(pg2))) as f32, n(pb) as f32]);
+                saturated.push(q.iter().any(|&r| r >= self.white));
+            }
+        }
+        (rgb, saturated)
+    }
+}
+
 /// The superpixel computation on a decoded image.
 fn superpixel(
     path: &Path,
@@ -464,34 +514,14 @@ fn superpixel(
         }
     }
     let (w, h) = (aw / 2, ah / 2);
-    let mut rgb = Vec::with_capacity(w * h);
-    let mut saturated = Vec::with_capacity(w * h);
-    let [pr, pg1, pg2, pb] = phase.positions();
-    let scale = black_levels.map(|b| 1.0 / (white_level - b));
-    let mut run = |get: &dyn Fn(usize) -> f64| {
-        for v in 0..h {
-            let y = top + 2 * v;
-            for u in 0..w {
-                let x = left + 2 * u;
-                let q = [
-                    get(y * sw + x),
-                    get(y * sw + x + 1),
-                    get((y + 1) * sw + x),
-                    get((y + 1) * sw + x + 1),
-                ];
-                let n = |k: usize| (q[k] - black_levels[k]) * scale[k];
-                rgb.push([n(pr) as f32, (0.5 * (n(pg1) + n(pg2))) as f32, n(pb) as f32]);
-                saturated.push(q.iter().any(|&r| r >= white_level));
-            }
-        }
-    };
     let expected = sw * sh;
-    match &image.data {
-        RawImageData::Integer(d) if d.len() >= expected => run(&|i| f64::from(d[i])),
-        RawImageData::Float(d) if d.len() >= expected => run(&|i| f64::from(d[i])),
+    let levels = SuperpixelLevels::new(black_levels, white_level, phase.positions());
+    let (rgb, saturated) = match &image.data {
+        RawImageData::Integer(d) if d.len() >= expected => levels.run(d, sw, left, top, w, h),
+        RawImageData::Float(d) if d.len() >= expected => levels.run(d, sw, left, top, w, h),
         RawImageData::Integer(d) => return Err(short_data(path, d.len(), expected)),
         RawImageData::Float(d) => return Err(short_data(path, d.len(), expected)),
-    }
+    };
     let to_u32 = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
     Ok(RawFrame {
         kind,

@@ -57,10 +57,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             },
         ),
         (
-            "overview 768 px, 14 views",
+            "overview 1024 px, 26 views",
             ScanTargetConfig {
-                overview_px: 768,
-                overview_views: 14,
+                overview_px: 1024,
+                overview_views: 26,
                 ..d
             },
         ),

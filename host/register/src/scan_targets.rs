@@ -89,8 +89,8 @@ pub struct ScanTargetConfig {
 impl Default for ScanTargetConfig {
     fn default() -> Self {
         Self {
-            overview_views: 26,
-            overview_px: 1024,
+            overview_views: 14,
+            overview_px: 768,
             overview_hfov_deg: 40.0,
             detail_px: 448,
             detail_mm_per_px: 0.12,

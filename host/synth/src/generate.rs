@@ -74,6 +74,10 @@ pub struct SynthOptions {
     /// and the scan, as a studio holds them after the capture ([`crate::studio`]). Without a
     /// `capture` record the generator writes the one a controller would for the shot list.
     pub studio: bool,
+    /// With `studio`: write only what the studio holds and the truth, leaving out the
+    /// generator's own session (its linear images and `session.toml`), which the studio's path
+    /// never reads.
+    pub studio_only: bool,
 }
 
 /// What was generated and what it cost.
@@ -433,6 +437,7 @@ fn generate_into(
         _ => None,
     };
     let setup_s = t_start.elapsed().as_secs_f64();
+    let studio_only = opts.studio_only && studio.is_some();
 
     let mut render_s = 0.0;
     let mut write_s = 0.0;
@@ -442,13 +447,15 @@ fn generate_into(
     // Post-processing of image i (noise, encoding, files, truth) runs while image i + 1 renders.
     let finish = |i: usize, shot: &Shot, r: Rendered| -> Result<(ImageTruth, f64), SynthError> {
         let t1 = Instant::now();
-        let stored = encode_image(
-            &r,
-            &scene,
-            opts.noise_free,
-            scene.seed ^ (i as u64).wrapping_mul(0x1234_5678_9abc),
-        );
-        write_image(&dir.join(&shot.file), &r, &stored, &scene)?;
+        if !studio_only {
+            let stored = encode_image(
+                &r,
+                &scene,
+                opts.noise_free,
+                scene.seed ^ (i as u64).wrapping_mul(0x1234_5678_9abc),
+            );
+            write_image(&dir.join(&shot.file), &r, &stored, &scene)?;
+        }
         if let Some((studio_dir, card)) = &studio {
             for c in card.iter().filter(|c| c.shot == i) {
                 let seed = scene.seed ^ u64::from(c.shutter_count).wrapping_mul(0x9e37_79b9);
@@ -583,7 +590,9 @@ fn generate_into(
         known: KnownQuantities::default(),
         registration: None,
     };
-    skinbrdf_session::Session::write_file(dir, &session)?;
+    if !studio_only {
+        skinbrdf_session::Session::write_file(dir, &session)?;
+    }
     let truth = Truth {
         format_version: TRUTH_FORMAT_VERSION,
         scene: scene.name.clone(),

@@ -100,6 +100,9 @@ pub const CARD_FOLDER: &str = "card/DCIM/100SKBRF";
 /// The survey shots' folder inside the studio directory (`skinbrdf ingest --survey`): taken by
 /// hand before the session, copied off the camera apart from the session's card.
 pub const SURVEY_DIR: &str = "survey";
+/// The camera's calibration as the studio keeps it (a `[camera]` table as in `session.toml`,
+/// what `skinbrdf ingest --camera` reads).
+pub const CAMERA_FILE: &str = "camera.toml";
 
 /// How a scene's studio differs from the default (`[studio]` in a scene file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -1130,6 +1133,7 @@ pub fn write_studio_files(
             layout_text(scene, sheet)?.as_bytes(),
         )?;
     }
+    write_camera_file(&dir.join(CAMERA_FILE), &rig.camera)?;
     RigIo::write_file(&dir.join("rig-measured.toml"), &rig_file(scene, rig))?;
     RigIo::write_file(
         &dir.join("rig.toml"),
@@ -1143,6 +1147,25 @@ pub fn write_studio_files(
         crate::textured_scan::write_textured_scan(&dir.join("scan"), scene, rig)?;
     }
     Ok(dir)
+}
+
+/// Writes the camera's calibration as a studio keeps it from an earlier calibration: the
+/// `[camera]` table of `session.toml` alone.
+fn write_camera_file(path: &Path, camera: &skinbrdf_core::CameraModel) -> Result<(), SynthError> {
+    #[derive(Serialize)]
+    struct CameraFile {
+        camera: skinbrdf_session::CameraSpec,
+    }
+    let body = toml::to_string(&CameraFile {
+        camera: skinbrdf_session::CameraSpec::Calibrated(*camera),
+    })
+    .map_err(|e| SynthError::Invalid {
+        field: "camera",
+        problem: format!("cannot be written as TOML: {e}"),
+    })?;
+    let text = format!("# The camera's calibration (intrinsics and distortion), as `skinbrdf ingest --camera` reads it.\n{body}");
+    skinbrdf_session::write_atomic(path, text.as_bytes())?;
+    Ok(())
 }
 
 /// The frame the studio states head-frame placements in: the textured scan's (the scanner's

@@ -152,6 +152,7 @@ fn written_session_matches_equation_2_through_files_and_truth() {
         noise_free: true,
         samples_per_pixel: Some(1),
         studio: false,
+        studio_only: false,
     };
     generate(&scene, &opts, dir.path()).unwrap();
     let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));

@@ -16,6 +16,7 @@ fn small(samples: u32) -> SynthOptions {
         noise_free: false,
         samples_per_pixel: Some(samples),
         studio: false,
+        studio_only: false,
     }
 }
 
@@ -132,6 +133,7 @@ fn survey_images_are_taken_without_the_subject_before_the_session() {
     // The studio's 14-bit rows need an even width of superpixels x 2 photosites.
     let opts = SynthOptions {
         studio: true,
+        studio_only: false,
         resolution: Some((200, 133)),
         ..small(1)
     };

@@ -37,6 +37,10 @@ pub struct Args {
     /// after a capture (the input of `skinbrdf ingest`).
     #[arg(long)]
     studio: bool,
+    /// With --studio: write only the studio's files and the truth, not the generator's own
+    /// session (its linear images and session.toml), which the studio's path never reads.
+    #[arg(long, requires = "studio")]
+    studio_only: bool,
     /// List the built-in scenes and exit.
     #[arg(long)]
     list: bool,
@@ -89,6 +93,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         noise_free: args.noise_free,
         samples_per_pixel: args.samples_per_pixel,
         studio: args.studio,
+        studio_only: args.studio_only,
     };
     let s = generate(&scene, &opts, &out)
         .with_context(|| format!("generating scene `{}`", scene.name))?;
