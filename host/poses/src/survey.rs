@@ -101,6 +101,7 @@ use std::time::Instant;
 
 use glam::{DQuat, DVec2, DVec3};
 use nalgebra::DVector;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use skinbrdf_core::{CameraModel, Pose};
 use skinbrdf_session::rig::{RigFile, RigTarget};
@@ -752,34 +753,37 @@ fn init_group(
     let mut last_candidates: HashMap<usize, (usize, usize)> = HashMap::new();
     let mut two_places: HashSet<usize> = HashSet::new();
     loop {
-        // (1) Cameras in the group frame from what is placed.
-        for (i, o) in obs.iter().enumerate() {
-            let mut pts = Vec::new();
-            let mut n = 0;
-            for (id, c) in &g.placed {
-                if let Some(d) = o.get(id) {
-                    pts.extend(points(*id, c, d));
-                    n += 1;
-                }
-            }
-            for &b in &g.bodies {
-                let Some(p) = pose[b] else { continue };
-                for (id, _, c) in &g.defs[b].members {
+        // (1) Cameras in the group frame from what is placed (parallel over images).
+        let placed_pose: &[Option<Pose>] = pose;
+        obs.par_iter()
+            .zip(gfc.par_iter_mut())
+            .for_each(|(o, gfc_i)| {
+                let mut pts = Vec::new();
+                let mut n = 0;
+                for (id, c) in &g.placed {
                     if let Some(d) = o.get(id) {
-                        pts.extend(points(*id, &c.map(|x| p.transform_point(x)), d));
+                        pts.extend(points(*id, c, d));
                         n += 1;
                     }
                 }
-            }
-            let need = if allow_single { 1 } else { 2 };
-            gfc[i] = if n >= need {
-                estimate_pose(camera, &pts, None, &pnp_n(need.min(n)))
-                    .ok()
-                    .map(|e| e.frame_from_camera)
-            } else {
-                None
-            };
-        }
+                for &b in &g.bodies {
+                    let Some(p) = placed_pose[b] else { continue };
+                    for (id, _, c) in &g.defs[b].members {
+                        if let Some(d) = o.get(id) {
+                            pts.extend(points(*id, &c.map(|x| p.transform_point(x)), d));
+                            n += 1;
+                        }
+                    }
+                }
+                let need = if allow_single { 1 } else { 2 };
+                *gfc_i = if n >= need {
+                    estimate_pose(camera, &pts, None, &pnp_n(need.min(n)))
+                        .ok()
+                        .map(|e| e.frame_from_camera)
+                } else {
+                    None
+                };
+            });
         // (2) Candidates for the bodies not yet placed.
         let mut placed_now = 0;
         for &b in &g.bodies {
@@ -789,22 +793,26 @@ fn init_group(
             if two_places.contains(&b) {
                 continue;
             }
-            let mut cands = Vec::new();
-            for (i, o) in obs.iter().enumerate() {
-                let Some(wc) = gfc[i] else { continue };
-                let mut pts = Vec::new();
-                for (id, _, c) in &g.defs[b].members {
-                    if let Some(d) = o.get(id) {
-                        pts.extend(points(*id, c, d));
+            // Single-view poses of the body in every image with a camera (parallel).
+            let cands: Vec<(usize, Pose)> = obs
+                .par_iter()
+                .enumerate()
+                .filter_map(|(i, o)| {
+                    let wc = gfc[i]?;
+                    let mut pts = Vec::new();
+                    for (id, _, c) in &g.defs[b].members {
+                        if let Some(d) = o.get(id) {
+                            pts.extend(points(*id, c, d));
+                        }
                     }
-                }
-                if pts.len() < 4 {
-                    continue;
-                }
-                if let Ok(e) = estimate_pose(camera, &pts, None, &pnp_n(1)) {
-                    cands.push((i, wc * e.frame_from_camera.inverse()));
-                }
-            }
+                    if pts.len() < 4 {
+                        return None;
+                    }
+                    estimate_pose(camera, &pts, None, &pnp_n(1))
+                        .ok()
+                        .map(|e| (i, wc * e.frame_from_camera.inverse()))
+                })
+                .collect();
             let agree = |a: &Pose, b: &Pose| {
                 a.translation_m.distance(b.translation_m) < cfg.consensus_position_m
                     && angle_deg(a.rotation, b.rotation) < cfg.consensus_angle_deg

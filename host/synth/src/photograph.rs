@@ -39,6 +39,7 @@ use glam::{DMat3, DVec2, DVec3, Vec3};
 use rayon::prelude::*;
 use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::{CameraModel, Pose, ShadingFrame, TriMesh};
+use skinbrdf_mesh::shadow::{shadow_ray, ShadowScratch};
 use skinbrdf_mesh::{BuildQuality, CameraRays, Hit, MeshBvh, TraceScratch};
 use skinbrdf_session::Target;
 
@@ -187,6 +188,50 @@ pub struct Renderer {
     shape: crate::shape::Shape,
     /// Triangles in the render mesh of the skin.
     pub skin_triangles: usize,
+    /// The camera-frame directions of the last sub-pixel pattern (see [`SamplePattern`]).
+    pattern: std::sync::Mutex<Option<Arc<SamplePattern>>>,
+}
+
+/// The camera-frame unit directions of every pixel's `side x side` jittered sub-pixel
+/// samples, on the image's sample grid (`width * side` wide; zero where the camera has no
+/// ray). The jitter is a function of the seed and the pixel only, so one pattern serves every
+/// image rendered with that seed: the undistortion behind each direction is computed once per
+/// session instead of once per image.
+#[derive(Debug)]
+struct SamplePattern {
+    seed: u64,
+    side: u32,
+    dirs: Vec<Vec3>,
+}
+
+/// Largest sample pattern kept between images, directions (12 bytes each): 24 M, about
+/// 290 MB, covers 24 MP at one ray per pixel or 6 MP at four; beyond it the directions are
+/// computed per image.
+const MAX_PATTERN_DIRS: usize = 24_000_000;
+
+/// The sub-pixel positions of pixel `(x, y)`'s `n x n` samples, in the pattern's order:
+/// stratified, each jittered in its cell from a hash of `seed` and the pixel (independent of
+/// which pixels are traced and of the thread schedule).
+fn sub_pixel_positions(
+    seed: u64,
+    x: u32,
+    y: u32,
+    n: u32,
+) -> impl Iterator<Item = (u32, u32, DVec2)> {
+    let mut state = seed ^ (u64::from(y) << 32 | u64::from(x)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    (0..n)
+        .flat_map(move |sy| (0..n).map(move |sx| (sx, sy)))
+        .map(move |(sx, sy)| {
+            let (jx, jy) = if n == 1 {
+                (0.0, 0.0)
+            } else {
+                (
+                    (f64::from(sx) + unit(&mut state)) / f64::from(n) - 0.5,
+                    (f64::from(sy) + unit(&mut state)) / f64::from(n) - 0.5,
+                )
+            };
+            (sx, sy, DVec2::new(f64::from(x) + jx, f64::from(y) + jy))
+        })
 }
 
 /// One rendered image before sensor noise.
@@ -418,7 +463,43 @@ impl Renderer {
             roi_radius_m: scene.geometry.roi_radius_m,
             shape: rig.shape.clone(),
             skin_triangles,
+            pattern: std::sync::Mutex::new(None),
         })
+    }
+
+    /// The sample pattern of `seed` at the current rays per pixel, computed on first use and
+    /// kept for the next image; `None` when it would exceed [`MAX_PATTERN_DIRS`].
+    fn pattern(&self, seed: u64) -> Option<Arc<SamplePattern>> {
+        let (w, h, n) = (self.camera.width_px, self.camera.height_px, self.spp_side);
+        let gw = (w * n) as usize;
+        let len = gw * (h * n) as usize;
+        if len > MAX_PATTERN_DIRS {
+            return None;
+        }
+        let mut slot = self.pattern.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(p) = slot.as_ref().filter(|p| p.seed == seed && p.side == n) {
+            return Some(Arc::clone(p));
+        }
+        let mut dirs = vec![Vec3::ZERO; len];
+        dirs.par_chunks_mut(gw * n as usize)
+            .enumerate()
+            .for_each(|(y, rows)| {
+                let y = y as u32;
+                for x in 0..w {
+                    for (sx, sy, px) in sub_pixel_positions(seed, x, y, n) {
+                        if let Some(d) = self.camera_rays.pixel_ray(px) {
+                            rows[sy as usize * gw + (x * n + sx) as usize] = d.as_vec3();
+                        }
+                    }
+                }
+            });
+        let p = Arc::new(SamplePattern {
+            seed,
+            side: n,
+            dirs,
+        });
+        *slot = Some(Arc::clone(&p));
+        Some(p)
     }
 
     /// Rays per pixel actually used (a square number).
@@ -503,17 +584,34 @@ impl Renderer {
         ambient: bool,
     ) -> [f64; 3] {
         let n = self.shape.normal(p_head);
+        self.skin_value_at(p_head, n, cam_head, light_head, fired, ambient, || {
+            let origin = p_head + n * SHADOW_OFFSET_M;
+            let (wi, t_max) =
+                shadow_ray(origin.as_vec3(), light_head.as_vec3(), 0.0).unwrap_or((Vec3::Z, 0.0));
+            self.skin.bvh.occluded(origin.as_vec3(), wi, t_max)
+        })
+    }
+
+    /// The skin's value at head-frame point `p_head` with unit normal `n`; `occluded` answers
+    /// whether the skin hides the light from it (asked only when the point faces the fired
+    /// light): the shadow ray from `p_head + n SHADOW_OFFSET_M` to the light, traced ray by ray
+    /// ([`Self::skin_value`]) or for a whole band at once ([`Self::render`]).
+    #[allow(clippy::too_many_arguments)]
+    fn skin_value_at(
+        &self,
+        p_head: DVec3,
+        n: DVec3,
+        cam_head: DVec3,
+        light_head: DVec3,
+        fired: bool,
+        ambient: bool,
+        occluded: impl FnOnce() -> bool,
+    ) -> [f64; 3] {
         let mut v = [0.0; 3];
         if fired {
             let (cos_i, wi, d) = self.lit(p_head, n, light_head);
             if cos_i > 0.0 {
-                let origin = p_head + n * SHADOW_OFFSET_M;
-                let t_max = (light_head - origin).length() as f32;
-                if !self
-                    .skin
-                    .bvh
-                    .occluded(origin.as_vec3(), wi.as_vec3(), t_max)
-                {
+                if !occluded() {
                     let we = (cam_head - p_head).normalize();
                     let frame = ShadingFrame::from_normal(n);
                     let rho = self.skin_brdf.eval(frame.to_local(wi), frame.to_local(we));
@@ -532,10 +630,63 @@ impl Renderer {
         v
     }
 
+    /// The closest of the precomputed hits `pre` (world, skin, headdress, standard) among the
+    /// objects present in the view: distance, surface and frame (0 world, 1 head, 2 standard).
+    fn closest(&self, view: &View, pre: &[Option<Hit>; 4]) -> (f32, Surface, u8) {
+        let mut best = (f32::INFINITY, Surface::Skin, 0u8);
+        for (k, (g, which)) in [
+            (&self.world, 0u8),
+            (&self.skin, 1),
+            (&self.head_tags, 1),
+            (&self.standard, 2),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            if (k == 3 && !view.standard_present) || ((k == 1 || k == 2) && !view.subject_present) {
+                continue;
+            }
+            if let Some(h) = pre[k] {
+                if h.t_m < best.0 {
+                    best = (h.t_m, g.kinds[h.triangle as usize], which);
+                }
+            }
+        }
+        best
+    }
+
+    /// The refined skin point (head frame) and its normal when the closest of `pre` is the
+    /// skin (see [`refine_on_ray`]).
+    fn skin_point(
+        &self,
+        o_w: DVec3,
+        d_w: DVec3,
+        view: &View,
+        pre: &[Option<Hit>; 4],
+    ) -> Option<(DVec3, DVec3)> {
+        let (t, surf, _) = self.closest(view, pre);
+        if !(t.is_finite() && matches!(surf, Surface::Skin)) {
+            return None;
+        }
+        let oh = view.head_from_world.transform_point(o_w);
+        let dh = view.head_from_world.transform_vector(d_w);
+        let p = refine_on_ray(&self.shape, oh + dh * f64::from(t), dh);
+        Some((p, self.shape.normal(p)))
+    }
+
     /// The sample of one world ray. `pre` holds the closest hits of the world, skin, headdress
     /// and standard meshes when the caller traced them already (coherently, with
     /// [`MeshBvh::intersect_grid_into`]); `None` traces them here, ray by ray.
-    fn trace(&self, o_w: DVec3, d_w: DVec3, view: &View, pre: Option<[Option<Hit>; 4]>) -> Sample {
+    /// `skin` holds, when the closest hit is the skin and the caller has them, its refined
+    /// point and normal and whether the skin hides the light from it.
+    fn trace_with(
+        &self,
+        o_w: DVec3,
+        d_w: DVec3,
+        view: &View,
+        pre: Option<[Option<Hit>; 4]>,
+        skin: Option<(DVec3, DVec3, bool)>,
+    ) -> Sample {
         let mut best = (f32::INFINITY, Surface::Skin, 0u8);
         let head = || {
             (
@@ -592,11 +743,30 @@ impl Renderer {
         match surf {
             Surface::Skin => {
                 let (oh, dh) = head();
-                let p = oh + dh * t;
-                // Refine onto the analytic surface along the ray (removes the tessellation's
-                // few-µm offset and the f32 hit's rounding): Newton on the implicit function.
-                let p = refine_on_ray(&self.shape, p, dh);
-                let v = self.skin_value(p, oh, view.light_head, view.fired, view.ambient);
+                let (p, v) = match skin {
+                    Some((p, n, occluded)) => (
+                        p,
+                        self.skin_value_at(
+                            p,
+                            n,
+                            oh,
+                            view.light_head,
+                            view.fired,
+                            view.ambient,
+                            || occluded,
+                        ),
+                    ),
+                    None => {
+                        // Refine onto the analytic surface along the ray (removes the
+                        // tessellation's few-µm offset and the f32 hit's rounding): Newton on
+                        // the implicit function.
+                        let p = refine_on_ray(&self.shape, oh + dh * t, dh);
+                        (
+                            p,
+                            self.skin_value(p, oh, view.light_head, view.fired, view.ambient),
+                        )
+                    }
+                };
                 Sample {
                     v,
                     skin_roi: p.distance(self.roi_centre_head) <= self.roi_radius_m,
@@ -830,8 +1000,10 @@ impl Renderer {
         (blocks, bw)
     }
 
-    /// Renders one shot (noise-free). `seed` makes the jitter reproducible; `cull = false`
-    /// traces every pixel (for tests of the culling).
+    /// Renders one shot (noise-free). `seed` chooses the sub-pixel jitter pattern (a function
+    /// of the seed and the pixel only: images rendered with one seed share it, and its ray
+    /// directions are computed once, [`SamplePattern`]); `cull = false` traces every pixel (for
+    /// tests of the culling).
     pub fn render(&self, shot: &Shot, rig: &Rig, seed: u64, cull: bool) -> Rendered {
         let view = self.view(shot, rig);
         let (w, h) = (self.camera.width_px, self.camera.height_px);
@@ -843,6 +1015,7 @@ impl Renderer {
         };
         let blocks = Arc::new(blocks);
         let n = self.spp_side;
+        let pattern = self.pattern(seed);
         let inv = 1.0 / f64::from(n * n);
         let origin = view.world_from_camera.translation_m;
         let origin_head = view.head_from_world.transform_point(origin);
@@ -858,37 +1031,35 @@ impl Renderer {
         // small meshes ray by ray.
         let bands: Vec<Vec<RowOut>> = (0..h.div_ceil(BAND_ROWS))
             .into_par_iter()
-            .map_init(TraceScratch::default, |scratch, band| {
-                let y0 = band * BAND_ROWS;
-                let y1 = (y0 + BAND_ROWS).min(h);
-                let gh = (y1 - y0) as usize * nu;
-                let mut dirs_w = vec![DVec3::ZERO; gw * gh];
-                let mut dirs_wf = vec![Vec3::ZERO; gw * gh];
-                let mut dirs_h = vec![Vec3::ZERO; gw * gh];
-                let mut dirs_s = vec![Vec3::ZERO; gw * gh];
-                for y in y0..y1 {
-                    for x in 0..w {
-                        if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
-                            continue;
-                        }
-                        // Jitter from a per-pixel hash: independent of which pixels are traced
-                        // and of the thread schedule.
-                        let mut state = seed
-                            ^ (u64::from(y) << 32 | u64::from(x))
-                                .wrapping_mul(0x9e37_79b9_7f4a_7c15);
-                        for sy in 0..n {
-                            for sx in 0..n {
-                                let (jx, jy) = if n == 1 {
-                                    (0.0, 0.0)
-                                } else {
-                                    (
-                                        (f64::from(sx) + unit(&mut state)) / f64::from(n) - 0.5,
-                                        (f64::from(sy) + unit(&mut state)) / f64::from(n) - 0.5,
-                                    )
-                                };
-                                let px = DVec2::new(f64::from(x) + jx, f64::from(y) + jy);
-                                let Some(dir_c) = self.camera_rays.pixel_ray(px) else {
-                                    continue;
+            .map_init(
+                || (TraceScratch::default(), ShadowScratch::default()),
+                |(scratch, shadow_scratch), band| {
+                    let y0 = band * BAND_ROWS;
+                    let y1 = (y0 + BAND_ROWS).min(h);
+                    let gh = (y1 - y0) as usize * nu;
+                    let mut dirs_w = vec![DVec3::ZERO; gw * gh];
+                    let mut dirs_wf = vec![Vec3::ZERO; gw * gh];
+                    let mut dirs_h = vec![Vec3::ZERO; gw * gh];
+                    let mut dirs_s = vec![Vec3::ZERO; gw * gh];
+                    for y in y0..y1 {
+                        for x in 0..w {
+                            if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
+                                continue;
+                            }
+                            for (sx, sy, px) in sub_pixel_positions(seed, x, y, n) {
+                                let dir_c = match &pattern {
+                                    Some(p) => {
+                                        let g = (y * n + sy) as usize * gw + (x * n + sx) as usize;
+                                        let v = p.dirs[g];
+                                        if v == Vec3::ZERO {
+                                            continue;
+                                        }
+                                        v.as_dvec3()
+                                    }
+                                    None => match self.camera_rays.pixel_ray(px) {
+                                        Some(d) => d,
+                                        None => continue,
+                                    },
                                 };
                                 let g = ((y - y0) * n + sy) as usize * gw + (x * n + sx) as usize;
                                 let d = rot_wc * dir_c;
@@ -901,75 +1072,109 @@ impl Renderer {
                             }
                         }
                     }
-                }
-                // Closest hits per mesh: world, skin, headdress, standard.
-                let mut hits = [
-                    vec![None; gw * gh],
-                    vec![None; gw * gh],
-                    vec![None; gw * gh],
-                    vec![None; gw * gh],
-                ];
-                let [hw, hs, ht, hst] = &mut hits;
-                let trace_grid = |g: &Group,
-                                  o: DVec3,
-                                  d: &[Vec3],
-                                  out: &mut [Option<Hit>],
-                                  sc: &mut TraceScratch| {
-                    g.bvh
-                        .intersect_grid_into(o.as_vec3(), d, gw, f32::INFINITY, out, sc);
-                };
-                trace_grid(&self.world, origin, &dirs_wf, hw, scratch);
-                if view.subject_present {
-                    trace_grid(&self.skin, origin_head, &dirs_h, hs, scratch);
-                    trace_grid(&self.head_tags, origin_head, &dirs_h, ht, scratch);
-                }
-                if view.standard_present {
-                    trace_grid(&self.standard, origin_std, &dirs_s, hst, scratch);
-                }
-                (y0..y1)
-                    .map(|y| {
-                        let mut v = vec![[0.0f32; 3]; w as usize];
-                        let mut fh = vec![false; w as usize];
-                        let mut tg = vec![false; w as usize];
-                        let mut st = vec![false; w as usize];
-                        let mut rays = 0u64;
-                        for x in 0..w {
-                            if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
+                    // Closest hits per mesh: world, skin, headdress, standard.
+                    let mut hits = [
+                        vec![None; gw * gh],
+                        vec![None; gw * gh],
+                        vec![None; gw * gh],
+                        vec![None; gw * gh],
+                    ];
+                    let [hw, hs, ht, hst] = &mut hits;
+                    let trace_grid = |g: &Group,
+                                      o: DVec3,
+                                      d: &[Vec3],
+                                      out: &mut [Option<Hit>],
+                                      sc: &mut TraceScratch| {
+                        g.bvh
+                            .intersect_grid_into(o.as_vec3(), d, gw, f32::INFINITY, out, sc);
+                    };
+                    trace_grid(&self.world, origin, &dirs_wf, hw, scratch);
+                    if view.subject_present {
+                        trace_grid(&self.skin, origin_head, &dirs_h, hs, scratch);
+                        trace_grid(&self.head_tags, origin_head, &dirs_h, ht, scratch);
+                    }
+                    if view.standard_present {
+                        trace_grid(&self.standard, origin_std, &dirs_s, hst, scratch);
+                    }
+                    // The skin's points, normals and shadow rays: the shadow rays of the band
+                    // towards the light traced together (coherently).
+                    let mut skin_pn: Vec<Option<(DVec3, DVec3)>> = vec![None; gw * gh];
+                    let mut occluded = vec![false; gw * gh];
+                    if view.subject_present {
+                        let mut origins = vec![Vec3::NAN; gw * gh];
+                        let mut any = false;
+                        for g in 0..gw * gh {
+                            let d = dirs_w[g];
+                            if d == DVec3::ZERO {
                                 continue;
                             }
-                            let mut acc = [0.0f64; 3];
-                            let (mut all_roi, mut any_tag, mut all_std) = (true, false, true);
-                            for sy in 0..n {
-                                for sx in 0..n {
-                                    let g =
-                                        ((y - y0) * n + sy) as usize * gw + (x * n + sx) as usize;
-                                    let d = dirs_w[g];
-                                    if d == DVec3::ZERO {
-                                        // No camera ray through this position.
-                                        all_roi = false;
-                                        all_std = false;
-                                        continue;
-                                    }
-                                    rays += 1;
-                                    let pre = [hits[0][g], hits[1][g], hits[2][g], hits[3][g]];
-                                    let s = self.trace(origin, d, &view, Some(pre));
-                                    for (a, sv) in acc.iter_mut().zip(s.v) {
-                                        *a += sv;
-                                    }
-                                    all_roi &= s.skin_roi;
-                                    any_tag |= s.target;
-                                    all_std &= s.standard;
-                                }
+                            let pre = [hits[0][g], hits[1][g], hits[2][g], hits[3][g]];
+                            let Some((p, n)) = self.skin_point(origin, d, &view, &pre) else {
+                                continue;
+                            };
+                            skin_pn[g] = Some((p, n));
+                            if view.fired && n.dot(view.light_head - p) > 0.0 {
+                                origins[g] = (p + n * SHADOW_OFFSET_M).as_vec3();
+                                any = true;
                             }
-                            v[x as usize] = acc.map(|a| (a * inv * view.exposure_gain) as f32);
-                            fh[x as usize] = all_roi;
-                            tg[x as usize] = any_tag;
-                            st[x as usize] = all_std;
                         }
-                        (v, fh, tg, st, rays)
-                    })
-                    .collect()
-            })
+                        if any {
+                            self.skin.bvh.occluded_toward_grid_into(
+                                view.light_head.as_vec3(),
+                                &origins,
+                                gw,
+                                0.0,
+                                &mut occluded,
+                                shadow_scratch,
+                            );
+                        }
+                    }
+                    (y0..y1)
+                        .map(|y| {
+                            let mut v = vec![[0.0f32; 3]; w as usize];
+                            let mut fh = vec![false; w as usize];
+                            let mut tg = vec![false; w as usize];
+                            let mut st = vec![false; w as usize];
+                            let mut rays = 0u64;
+                            for x in 0..w {
+                                if !blocks[((y / BLOCK_PX) * bw + x / BLOCK_PX) as usize] {
+                                    continue;
+                                }
+                                let mut acc = [0.0f64; 3];
+                                let (mut all_roi, mut any_tag, mut all_std) = (true, false, true);
+                                for sy in 0..n {
+                                    for sx in 0..n {
+                                        let g = ((y - y0) * n + sy) as usize * gw
+                                            + (x * n + sx) as usize;
+                                        let d = dirs_w[g];
+                                        if d == DVec3::ZERO {
+                                            // No camera ray through this position.
+                                            all_roi = false;
+                                            all_std = false;
+                                            continue;
+                                        }
+                                        rays += 1;
+                                        let pre = [hits[0][g], hits[1][g], hits[2][g], hits[3][g]];
+                                        let skin = skin_pn[g].map(|(p, n)| (p, n, occluded[g]));
+                                        let s = self.trace_with(origin, d, &view, Some(pre), skin);
+                                        for (a, sv) in acc.iter_mut().zip(s.v) {
+                                            *a += sv;
+                                        }
+                                        all_roi &= s.skin_roi;
+                                        any_tag |= s.target;
+                                        all_std &= s.standard;
+                                    }
+                                }
+                                v[x as usize] = acc.map(|a| (a * inv * view.exposure_gain) as f32);
+                                fh[x as usize] = all_roi;
+                                tg[x as usize] = any_tag;
+                                st[x as usize] = all_std;
+                            }
+                            (v, fh, tg, st, rays)
+                        })
+                        .collect()
+                },
+            )
             .collect();
         let rows = bands.into_iter().flatten();
         let mut out = Rendered {
