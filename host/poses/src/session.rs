@@ -695,7 +695,7 @@ fn estimate_session_stages_with(
     if cfg.bundle.enabled {
         let mut bcfg = cfg.bundle;
         bcfg.refine_intrinsics |= out.calibration.is_some();
-        run_bundle(&mut out, &detected, &table, light_centre, &bcfg);
+        run_bundle(&mut out, detected, &table, light_centre, &bcfg);
     } else {
         out.skipped
             .push("bundle adjustment (disabled in the configuration)".into());

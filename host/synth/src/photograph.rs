@@ -610,14 +610,13 @@ impl Renderer {
         let mut v = [0.0; 3];
         if fired {
             let (cos_i, wi, d) = self.lit(p_head, n, light_head);
-            if cos_i > 0.0 {
-                if !occluded() {
-                    let we = (cam_head - p_head).normalize();
-                    let frame = ShadingFrame::from_normal(n);
-                    let rho = self.skin_brdf.eval(frame.to_local(wi), frame.to_local(we));
-                    for k in 0..3 {
-                        v[k] = rho[k] * cos_i / (self.c[k] * d * d);
-                    }
+            // The shadow ray is asked only for a point facing the light.
+            if cos_i > 0.0 && !occluded() {
+                let we = (cam_head - p_head).normalize();
+                let frame = ShadingFrame::from_normal(n);
+                let rho = self.skin_brdf.eval(frame.to_local(wi), frame.to_local(we));
+                for k in 0..3 {
+                    v[k] = rho[k] * cos_i / (self.c[k] * d * d);
                 }
             }
         }
