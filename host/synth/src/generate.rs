@@ -494,8 +494,12 @@ fn generate_into(
     let render_one = |i: usize| -> (Rendered, f64) {
         let t0 = Instant::now();
         let (rig_i, renderer_i) = rig_of(i);
-        // One sub-pixel pattern for every image (the renderer computes its directions once).
-        let r = renderer_i.render(&shots[i], rig_i, scene.seed.wrapping_mul(1000), true);
+        let r = renderer_i.render(
+            &shots[i],
+            rig_i,
+            scene.seed.wrapping_mul(1000).wrapping_add(i as u64),
+            true,
+        );
         (r, t0.elapsed().as_secs_f64())
     };
     let mut pending: Option<(usize, Rendered)> = None;
