@@ -8,6 +8,8 @@
 //!
 //! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
 
+mod common;
+
 use std::path::Path;
 
 use rand::SeedableRng;
@@ -18,7 +20,7 @@ use skinbrdf_pipeline::process::{bounds, process, ProcessConfig};
 use skinbrdf_register::{RegistrationMethod, RegistrationReport};
 use skinbrdf_session::RegistrationFit;
 use skinbrdf_synth::studio::STUDIO_DIR;
-use skinbrdf_synth::{generate, Scene, SynthOptions};
+use skinbrdf_synth::Scene;
 
 /// Measurement images (the default scene has 30).
 const MEASUREMENT_IMAGES: u32 = 12;
@@ -78,21 +80,7 @@ fn an_untextured_scan_is_registered_by_picked_points() {
     let dir = tempfile::tempdir().expect("tempdir");
     let mut scene = Scene::load("default").expect("default scene");
     scene.session.measurement_images = MEASUREMENT_IMAGES;
-    let s = dir.path().join("S");
-    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
-    generate(
-        &scene,
-        &SynthOptions {
-            resolution: Some(half),
-            capture: None,
-            noise_free: false,
-            samples_per_pixel: None,
-            studio: true,
-            studio_only: false,
-        },
-        &s,
-    )
-    .expect("synthesis");
+    let s = common::half_resolution_studio(dir.path(), &scene);
     let st = s.join(STUDIO_DIR);
     let plain = dir.path().join("head-plain.ply");
     untextured(&st, &plain);

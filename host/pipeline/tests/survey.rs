@@ -6,8 +6,9 @@
 //!
 //! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
 
+mod common;
+
 use std::collections::HashMap;
-use std::path::Path;
 
 use glam::DVec3;
 use skinbrdf_ingest::ingest;
@@ -16,7 +17,7 @@ use skinbrdf_pipeline::process::{bounds, process, ProcessConfig};
 use skinbrdf_poses::{HeadGauge, Survey};
 use skinbrdf_session::{Session, TargetGroup};
 use skinbrdf_synth::studio::STUDIO_DIR;
-use skinbrdf_synth::{generate, Scene, SynthOptions};
+use skinbrdf_synth::Scene;
 
 /// Reference targets surveyed within this RMS of the truth, mm (the bound), over every
 /// target the survey placed: it leaves out those it cannot place that well (`Uncertain`).
@@ -56,31 +57,12 @@ fn corner_rms_mm(
     ((sq / n.max(1) as f64).sqrt(), worst, n)
 }
 
-fn studio(dir: &Path, scene: &Scene) -> std::path::PathBuf {
-    let s = dir.join("S");
-    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
-    generate(
-        scene,
-        &SynthOptions {
-            resolution: Some(half),
-            capture: None,
-            noise_free: false,
-            samples_per_pixel: None,
-            studio: true,
-            studio_only: false,
-        },
-        &s,
-    )
-    .expect("synthesis");
-    s
-}
-
 #[test]
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_bounds() {
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = Scene::load("default").expect("default scene");
-    let s = studio(dir.path(), &scene);
+    let s = common::half_resolution_studio(dir.path(), &scene);
     let st = s.join(STUDIO_DIR);
     let s2 = dir.path().join("S2");
     // What a studio holds: the card, the record, a rig nobody measured and the textured scan

@@ -9,8 +9,9 @@
 //!
 //! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
 
+mod common;
+
 use std::collections::HashMap;
-use std::path::PathBuf;
 
 use glam::DVec3;
 use skinbrdf_ingest::ingest;
@@ -19,34 +20,11 @@ use skinbrdf_pipeline::process::{bounds, process, ProcessConfig};
 use skinbrdf_poses::{survey, SurveyConfig, SurveyIssue};
 use skinbrdf_session::{Session, TargetGroup, Truth};
 use skinbrdf_synth::studio::STUDIO_DIR;
-use skinbrdf_synth::{generate, Scene, SynthOptions};
+use skinbrdf_synth::Scene;
 
 /// Every other surveyed reference target within this RMS of the truth, mm: the survey test's
 /// all-target bound (half-resolution images, few-view targets included).
 const ALL_TARGETS_RMS_MM: f64 = 1.0;
-
-/// Synthesizes a built-in scene's studio at half resolution and ingests it unsurveyed; returns
-/// the generated directory and the ingested session's.
-fn studio_session(dir: &std::path::Path, scene: &Scene) -> (PathBuf, PathBuf) {
-    let s = dir.join("S");
-    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
-    generate(
-        scene,
-        &SynthOptions {
-            resolution: Some(half),
-            capture: None,
-            noise_free: false,
-            samples_per_pixel: None,
-            studio: true,
-            studio_only: false,
-        },
-        &s,
-    )
-    .expect("synthesis");
-    let s2 = dir.join("S2");
-    ingest(&studio_ingest_config(&s, scene, s2.clone())).expect("ingest");
-    (s, s2)
-}
 
 /// RMS over the surveyed targets of a group of the mean corner distance to the truth, mm.
 fn group_rms_mm(sv: &skinbrdf_poses::Survey, truth: &Truth, group: TargetGroup) -> (f64, usize) {
@@ -82,7 +60,7 @@ const HEADDRESS_RMS_MM: f64 = 0.5;
 fn printed_sheets_are_placed_whole_with_their_print_scale() {
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = Scene::load("survey-sheets").expect("survey-sheets scene");
-    let (s, s2) = studio_session(dir.path(), &scene);
+    let (s, s2) = common::studio_session(dir.path(), &scene);
     let truth = Truth::load(&s.join(STUDIO_DIR).join("truth.json")).expect("truth");
     let session = Session::load(&s2).expect("session");
     let sv = survey(&session, &SurveyConfig::default()).expect("survey");
@@ -147,7 +125,7 @@ fn printed_sheets_are_placed_whole_with_their_print_scale() {
 fn a_bent_sheet_a_wrapped_band_and_a_duplicated_id_are_named() {
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = Scene::load("survey-faults").expect("survey-faults scene");
-    let (s, s2) = studio_session(dir.path(), &scene);
+    let (s, s2) = common::studio_session(dir.path(), &scene);
     let st = s.join(STUDIO_DIR);
     let truth = Truth::load(&st.join("truth.json")).expect("truth");
     // `process` runs the survey and the registration to the scan: the band's targets, surveyed
@@ -272,21 +250,7 @@ fn a_moved_target_and_targets_seen_apart_are_named_and_left_out() {
         .moved_target
         .clone()
         .expect("the scene moves a target");
-    let s = dir.path().join("S");
-    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
-    generate(
-        &scene,
-        &SynthOptions {
-            resolution: Some(half),
-            capture: None,
-            noise_free: false,
-            samples_per_pixel: None,
-            studio: true,
-            studio_only: false,
-        },
-        &s,
-    )
-    .expect("synthesis");
+    let s = common::half_resolution_studio(dir.path(), &scene);
     let st = s.join(STUDIO_DIR);
     let s2 = dir.path().join("S2");
     let cfg = studio_ingest_config(&s, &scene, s2.clone());

@@ -7,46 +7,22 @@
 //!
 //! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
 
+mod common;
+
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use skinbrdf_ingest::ingest;
-use skinbrdf_pipeline::demo::studio_ingest_config;
 use skinbrdf_pipeline::process::ProcessConfig;
 use skinbrdf_poses::{survey, Survey, SurveyConfig};
 use skinbrdf_session::{ImageRole, Session, TargetGroup, Truth};
 use skinbrdf_synth::studio::STUDIO_DIR;
-use skinbrdf_synth::{generate, Scene, SynthOptions};
+use skinbrdf_synth::Scene;
 
 /// Reference targets within this RMS of the truth, mm (the bound).
 const REFERENCE_RMS_MM: f64 = 0.3;
 /// Every placed target's error within this many of its stated standard deviations (a Gaussian
 /// 3-D error exceeds 4 sigma-of-the-trace with probability well under 1e-3).
 const SIGMA_COVERAGE: f64 = 4.0;
-
-/// Synthesizes a built-in scene's studio at half resolution and ingests it unsurveyed (with the
-/// survey folder when the studio has one); returns the generated directory and the session's.
-fn studio_session(dir: &Path, scene: &Scene) -> (PathBuf, PathBuf) {
-    let s = dir.join("S");
-    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
-    generate(
-        scene,
-        &SynthOptions {
-            resolution: Some(half),
-            capture: None,
-            noise_free: false,
-            samples_per_pixel: None,
-            studio: true,
-            studio_only: false,
-        },
-        &s,
-    )
-    .expect("synthesis");
-    let s2 = dir.join("S2");
-    ingest(&studio_ingest_config(&s, scene, s2.clone())).expect("ingest");
-    (s, s2)
-}
 
 /// Per surveyed target of `group`: its mean corner distance to the truth, mm, and its stated
 /// position sigma, mm.
@@ -79,7 +55,7 @@ fn survey_images_place_more_reference_targets() {
     let scene = Scene::load("survey-images").expect("survey-images scene");
     let n = scene.session.survey_images as usize;
     assert!(n > 0, "the scene takes survey images");
-    let (s, s2) = studio_session(dir.path(), &scene);
+    let (s, s2) = common::studio_session(dir.path(), &scene);
     let truth = Truth::load(&s.join(STUDIO_DIR).join("truth.json")).expect("truth");
     let session = Session::load(&s2).expect("session");
     let roles: Vec<ImageRole> = session.file.images.iter().map(|e| e.role).collect();

@@ -389,11 +389,6 @@ impl SessionDetections {
             && self.linearization == session.file.linearization
             && self.detector == *detector
     }
-
-    /// Seconds spent decoding and detecting, summed over the images.
-    pub fn detect_s(&self) -> f64 {
-        self.detected.iter().map(|d| d.detect_ms).sum::<f64>() * 1e-3
-    }
 }
 
 /// Detects the tags of every image (parallel over images).

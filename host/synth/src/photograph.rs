@@ -677,19 +677,17 @@ impl Renderer {
     }
 
     /// The sample of one world ray. `pre` holds the closest hits of the world, skin, headdress
-    /// and standard meshes when the caller traced them already (coherently, with
-    /// [`MeshBvh::intersect_grid_into`]); `None` traces them here, ray by ray.
-    /// `skin` holds, when the closest hit is the skin and the caller has them, its refined
+    /// and standard meshes, traced by the caller (coherently, with
+    /// [`MeshBvh::intersect_grid_into`]). `skin` holds, when the closest hit is the skin and the caller has them, its refined
     /// point and normal and whether the skin hides the light from it.
-    fn trace_with(
+    fn trace(
         &self,
         o_w: DVec3,
         d_w: DVec3,
         view: &View,
-        pre: Option<[Option<Hit>; 4]>,
+        pre: [Option<Hit>; 4],
         skin: Option<(DVec3, DVec3, bool)>,
     ) -> Sample {
-        let mut best = (f32::INFINITY, Surface::Skin, 0u8);
         let head = || {
             (
                 view.head_from_world.transform_point(o_w),
@@ -702,36 +700,7 @@ impl Renderer {
                 view.standard_from_world.transform_vector(d_w),
             )
         };
-        for (k, (g, which)) in [
-            (&self.world, 0u8),
-            (&self.skin, 1),
-            (&self.head_tags, 1),
-            (&self.standard, 2),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            if (k == 3 && !view.standard_present) || ((k == 1 || k == 2) && !view.subject_present) {
-                continue;
-            }
-            let hit = match pre {
-                Some(p) => p[k],
-                None => {
-                    let (o, d) = match which {
-                        0 => (o_w, d_w),
-                        1 => head(),
-                        _ => std_frame(),
-                    };
-                    g.bvh.intersect(o.as_vec3(), d.as_vec3(), best.0)
-                }
-            };
-            if let Some(h) = hit {
-                if h.t_m < best.0 {
-                    best = (h.t_m, g.kinds[h.triangle as usize], which);
-                }
-            }
-        }
-        let (t, surf, which) = best;
+        let (t, surf, which) = self.closest(view, &pre);
         let none = Sample {
             v: [0.0; 3],
             skin_roi: false,
@@ -1153,7 +1122,7 @@ impl Renderer {
                                         rays += 1;
                                         let pre = [hits[0][g], hits[1][g], hits[2][g], hits[3][g]];
                                         let skin = skin_pn[g].map(|(p, n)| (p, n, occluded[g]));
-                                        let s = self.trace_with(origin, d, &view, Some(pre), skin);
+                                        let s = self.trace(origin, d, &view, pre, skin);
                                         for (a, sv) in acc.iter_mut().zip(s.v) {
                                             *a += sv;
                                         }
