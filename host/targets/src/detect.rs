@@ -47,9 +47,10 @@
 //!    has an edge as straight and as contrasted as the white ring's and parallel to the side,
 //!    so the contrast, bend and cell tests all pass, and it moves both corners of that side
 //!    together; but it leaves the inner edge where it was, so the border measures too thin.
-//!    A side displaced by more than [`BORDER_WIDTH_SIGMAS`] of the edge fits' own scatter and
-//!    [`MIN_BORDER_DISPLACEMENT_PX`] has both its corners marked occluded and the displacement
-//!    added to their variance along that side's normal. What is common to all sides (ink
+//!    A side displaced by more than [`BORDER_COVARIANCE_SIGMAS`] of the edge fits' own scatter
+//!    has the displacement added to both its corners' variance along that side's normal, and,
+//!    beyond [`BORDER_WIDTH_SIGMAS`] and [`MIN_BORDER_DISPLACEMENT_PX`], the corners marked
+//!    occluded. What is common to all sides (ink
 //!    spread, a bloom of the white) is taken off first; sides whose cells are under
 //!    [`MIN_WIDTH_TEST_CELL_PX`] across are not tested (their edges are too close to tell a
 //!    fraction of a pixel); every side of the family has a white cell within
@@ -91,6 +92,24 @@ pub const SIGMA_FLOOR_PX: f64 = 0.04;
 /// are not fitted. A shadow edge across the tag keeps the contrast (it scales both levels); the
 /// blur of small tags lowers it everywhere alike.
 pub const VISIBLE_CONTRAST: f64 = 0.5;
+
+/// A sample of an outer edge whose contrast (as for [`VISIBLE_CONTRAST`]) exceeds the tag's
+/// median by more than this many of the tag's robust contrast scatter, and by at least
+/// [`MIN_CONTRAST_EXCESS`], is hidden too: something brighter than the white ring stands over the
+/// ring within half a cell of the edge (a white standard, a sheet nearer the flash). Its edge,
+/// when it is within the gradient window's reach, makes the edge a double step whose gradient
+/// centroid lies outward of the border's, by up to half a pixel over a one-pixel sliver of ring,
+/// and the side's line pivots towards it. A shadow scales both levels and keeps the contrast;
+/// glare and flare lower it. Five robust sigmas leave whole tags' samples alone (noise and the
+/// code's pull on a blurred border sample stay within it).
+pub const CONTRAST_CEILING_MADS: f64 = 5.0;
+
+/// Smallest contrast excess that hides a sample (Michelson units): what the code's pull on the
+/// border sample and noise reach on whole tags whose contrast scatter is very small.
+pub const MIN_CONTRAST_EXCESS: f64 = 0.05;
+
+/// Median absolute deviation to standard deviation for Gaussian data.
+const MAD_TO_SIGMA: f64 = 1.4826;
 
 /// Contrast samples in each corner zone of a side (the last 0.75 cell before the corner, where
 /// no edge points are fitted).
@@ -1075,11 +1094,20 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         }
         median_contrast = median;
         let visible_at = VISIBLE_CONTRAST * median;
+        // A sample whose contrast is more than CONTRAST_CEILING_MADS of the tag's robust
+        // scatter (and at least MIN_CONTRAST_EXCESS) above the median has something brighter
+        // than the ring within half a cell of the edge.
+        let mut dev: Vec<f64> = all.iter().map(|m| (m - median).abs()).collect();
+        dev.sort_by(f64::total_cmp);
+        let mad = dev.get(dev.len() / 2).copied().unwrap_or(0.0);
+        let ceiling =
+            median + (CONTRAST_CEILING_MADS * MAD_TO_SIGMA * mad).max(MIN_CONTRAST_EXCESS);
+        let visible = |m: f64| (visible_at..=ceiling).contains(&m);
         for k in 0..4 {
             let (pts, contrast) = &sides[k];
             let mut used: Vec<(DVec2, f64)> = pts
                 .iter()
-                .filter(|p| p.2 >= visible_at)
+                .filter(|p| visible(p.2))
                 .map(|p| (p.0, p.1))
                 .collect();
             // Too little of the side visible to fit: fit all its edge points and mark both its
@@ -1129,7 +1157,7 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
                     .iter()
                     .filter(|c| c.0 >= lo && c.0 <= hi)
                     .fold((0usize, 0usize), |(n, v), c| {
-                        (n + 1, v + usize::from(c.1 >= visible_at))
+                        (n + 1, v + usize::from(visible(c.1)))
                     });
                 if n == 0 {
                     0.0
@@ -1240,6 +1268,12 @@ const SAMPLES_PER_INDEPENDENT: f64 = 2.0;
 /// its standard deviations from the edge fits' scatter: four, as for a bend ([`BEND_SIGMAS`]),
 /// so that Gaussian noise alone flags about one side in 16 000 (the two-sided 4-sigma tail).
 pub const BORDER_WIDTH_SIGMAS: f64 = 4.0;
+
+/// A side's displacement goes into its corners' covariance (without marking them) when it
+/// exceeds this many of its standard deviations: under [`MIN_BORDER_DISPLACEMENT_PX`] it may be
+/// the centroid's phase bias as well as an occluder, and either way the corners are uncertain by
+/// that much. Two: about one whole side in 20 takes its (small) displacement by chance.
+pub const BORDER_COVARIANCE_SIGMAS: f64 = 2.0;
 
 /// Smallest displacement of a side that counts, pixels: model error of comparing two edges that
 /// the scatter does not show. A gradient centroid sampled on the pixel grid is biased by a
@@ -1438,9 +1472,22 @@ impl EdgeProbe {
     }
 }
 
-/// Per side of the quad, how far its fitted outer edge lies inside where its inner edges put
-/// it (pixels, negative: outside) when that is more than noise and model error allow
-/// ([`BORDER_WIDTH_SIGMAS`], [`MIN_BORDER_DISPLACEMENT_PX`]), else `None`.
+/// A side's outer edge measured off where its inner edges put it (`displaced_sides`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct SideDisplacement {
+    /// How far the fitted outer edge lies inside where the inner edges put it, pixels
+    /// (negative: outside).
+    d_px: f64,
+    /// Beyond [`BORDER_WIDTH_SIGMAS`] and [`MIN_BORDER_DISPLACEMENT_PX`]: an occluder's edge,
+    /// so the side's corners are marked occluded. Under it the displacement may as well be the gradient centroid's
+    /// sub-pixel phase bias; either way the corners are uncertain by that much, so it goes
+    /// into their covariance without marking them.
+    marked: bool,
+}
+
+/// Per side of the quad, its displacement (see [`SideDisplacement`]) when that is more than
+/// [`BORDER_COVARIANCE_SIGMAS`] of the edge fits' scatter, else `None`; it is marked beyond
+/// [`BORDER_WIDTH_SIGMAS`] and [`MIN_BORDER_DISPLACEMENT_PX`].
 ///
 /// An occluder's edge along side `k` moves that side inward by `δ` while its inner edges stay:
 /// the homography then shrinks the cell by `δ/8` across the tag, so side `k`'s border measures
@@ -1450,7 +1497,7 @@ impl EdgeProbe {
 /// spread, a bloom of the white or a blur that moves every edge alike make every border
 /// thicker or thinner, so with three or four sides measured their median displacement is taken
 /// off each before the test.
-fn displaced_sides(e: &[Option<InnerEdges>; 4]) -> [Option<f64>; 4] {
+fn displaced_sides(e: &[Option<InnerEdges>; 4]) -> [Option<SideDisplacement>; 4] {
     let est: [Option<(f64, f64)>; 4] = std::array::from_fn(|k| {
         let ek = e[k]?;
         Some(match e[(k + 2) % 4] {
@@ -1470,8 +1517,11 @@ fn displaced_sides(e: &[Option<InnerEdges>; 4]) -> [Option<f64>; 4] {
     };
     est.map(|d| {
         let (d, sd) = d?;
-        let d = d - common;
-        (d.abs() > (BORDER_WIDTH_SIGMAS * sd).max(MIN_BORDER_DISPLACEMENT_PX)).then_some(d)
+        let d_px = d - common;
+        (d_px.abs() > BORDER_COVARIANCE_SIGMAS * sd).then_some(SideDisplacement {
+            d_px,
+            marked: d_px.abs() > (BORDER_WIDTH_SIGMAS * sd).max(MIN_BORDER_DISPLACEMENT_PX),
+        })
     })
 }
 
@@ -1772,8 +1822,8 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
         white[r][c] = (wrong >> (tag36h11::NBITS - 1 - i)) & 1 == 1;
     }
     // Border width: a side whose outer edge is displaced against its inner edges (an
-    // occluder's edge along the border) has both its corners occluded, and its displacement
-    // goes into their covariance along that side's normal.
+    // occluder's edge along the border) has its displacement in both its corners' covariance
+    // along that side's normal, and the corners marked occluded when it is beyond the floor.
     let edges = inner_edges(img, &h, &white, rq);
     let shifted = displaced_sides(&edges);
     // A corner is occluded when the edge next to it is hidden on either side, a side next to it
@@ -1783,16 +1833,18 @@ fn decode(img: &GrayF32, rq: &RefinedQuad, cfg: &DetectorConfig) -> Option<Detec
         rq.visible_near[j] < MIN_VISIBLE_NEAR
             || evidence[j] > 0
             || rq.bent[j]
-            || shifted[j].is_some()
-            || shifted[(j + 3) % 4].is_some()
+            || shifted[j].is_some_and(|s| s.marked)
+            || shifted[(j + 3) % 4].is_some_and(|s| s.marked)
     });
     let extra = (OCCLUDED_SIGMA_CELLS * rq.cell_px).powi(2);
     // A displaced side `k` moves its corners along the other side through each: corner `k`
     // along side `k - 1`, corner `k + 1` along side `k + 1`, by the displacement over the sine
     // of their angle (floored as in the edge refinement's covariance).
     let mut rq_cov = rq.cov;
-    for (k, d) in shifted.iter().enumerate() {
-        let Some(d) = d else { continue };
+    for (k, s) in shifted.iter().enumerate() {
+        let Some(SideDisplacement { d_px: d, .. }) = *s else {
+            continue;
+        };
         for (j, other) in [(k, (k + 3) % 4), ((k + 1) % 4, (k + 1) % 4)] {
             let (u, n) = (rq.lines[other].dir(), rq.lines[k].n);
             let sin2 = n.dot(u).powi(2).max(0.05 * 0.05);
@@ -2100,13 +2152,21 @@ mod tests {
         // A side moved 1 px inward: its border is 7/8 px thinner than predicted, the opposite
         // side's 1/8 px thicker; only the moved side is displaced, by about 1 px.
         let one = displaced_sides(&[side(-0.875), side(0.0), side(0.125), side(0.0)]);
-        assert!(one[0].is_some_and(|d| (d - 1.0).abs() < 1e-9), "{one:?}");
+        assert!(
+            one[0].is_some_and(|s| (s.d_px - 1.0).abs() < 1e-9 && s.marked),
+            "{one:?}"
+        );
         assert_eq!(one[1..], [None, None, None]);
         // Every border 0.4 px thicker (ink spread): nothing is displaced.
         assert_eq!(displaced_sides(&[side(0.4); 4]), [None; 4]);
-        // Noise and model error: under the floor, or under four sigmas, nothing.
+        // Under the floor, or beyond the floor but under four sigmas: a displacement for the
+        // covariance, not an occluder; under two sigmas, nothing.
         let small = displaced_sides(&[side(-0.2), side(0.0), side(0.0), side(0.0)]);
-        assert_eq!(small, [None; 4]);
+        assert!(
+            small[0].is_some_and(|s| !s.marked && (s.d_px - 0.2 * 8.0 / 7.0).abs() < 0.05),
+            "{small:?}"
+        );
+        assert_eq!(small[1..], [None, None, None]);
         let noisy = [
             Some(InnerEdges {
                 offset_px: -0.6,
@@ -2116,7 +2176,18 @@ mod tests {
             side(0.0),
             side(0.0),
         ];
-        assert_eq!(displaced_sides(&noisy), [None; 4]);
+        let noisy = displaced_sides(&noisy);
+        assert!(noisy[0].is_some_and(|s| !s.marked), "{noisy:?}");
+        let quiet = [
+            Some(InnerEdges {
+                offset_px: -0.3,
+                var_px2: 0.2f64.powi(2),
+            }),
+            side(0.0),
+            side(0.0),
+            side(0.0),
+        ];
+        assert_eq!(displaced_sides(&quiet), [None; 4]);
         // Sides not measured are not tested.
         assert_eq!(displaced_sides(&[None; 4]), [None; 4]);
     }

@@ -22,9 +22,12 @@ const MAX_ERROR_OVER_SIGMA: f64 = 5.0;
 /// per-axis sigma; the sigma stated is the worst direction's, which lowers it), above 1.6 they
 /// are optimistic. On these clean 32..70 px tags the corner errors (median 0.03 px) are below
 /// the sigma floor (`SIGMA_FLOOR_PX`, 0.04 px, set on the rendered sessions where the median
-/// is 1.1), so whole tags sit at about 0.6, and the occluded corners' added term lowers the
-/// partly hidden tags' median further: 0.4 is the pessimistic end still useful.
-const MEDIAN_RANGE: (f64, f64) = (0.4, 1.6);
+/// is 1.1), so whole tags sit at about 0.6, and the occluded corners' added term, the samples
+/// hidden by the contrast tests and the border displacements under the marking floor that go
+/// into the covariance (`BORDER_COVARIANCE_SIGMAS`) lower the partly hidden tags' median
+/// further, to about 0.35: 0.3 is the pessimistic end still useful (the rendered sessions,
+/// whose errors are above the floor, sit at 0.75..0.92, docs/benchmarks-poses.md).
+const MEDIAN_RANGE: (f64, f64) = (0.3, 1.6);
 
 /// Corner error beyond which a corner must be marked occluded, pixels (about ten times the
 /// whole tags' largest error here).
@@ -249,5 +252,47 @@ fn stated_sigmas_cover_the_corner_errors_of_whole_and_partly_hidden_tags() {
             max <= MAX_ERROR_OVER_SIGMA,
             "{what}: a corner at {max} sigma"
         );
+    }
+}
+
+/// A surface brighter than the white ring standing over it a pixel from the border: a crop of a
+/// rendered studio image (`synth`, default scene, 1524 x 1012, image `m06`), where the
+/// reflectance standard hides the reference target 52's ring under the right two thirds of its
+/// bottom side and leaves a sliver of ring about a pixel wide. The tag itself is whole, so its
+/// corners are `fully_visible` in the truth; the double step pulled the bottom side's line out
+/// at one end, 0.74 px off at a stated 0.05 px, before the contrast ceiling
+/// (`CONTRAST_CEILING_MADS`). Every corner must be within 3 of its sigmas or marked occluded.
+#[test]
+fn a_brighter_surface_over_the_ring_next_to_the_border() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/studio_bright_surface.png");
+    let img = GrayF32::load(&path).expect("fixture loads");
+    // The truth's corners (`truth.json`, less the crop's origin 720, 140), in the detector's
+    // order (bottom-left, bottom-right, top-right, top-left of the printed tag).
+    let truth = [
+        DVec2::new(37.0723, 119.1742),
+        DVec2::new(104.9649, 117.5935),
+        DVec2::new(103.5298, 30.6834),
+        DVec2::new(35.6187, 33.122),
+    ];
+    let dets = detect(&img, &DetectorConfig::default());
+    let d = dets.iter().find(|d| d.id == 52).expect("tag 52 found");
+    let sig = d.corner_sigma_px();
+    for j in 0..4 {
+        let e = d.corners_px[j].distance(truth[j]);
+        println!(
+            "corner {j}: error {e:.3} px, sigma {:.3} px, marked {}",
+            sig[j], d.occluded_corners[j]
+        );
+        assert!(
+            d.occluded_corners[j] || e <= 3.0 * sig[j],
+            "corner {j}: error {e:.2} px at sigma {:.2} px, not marked",
+            sig[j]
+        );
+    }
+    // The corners away from the surface keep their accuracy and are not marked.
+    for j in [2, 3] {
+        assert!(!d.occluded_corners[j], "corner {j} marked");
+        assert!(d.corners_px[j].distance(truth[j]) < 0.15, "corner {j}");
     }
 }
