@@ -125,6 +125,14 @@ pub const BEND_SIGMAS: f64 = 4.0;
 /// corners).
 pub const MIN_BEND_PX: f64 = 0.15;
 
+/// A side whose half-side line is off the whole side's at a corner by more than this many of
+/// its standard deviations (but not by [`BEND_SIGMAS`] and [`MIN_BEND_PX`]) adds the bend to the
+/// corner's variance without marking it: a smooth curvature (lens distortion across a large
+/// tag, a bent sheet) or an occluder's edge too slight to be sure of; either way the line's
+/// extrapolation to the corner is uncertain by that much. Three: one whole side in 370 takes its
+/// (small) bend by chance.
+pub const BEND_COVARIANCE_SIGMAS: f64 = 3.0;
+
 /// A corner whose neighbouring side quarters are less than this fraction visible (on either
 /// side, [`VISIBLE_CONTRAST`]) is occluded.
 pub const MIN_VISIBLE_NEAR: f64 = 0.5;
@@ -1194,16 +1202,16 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         let (l1, l2) = (&lines[(k + 3) % 4], &lines[k]);
         let sin = l1.n.perp_dot(l2.n).abs().max(0.05);
         let floor2 = SIGMA_FLOOR_PX * SIGMA_FLOOR_PX;
-        // A bent side adds its bend at the corner to the line's offset variance.
+        // A side that bends beyond BEND_COVARIANCE_SIGMAS adds its bend at the corner to the
+        // line's offset variance; beyond BEND_SIGMAS and MIN_BEND_PX it marks the corner.
         let bend_var = |(d, var): (f64, f64)| {
-            if d > MIN_BEND_PX && d * d > BEND_SIGMAS * BEND_SIGMAS * (var + floor2) {
-                d * d
-            } else {
-                0.0
-            }
+            let marked = d > MIN_BEND_PX && d * d > BEND_SIGMAS * BEND_SIGMAS * (var + floor2);
+            let counted =
+                marked || d * d > BEND_COVARIANCE_SIGMAS * BEND_COVARIANCE_SIGMAS * (var + floor2);
+            (if counted { d * d } else { 0.0 }, marked)
         };
-        let (b1, b2) = (bend_var(bend[(k + 3) % 4][1]), bend_var(bend[k][0]));
-        bent[k] = b1 > 0.0 || b2 > 0.0;
+        let ((b1, m1), (b2, m2)) = (bend_var(bend[(k + 3) % 4][1]), bend_var(bend[k][0]));
+        bent[k] = m1 || m2;
         let v1 = l1.offset_var_at(corners[k]) + floor2 + b1;
         let v2 = l2.offset_var_at(corners[k]) + floor2 + b2;
         let (u1, u2) = (l1.dir(), l2.dir());
