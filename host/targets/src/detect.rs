@@ -142,6 +142,18 @@ pub const MIN_VISIBLE_NEAR: f64 = 0.5;
 /// partly an occluder's outline.
 pub const OCCLUDED_SIGMA_CELLS: f64 = 0.25;
 
+/// Largest cell, pixels, of a tag read through its contour's quad when its refined quad does
+/// not decode: on cells of a few pixels a neighbour's edge or the surround's within the
+/// gradient window can pull a refined side by a cell, so the grid is sampled off by a cell
+/// while the binary contour is still right. On larger tags a refined quad that does not
+/// decode is mostly an occluded one, whose contour follows the occluder's outline.
+pub const UNREFINED_MAX_CELL_PX: f64 = 4.0;
+
+/// Standard deviation added to every corner of a tag read through its contour's quad, in
+/// cells: the contour's corners are only as good as the binary threshold's pixel grid, and the
+/// refined sides that disagree with them do not say which is right.
+pub const UNREFINED_SIGMA_CELLS: f64 = 1.0;
+
 /// Half the span of the central difference that measures the edge gradient, pixels (the
 /// reference library uses 1; wider is less sensitive to noise and JPEG ringing, narrower
 /// resolves closely spaced edges of tiny tags).
@@ -283,6 +295,10 @@ pub struct DetectStats {
     pub rejected_decode: usize,
     /// Duplicate detections removed.
     pub duplicates: usize,
+    /// Tags decoded through their contour's quad after their refined quad did not decode
+    /// (every corner marked occluded).
+    #[serde(default)]
+    pub decoded_unrefined: usize,
 }
 
 /// Detects tag36h11 tags.
@@ -356,7 +372,32 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
             };
             refined.corners = b;
         }
-        match decode(img, &refined, cfg) {
+        // A small tag whose refined quad does not decode is read once more through its
+        // contour's quad (UNREFINED_MAX_CELL_PX); its corners are all marked occluded, with
+        // UNREFINED_SIGMA_CELLS. Not in the reference library's corner model, which reports
+        // that library's quads only.
+        let det = decode(img, &refined, cfg).or_else(|| {
+            if reference.is_some() || refined.cell_px > UNREFINED_MAX_CELL_PX {
+                return None;
+            }
+            let mut det = decode(
+                img,
+                &RefinedQuad {
+                    corners: quad,
+                    ..refined
+                },
+                cfg,
+            )?;
+            stats.decoded_unrefined += 1;
+            let extra = (UNREFINED_SIGMA_CELLS * refined.cell_px).powi(2);
+            for cov in &mut det.corner_cov_px2 {
+                cov[0] += extra;
+                cov[2] += extra;
+            }
+            det.occluded_corners = [true; 4];
+            Some(det)
+        });
+        match det {
             Some(det) => {
                 decoded_groups.insert(cc.group_of[k as usize]);
                 out.push(det)

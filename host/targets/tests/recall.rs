@@ -232,3 +232,39 @@ fn every_small_oblique_packed_or_shadowed_tag_is_found_on_a_dark_surround() {
     // between the border and the surround, and blur joins them diagonally.
     check(&scene(0.3, 2), "dark surround");
 }
+
+/// A 15 px tag (cells under 2 px) at the corner of a tilted packed grid, on a grey surround: a
+/// crop of the recall benchmark's `packed018.png` (`scripts/peers/apriltag_recall.py --images 24
+/// --seed 3`, tag 461), which the AprilTag C library finds. The surround's edge within the
+/// gradient window pulls one refined side by more than a cell, so the refined quad does not
+/// decode; the contour's quad does (`UNREFINED_MAX_CELL_PX`). Its corners are all marked
+/// occluded, with sigmas that cover their errors.
+#[test]
+fn a_small_tag_whose_refined_quad_does_not_decode_is_read_through_its_contour() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/packed_small_tag.png");
+    let img = GrayF32::load(&path).expect("fixture loads");
+    // The benchmark's truth, less the crop's origin (1013, 591), in the detector's order.
+    let truth = [
+        DVec2::new(33.54, 33.9487),
+        DVec2::new(28.6659, 44.6212),
+        DVec2::new(47.2967, 46.2809),
+        DVec2::new(52.0367, 35.5226),
+    ];
+    let dets = detect(&img, &DetectorConfig::default());
+    let d = dets.iter().find(|d| d.id == 461).expect("tag 461 found");
+    assert_eq!(d.occluded_corners, [true; 4]);
+    let sig = d.corner_sigma_px();
+    for j in 0..4 {
+        let e = d.corners_px[j].distance(truth[j]);
+        assert!(
+            e <= 3.0 * sig[j],
+            "corner {j}: error {e:.2} px, sigma {:.2} px",
+            sig[j]
+        );
+    }
+    // Its neighbours in the crop are found through their refined quads, and nothing else.
+    let mut ids: Vec<u32> = dets.iter().map(|d| d.id).collect();
+    ids.sort_unstable();
+    assert_eq!(ids, [31, 223, 438, 461, 507, 518]);
+}
