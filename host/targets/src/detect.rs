@@ -50,8 +50,8 @@
 //!    A side displaced by more than [`BORDER_COVARIANCE_SIGMAS`] of the edge fits' own scatter
 //!    has the displacement added to both its corners' variance along that side's normal, and,
 //!    beyond [`BORDER_WIDTH_SIGMAS`] and [`MIN_BORDER_DISPLACEMENT_PX`], the corners marked
-//!    occluded. What is common to all sides (ink
-//!    spread, a bloom of the white) is taken off first; sides whose cells are under
+//!    occluded. What is common to all sides (ink spread, a bloom of the white) is taken off
+//!    first; sides whose cells are under
 //!    [`MIN_WIDTH_TEST_CELL_PX`] across are not tested (their edges are too close to tell a
 //!    fraction of a pixel); every side of the family has a white cell within
 //!    [`MAX_INNER_EDGE_DEPTH`] cells of its border, so no side is left untested by its code.
@@ -373,9 +373,9 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
             refined.corners = b;
         }
         // A small tag whose refined quad does not decode is read once more through its
-        // contour's quad (UNREFINED_MAX_CELL_PX); its corners are all marked occluded, with
-        // UNREFINED_SIGMA_CELLS. Not in the reference library's corner model, which reports
-        // that library's quads only.
+        // contour's quad (UNREFINED_MAX_CELL_PX); its corners are all marked occluded, their
+        // covariance the refined quad's plus UNREFINED_SIGMA_CELLS. Not in the reference
+        // library's corner model, which reports that library's quads only.
         let det = decode(img, &refined, cfg).or_else(|| {
             if reference.is_some() || refined.cell_px > UNREFINED_MAX_CELL_PX {
                 return None;
@@ -1528,9 +1528,9 @@ struct SideDisplacement {
     /// (negative: outside).
     d_px: f64,
     /// Beyond [`BORDER_WIDTH_SIGMAS`] and [`MIN_BORDER_DISPLACEMENT_PX`]: an occluder's edge,
-    /// so the side's corners are marked occluded. Under it the displacement may as well be the gradient centroid's
-    /// sub-pixel phase bias; either way the corners are uncertain by that much, so it goes
-    /// into their covariance without marking them.
+    /// so the side's corners are marked occluded. Short of either, the displacement may as
+    /// well be the gradient centroid's sub-pixel phase bias; the corners are uncertain by that
+    /// much all the same, so it goes into their covariance without marking them.
     marked: bool,
 }
 
@@ -2216,26 +2216,15 @@ mod tests {
             "{small:?}"
         );
         assert_eq!(small[1..], [None, None, None]);
-        let noisy = [
+        let noisy_side = |offset_px: f64| {
             Some(InnerEdges {
-                offset_px: -0.6,
+                offset_px,
                 var_px2: 0.2f64.powi(2),
-            }),
-            side(0.0),
-            side(0.0),
-            side(0.0),
-        ];
-        let noisy = displaced_sides(&noisy);
+            })
+        };
+        let noisy = displaced_sides(&[noisy_side(-0.6), side(0.0), side(0.0), side(0.0)]);
         assert!(noisy[0].is_some_and(|s| !s.marked), "{noisy:?}");
-        let quiet = [
-            Some(InnerEdges {
-                offset_px: -0.3,
-                var_px2: 0.2f64.powi(2),
-            }),
-            side(0.0),
-            side(0.0),
-            side(0.0),
-        ];
+        let quiet = [noisy_side(-0.3), side(0.0), side(0.0), side(0.0)];
         assert_eq!(displaced_sides(&quiet), [None; 4]);
         // Sides not measured are not tested.
         assert_eq!(displaced_sides(&[None; 4]), [None; 4]);
