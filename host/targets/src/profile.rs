@@ -470,7 +470,7 @@ pub fn refine_small_tag(img: &GrayF32, q: &[DVec2; 4]) -> Option<[DVec2; 4]> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::detect::{detect, DetectorConfig};
     use crate::homography::square_to_quad;
@@ -509,14 +509,20 @@ mod tests {
         GrayF32::new(img.width, img.height, pass(&a, false)).expect("image")
     }
 
-    struct Scene {
-        img: GrayF32,
-        truth: Vec<(u32, [DVec2; 4])>,
+    pub(crate) struct Scene {
+        pub(crate) img: GrayF32,
+        pub(crate) truth: Vec<(u32, [DVec2; 4])>,
     }
 
     /// Small tags (black squares of `sides` px) on a surround of level `beyond`, white cells at
     /// `white`, blurred and noisy.
-    fn scene(seed: u64, sides: (f64, f64), beyond: f32, white: f32, sigma: f64) -> Scene {
+    pub(crate) fn scene(
+        seed: u64,
+        sides: (f64, f64),
+        beyond: f32,
+        white: f32,
+        sigma: f64,
+    ) -> Scene {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let (w, h) = (480, 360);
         let mut img = GrayF32::new(w, h, vec![beyond; w * h]).expect("image");
