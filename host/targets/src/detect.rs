@@ -31,13 +31,21 @@
 //! 5. **Uncertainty**: the residual scatter of the edge points gives each line's offset variance
 //!    at the corner (`σ²/N + σ² t²/Σt²`); a corner's 2 x 2 covariance is
 //!    `σ₁²/sin²φ · u₂u₂ᵀ + σ₂²/sin²φ · u₁u₁ᵀ` for lines of directions `u₁, u₂` meeting at angle
-//!    `φ`. A floor of [`SIGMA_FLOOR_PX`] accounts for model error the residuals cannot see.
+//!    `φ`. A floor on each line's offset, [`SIGMA_FLOOR_PX`] ([`SIGMA_FLOOR_NARROW_PX`] on cells
+//!    under [`SMALL_CELL_PX`]), accounts for model error the residuals cannot see: the gradient
+//!    centroid's error with the edge's position between pixel centres, which a nearly
+//!    axis-aligned side shares along its length.
 //! 6. **Decoding**: the homography from the tag square to the quad samples all 10 x 10 cells;
 //!    black and white levels are modelled as planes over the tag (fitted to the black border and
 //!    the white outer ring), so a lighting gradient across the tag does not flip bits. The 36 data
 //!    bits are matched against all 587 codes for each of the four corner orderings; the best
 //!    match within [`DetectorConfig::max_hamming`] wins. Quads whose black border is not dark are
-//!    rejected before decoding.
+//!    rejected before decoding. Once the code is known, a tag with cells under
+//!    [`INNER_EDGE_BIAS_MAX_CELL_PX`] has its sides refitted without the pull of the border's
+//!    inner edge, which lies one cell behind the outer edge where the data cell there is white
+//!    and, blurred, moves the outer edge's gradient centroid outward: one bias per tag, fitted
+//!    from the white-backed edge points against the black-backed ones (`unbias_inner_edges`),
+//!    taken off, its uncertainty carried into the corners' covariance.
 //! 7. **Border width** (a side displaced by an occluding edge): the black border is exactly one
 //!    cell wide, and the decoded code says where a data cell behind it is white, i.e. where the
 //!    border's inner edge (or, behind a black data cell, the next one, two cells in) is visible.
