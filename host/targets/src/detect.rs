@@ -40,12 +40,12 @@
 //!    the white outer ring), so a lighting gradient across the tag does not flip bits. The 36 data
 //!    bits are matched against all 587 codes for each of the four corner orderings; the best
 //!    match within [`DetectorConfig::max_hamming`] wins. Quads whose black border is not dark are
-//!    rejected before decoding. Once the code is known, a tag with cells under
+//!    rejected before decoding. Once the code is known, a tag with its smallest cell under
 //!    [`INNER_EDGE_BIAS_MAX_CELL_PX`] has its sides refitted without the pull of the border's
 //!    inner edge, which lies one cell behind the outer edge where the data cell there is white
-//!    and, blurred, moves the outer edge's gradient centroid outward: one bias per tag, fitted
-//!    from the white-backed edge points against the black-backed ones (`unbias_inner_edges`),
-//!    taken off, its uncertainty carried into the corners' covariance.
+//!    and, blurred, moves the outer edge's gradient centroid outward: one bias per pair of
+//!    opposite sides, fitted from the white-backed edge points against the black-backed ones
+//!    (`unbias_inner_edges`), taken off, its uncertainty carried into the corners' covariance.
 //! 7. **Border width** (a side displaced by an occluding edge): the black border is exactly one
 //!    cell wide, and the decoded code says where a data cell behind it is white, i.e. where the
 //!    border's inner edge (or, behind a black data cell, the next one, two cells in) is visible.
@@ -99,10 +99,11 @@ pub const SIGMA_FLOOR_PX: f64 = 0.04;
 /// the narrower gradient difference. The gradient centroid's error depends on where the edge
 /// falls between pixel centres (its phase), and along a nearly axis-aligned side the phase is
 /// the same for every sample, so that error moves the whole line and the residuals do not
-/// show it. Over the phase, for an edge blurred by 0.3..0.7 px (a 1-D model of the estimator:
-/// box pixels, Gaussian blur, bilinear reads, the same window and passes), its standard
-/// deviation is 0.06..0.10 px with the half span of [`SMALL_CELL_PX`]'s tags, against
-/// 0.02..0.04 px with [`GRADIENT_HALF_SPAN_PX`], which the wider floor matches.
+/// show it. Over the phase, for an edge blurred by 0.3..0.7 px (a 1-D model of the estimator,
+/// `scripts/edge_pull_1d.py`: box pixels, Gaussian blur, bilinear reads, the same window and
+/// passes), its standard deviation is 0.04..0.11 px with the half span of [`SMALL_CELL_PX`]'s
+/// tags, against 0.02..0.04 px with [`GRADIENT_HALF_SPAN_PX`], which [`SIGMA_FLOOR_PX`]
+/// matches.
 pub const SIGMA_FLOOR_NARROW_PX: f64 = 0.08;
 
 /// Edge samples whose contrast (Michelson, white ring against black border) is below this
@@ -1343,17 +1344,27 @@ fn corner_covariance(
 // ---------------------------------------------------------------------------------------------
 // The inner edges' pull on small tags' outer edges
 
-/// Tags with cells under this many pixels have their sides refitted once decoded, with the
-/// inner edges' bias estimated and taken off (`unbias_inner_edges`): below it the border's
-/// inner edge, one cell behind the outer edge where the data cell there is white, is within
-/// the blur's reach of the gradient window. The same size as [`SMALL_CELL_PX`], below which the
-/// outer edges use a narrower gradient for the same reason.
+/// Tags whose smallest cell (shortest side over 8: across a foreshortened tag's long sides) is
+/// under this many pixels have their sides refitted once decoded, with the inner edges' bias
+/// estimated and taken off (`unbias_inner_edges`): below it the border's inner edge, one cell
+/// behind the outer edge where the data cell there is white, is within the blur's reach of the
+/// gradient window. In a 1-D model of the estimator (`scripts/edge_pull_1d.py`) the edge
+/// reads outward by 0.08..0.29 px more where the cell behind is white than where it is black at
+/// 2 px cells, 0.05..0.21 px at 3 px, 0.01..0.13 px at 3.5 px, under blur of 0.5..1 px. The
+/// same size as [`SMALL_CELL_PX`]; on the rendered sessions 3.5 and 4 px did no better
+/// (docs/benchmarks-poses.md).
 pub const INNER_EDGE_BIAS_MAX_CELL_PX: f64 = SMALL_CELL_PX;
 
-/// Fraction of the edge points that must see a white data cell behind the border, and of those
-/// that must not, for the bias to be estimated: with fewer, the bias is confounded with the
-/// sides' offsets and the refit is skipped.
+/// Fraction of a pair of sides' edge points that must see a white data cell behind the border,
+/// and of those that must not, for the pair's own bias to be estimated: with fewer, the bias is
+/// confounded with the sides' offsets.
 const MIN_BIAS_CONTRAST_FRACTION: f64 = 0.1;
+
+/// Largest ratio of the cells across a tag's two pairs of opposite sides for a pair whose own
+/// edge points do not separate white- from black-backed ones to take the other pair's bias: the
+/// pull falls steeply with the cell across the side (in the 1-D model of the estimator, by
+/// about half for each half pixel at 2..3.5 px), so a foreshortened tag's pairs differ.
+const MAX_POOLED_CELL_RATIO: f64 = 1.25;
 
 /// Refits the sides of a decoded small tag without its inner edges' pull.
 ///
@@ -1368,19 +1379,23 @@ const MIN_BIAS_CONTRAST_FRACTION: f64 = 0.1;
 ///
 /// With the code known, each edge point gets `w` = the fraction of white data cell behind it
 /// (sampled at its position and ±half a pixel along the side, so a point at a cell's end counts
-/// half), and the edge offsets `s` of all four sides are fitted jointly as
-/// `s = a_k + m_k t + b w` (per side an offset and a tilt, one `b` for the tag: the blur and
-/// the cell size are the tag's). By Frisch-Waugh, `b = Σ ω w̃ s̃ / Σ ω w̃²` with `w̃, s̃` the
-/// residuals of `w` and `s` after each side's own straight-line fit, and `var b = σ² / Σ ω w̃²`
-/// with `σ²` the model's residual variance. Each side's edge points are moved back by `b w`
-/// along its normal and its line refitted; the line's offset at `t` depends on `b` through the
-/// side's own straight-line fit of `w`, `ŵ(t)`, so `ŵ(t)² var b` joins its offset variance.
+/// half), and the edge offsets `s` of the four sides are fitted jointly as
+/// `s = a_k + m_k t + b_j w` (per side an offset and a tilt; one `b_j` per pair `j` of opposite
+/// sides, which share the cell across them and the blur: on a foreshortened tag the pull on the
+/// long sides, a narrow cell across, is several times that on the short ones). By Frisch-Waugh,
+/// `b_j = Σ ω w̃ s̃ / Σ ω w̃²` over the pair's points, with `w̃, s̃` the residuals of `w` and `s`
+/// after each side's own straight-line fit, and `var b_j = σ² / Σ ω w̃²` with `σ²` the model's
+/// residual variance. A pair whose own points do not separate the two kinds
+/// ([`MIN_BIAS_CONTRAST_FRACTION`]) takes the tag's pooled `b` when the two pairs' cells across
+/// are alike ([`MAX_POOLED_CELL_RATIO`]), else is left as it was. Each side's edge points are
+/// moved back by `b_j w` along its normal and its line refitted; the line's offset at `t`
+/// depends on `b_j` through the side's own straight-line fit of `w`, `ŵ(t)`, so
+/// `ŵ(t)² var b_j` joins its offset variance.
 ///
 /// `h`: the quad's homography from the tag square; `white`: the decoded code's cells in the
-/// quad's frame. `None` when the tag's code does not separate the two kinds of edge points
-/// ([`MIN_BIAS_CONTRAST_FRACTION`]) or the refitted quad is not a quad.
+/// quad's frame. `None` when neither pair can be corrected or the refitted quad is not a quad.
 ///
-/// The cost is a pass over the tag's edge points and four line fits, only for tags under
+/// The cost is a pass over the tag's edge points and up to four line fits, only for tags under
 /// [`INNER_EDGE_BIAS_MAX_CELL_PX`].
 fn unbias_inner_edges(
     rq: &RefinedQuad,
@@ -1433,41 +1448,65 @@ fn unbias_inner_edges(
             .collect();
         sides.push(pts);
     }
-    let all = sides.iter().flatten();
-    let n = all.clone().count();
-    let with_white = all.clone().filter(|p| p.white > 0.5).count();
-    let min_each = MIN_BIAS_CONTRAST_FRACTION * n as f64;
-    if n < 12 || (with_white as f64) < min_each || ((n - with_white) as f64) < min_each {
-        return None;
-    }
-    let (mut sww, mut sws) = (0.0, 0.0);
+    // Per pair of opposite sides (0 and 2, 1 and 3), which share the cell across them: the
+    // Frisch-Waugh sums, and the counts of white- and black-backed points.
     let mut fits = Vec::with_capacity(4);
-    // Residuals of `s` and `w` after each side's weighted straight-line fit.
-    for pts in &sides {
+    let (mut sww, mut sws) = ([0.0f64; 2], [0.0f64; 2]);
+    let mut kinds = [(0usize, 0usize); 2];
+    for (k, pts) in sides.iter().enumerate() {
         let (sa, sm) = straight_fit(pts, |p| p.s_px);
         let (wa, wm) = straight_fit(pts, |p| p.white);
         for p in pts {
             let (rs, rw) = (p.s_px - sa - sm * p.t_px, p.white - wa - wm * p.t_px);
-            sww += p.weight * rw * rw;
-            sws += p.weight * rw * rs;
+            sww[k % 2] += p.weight * rw * rw;
+            sws[k % 2] += p.weight * rw * rs;
+            if p.white > 0.5 {
+                kinds[k % 2].0 += 1;
+            } else {
+                kinds[k % 2].1 += 1;
+            }
         }
         fits.push((sa, sm, wa, wm));
     }
-    if sww <= 1e-9 {
+    let separates = |(white, black): (usize, usize)| {
+        let n = (white + black) as f64;
+        white + black >= 6
+            && white as f64 >= MIN_BIAS_CONTRAST_FRACTION * n
+            && black as f64 >= MIN_BIAS_CONTRAST_FRACTION * n
+    };
+    // The cell across each pair: pair 0 (sides 0 and 2) is crossed by sides 1 and 3.
+    let side_len = |k: usize| rq.corners[k].distance(rq.corners[(k + 1) % 4]);
+    let across = [
+        (side_len(1) + side_len(3)) / 16.0,
+        (side_len(0) + side_len(2)) / 16.0,
+    ];
+    let similar = across[0].max(across[1]) <= MAX_POOLED_CELL_RATIO * across[0].min(across[1]);
+    let both = (kinds[0].0 + kinds[1].0, kinds[0].1 + kinds[1].1);
+    // Each pair's own bias where its points separate the two kinds; else the tag's pooled one
+    // when the cells across the pairs are alike; else none (the pair is left as it was).
+    let own = |j: usize| (separates(kinds[j]) && sww[j] > 1e-9).then(|| (sws[j] / sww[j], sww[j]));
+    let pooled = (similar && separates(both) && sww[0] + sww[1] > 1e-9)
+        .then(|| ((sws[0] + sws[1]) / (sww[0] + sww[1]), sww[0] + sww[1]));
+    let bias: [Option<(f64, f64)>; 2] = std::array::from_fn(|j| own(j).or(pooled));
+    if bias.iter().all(Option::is_none) {
         return None;
     }
-    let b = sws / sww;
     let mut res2 = 0.0;
-    for (pts, &(sa, sm, wa, wm)) in sides.iter().zip(&fits) {
+    for (k, (pts, &(sa, sm, wa, wm))) in sides.iter().zip(&fits).enumerate() {
+        let b = bias[k % 2].map_or(0.0, |b| b.0);
         for p in pts {
             let r = (p.s_px - sa - sm * p.t_px) - b * (p.white - wa - wm * p.t_px);
             res2 += p.weight * r * r;
         }
     }
-    let dof = (n as f64 - 9.0).max(1.0);
-    let var_b = res2 / dof / sww;
+    let n = sides.iter().map(Vec::len).sum::<usize>() as f64;
+    let fitted = bias.iter().flatten().count() as f64;
+    let sigma2 = res2 / (n - 8.0 - fitted).max(1.0);
     let mut lines = rq.lines;
     for k in 0..4 {
+        let Some((b, sww_b)) = bias[k % 2] else {
+            continue;
+        };
         let old = &outward_lines[k];
         let moved: Vec<(DVec2, f64)> = rq.edge_points[k]
             .iter()
@@ -1483,7 +1522,7 @@ fn unbias_inner_edges(
         // The side's straight-line fit of `w`, re-centred on the new line's centroid.
         let (_, _, wa, wm) = fits[k];
         let shift = (line.centroid - old.centroid).dot(old.dir());
-        line.bias_var = [wa + wm * shift, wm, var_b];
+        line.bias_var = [wa + wm * shift, wm, sigma2 / sww_b];
         lines[k] = line;
     }
     let mut corners = [DVec2::ZERO; 4];
@@ -2140,7 +2179,7 @@ fn decode(
     }
     // A small tag's sides without the pull of its inner edges, now that the code says where
     // they are.
-    let unbiased = if unbias && rq.cell_px < INNER_EDGE_BIAS_MAX_CELL_PX {
+    let unbiased = if unbias && cell_px < INNER_EDGE_BIAS_MAX_CELL_PX {
         unbias_inner_edges(rq, &h, &white)
     } else {
         None
