@@ -793,7 +793,11 @@ struct Line {
     centroid: DVec2,
     sum_t2: f64,
     count: f64,
+    /// Scatter of the fitted points about the line, pixels.
     sigma: f64,
+    /// What the points' scatter is multiplied by, in variance, for the line's offset and tilt:
+    /// more than 1 when neighbouring points' errors are correlated (`allow_for_correlation`).
+    var_factor: f64,
     /// `[α, β, var_b]`: the line was moved by `b (α + β t)` at `t` (from the centroid, along
     /// the line) to undo the tag's inner-edge bias `b` (`unbias_inner_edges`), so its offset
     /// there is uncertain by `(α + β t)² var_b` more. Zero when not corrected.
@@ -817,7 +821,7 @@ impl Line {
     /// Variance of the line's offset along its normal at point `p`.
     fn offset_var_at(&self, p: DVec2) -> f64 {
         let t = (p - self.centroid).dot(self.dir());
-        let s2 = self.sigma * self.sigma;
+        let s2 = self.sigma * self.sigma * self.var_factor;
         let [alpha, beta, var_b] = self.bias_var;
         s2 / self.count.max(1.0)
             + s2 * t * t / self.sum_t2.max(1e-9)
@@ -861,6 +865,7 @@ fn fit_line(pts: &[(DVec2, f64)]) -> Option<Line> {
         sum_t2,
         count,
         sigma,
+        var_factor: 1.0,
         bias_var: [0.0; 3],
     })
 }
@@ -1275,7 +1280,8 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
             (0.4 * cell).clamp(0.75, 2.0)
         };
     }
-    let lines: [Line; 4] = lines.try_into().ok()?;
+    let mut lines: [Line; 4] = lines.try_into().ok()?;
+    allow_for_correlation(&mut lines, &edge_points);
     let (cov, bent) = corner_covariance(&lines, &corners, &bend, cell);
     let edge_rms_px = (lines.iter().map(|l| l.sigma * l.sigma).sum::<f64>() / 4.0).sqrt();
     // Corner k ends side k - 1 and starts side k.
@@ -1293,6 +1299,42 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
         edge_points,
         bend,
     })
+}
+
+/// Largest lag-one correlation of a tag's edge residuals allowed for (`allow_for_correlation`):
+/// the estimate from a few dozen points scatters by about 0.1, and a side whose residuals are
+/// more strongly correlated than this is a bent or partly replaced one, which the bend tests
+/// deal with. At 0.6 a line's variance is at most 4 times its points' scatter over their
+/// count.
+pub const MAX_RESIDUAL_CORRELATION: f64 = 0.6;
+
+/// Sets the four lines' variance factor from the tag's edge residuals' pooled lag-one
+/// correlation `ρ` (residuals about each side's line, neighbours along the side).
+///
+/// Neighbouring edge points are a pixel apart and each reads a central difference over up to
+/// ±1 px through bilinear interpolation, so they share pixels and their noise; and what varies
+/// slowly along a side (the pull of the code's cells behind the border, the sub-pixel phase as
+/// a slightly tilted edge crosses the pixel grid, shading across the blur) makes runs of
+/// residuals of one sign. Either way the points are fewer independent ones than they number.
+/// For residuals correlated as a first-order autoregression the variance of their mean is
+/// `(1 + ρ)/(1 - ρ)` times `σ²/N`, which each line's offset and tilt variance is multiplied by
+/// (`ρ` within `0..`[`MAX_RESIDUAL_CORRELATION`]; pooled over the four sides, because the
+/// image's noise and blur are the tag's).
+fn allow_for_correlation(lines: &mut [Line; 4], points: &[Vec<(DVec2, f64)>; 4]) {
+    let (mut lagged, mut squared) = (0.0, 0.0);
+    for (line, pts) in lines.iter().zip(points) {
+        let r: Vec<f64> = pts.iter().map(|(p, _)| p.dot(line.n) - line.d).collect();
+        squared += r.iter().map(|v| v * v).sum::<f64>();
+        lagged += r.windows(2).map(|w| w[0] * w[1]).sum::<f64>();
+    }
+    let rho = if squared > 0.0 {
+        (lagged / squared).clamp(0.0, MAX_RESIDUAL_CORRELATION)
+    } else {
+        0.0
+    };
+    for line in lines.iter_mut() {
+        line.var_factor = (1.0 + rho) / (1.0 - rho);
+    }
 }
 
 /// Each corner's 2 x 2 covariance (step 5 of the method) from its two lines' offset variances
@@ -1503,6 +1545,7 @@ fn unbias_inner_edges(
     let fitted = bias.iter().flatten().count() as f64;
     let sigma2 = res2 / (n - 8.0 - fitted).max(1.0);
     let mut lines = rq.lines;
+    let mut points = rq.edge_points.clone();
     for k in 0..4 {
         let Some((b, sww_b)) = bias[k % 2] else {
             continue;
@@ -1524,7 +1567,9 @@ fn unbias_inner_edges(
         let shift = (line.centroid - old.centroid).dot(old.dir());
         line.bias_var = [wa + wm * shift, wm, sigma2 / sww_b];
         lines[k] = line;
+        points[k] = moved;
     }
+    allow_for_correlation(&mut lines, &points);
     let mut corners = [DVec2::ZERO; 4];
     for k in 0..4 {
         corners[k] = lines[(k + 3) % 4].intersect(&lines[k])?;
@@ -1541,7 +1586,7 @@ fn unbias_inner_edges(
         cov,
         bent,
         lines,
-        edge_points: rq.edge_points.clone(),
+        edge_points: points,
         ..*rq
     })
 }
