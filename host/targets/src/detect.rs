@@ -34,7 +34,10 @@
 //!    `φ`. A floor on each line's offset, [`SIGMA_FLOOR_PX`] ([`SIGMA_FLOOR_NARROW_PX`] on cells
 //!    under [`SMALL_CELL_PX`]), accounts for model error the residuals cannot see: the gradient
 //!    centroid's error with the edge's position between pixel centres, which a nearly
-//!    axis-aligned side shares along its length.
+//!    axis-aligned side shares along its length. The points are fewer independent ones than
+//!    they number (neighbours share pixels; slow variations along a side make runs), so each
+//!    line's variance is multiplied by `(1 + ρ)/(1 - ρ)`, `ρ` the lag-one correlation of the
+//!    tag's residuals (`allow_for_correlation`, within 0..[`MAX_RESIDUAL_CORRELATION`]).
 //! 6. **Decoding**: the homography from the tag square to the quad samples all 10 x 10 cells;
 //!    black and white levels are modelled as planes over the tag (fitted to the black border and
 //!    the white outer ring), so a lighting gradient across the tag does not flip bits. The 36 data
@@ -1302,11 +1305,12 @@ fn refine_quad(img: &GrayF32, q: [DVec2; 4]) -> Option<RefinedQuad> {
 }
 
 /// Largest lag-one correlation of a tag's edge residuals allowed for (`allow_for_correlation`):
-/// the estimate from a few dozen points scatters by about 0.1, and a side whose residuals are
-/// more strongly correlated than this is a bent or partly replaced one, which the bend tests
-/// deal with. At 0.6 a line's variance is at most 4 times its points' scatter over their
-/// count.
-pub const MAX_RESIDUAL_CORRELATION: f64 = 0.6;
+/// at 0.3 a line's variance is at most 1.86 times its points' scatter over their count, and
+/// most tags reach it (the estimate, from about a hundred points, scatters by about 0.1). A
+/// higher cap inflates every sigma further without covering more of the errors, and the pose
+/// stages' robust losses and accuracy targets, set in units of the stated sigmas, then let more
+/// of a bad corner through (docs/benchmarks-poses.md, "Correlated edge residuals").
+pub const MAX_RESIDUAL_CORRELATION: f64 = 0.3;
 
 /// Sets the four lines' variance factor from the tag's edge residuals' pooled lag-one
 /// correlation `ρ` (residuals about each side's line, neighbours along the side).
