@@ -2638,6 +2638,111 @@ mod tests {
         assert!(median < 1.5 && max < 5.0, "median {median}, max {max}");
     }
 
+    /// Small foreshortened tags (10..14 px wide, twice as tall, blur 0.7 px): the long sides,
+    /// with a cell of 1.25..1.75 px across them, take several times the pull of the short
+    /// ones, so each pair of opposite sides gets its own bias. A side's outward offset from the
+    /// true side is the mean of its two corners' errors along its outward normal. Left in, the
+    /// pull moves the long sides outward beyond the first bound; one bias for the whole tag
+    /// moves the short sides inward beyond the second. What stays on the long sides is the
+    /// weaker pull of edges two cells in, which every point shares.
+    #[test]
+    fn a_foreshortened_small_tag_has_each_pair_of_sides_unbiased() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let (mut long, mut short) = (Vec::new(), Vec::new());
+        for _ in 0..10 {
+            let (w, h) = (480, 360);
+            let mut img = blank(w, h, 1.0);
+            let mut truth = Vec::new();
+            for (i, (cx, cy)) in [
+                (80.0, 90.0),
+                (240.0, 90.0),
+                (400.0, 90.0),
+                (80.0, 270.0),
+                (240.0, 270.0),
+                (400.0, 270.0),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let half_w = 0.5 * rng.random_range(10.0..14.0);
+                let ang: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+                let (s, c) = ang.sin_cos();
+                let corner = |x: f64, y: f64| {
+                    let (x, y) = (x * half_w, y * 2.0 * half_w);
+                    DVec2::new(cx + c * x - s * y, cy + s * x + c * y)
+                };
+                let q = [
+                    corner(-1.0, -1.0),
+                    corner(1.0, -1.0),
+                    corner(1.0, 1.0),
+                    corner(-1.0, 1.0),
+                ];
+                let id = 5 + 11 * i;
+                assert!(paint_tag(
+                    &mut img,
+                    &square_to_quad(&q).expect("homography"),
+                    id,
+                    0.05,
+                    1.0,
+                    4
+                ));
+                truth.push((id as u32, q));
+            }
+            let mut img = crate::profile::tests::blur(&img, 0.7);
+            for v in &mut img.data {
+                *v += rng.random_range(-0.01..0.01);
+            }
+            for d in detect(&img, &DetectorConfig::default()) {
+                let Some((_, q)) = truth.iter().find(|t| t.0 == d.id) else {
+                    continue;
+                };
+                if d.occluded_corners.contains(&true) {
+                    continue;
+                }
+                // The detected corners matched to the true ones, in the true order.
+                let found: Vec<DVec2> = q
+                    .iter()
+                    .map(|t| {
+                        d.corners_px
+                            .iter()
+                            .copied()
+                            .min_by(|a, b| a.distance(*t).total_cmp(&b.distance(*t)))
+                            .expect("four corners")
+                    })
+                    .collect();
+                let centre = (q[0] + q[1] + q[2] + q[3]) * 0.25;
+                for k in 0..4 {
+                    let (a, b) = (q[k], q[(k + 1) % 4]);
+                    let along = (b - a).normalize();
+                    let mut n = DVec2::new(-along.y, along.x);
+                    if n.dot((a + b) * 0.5 - centre) < 0.0 {
+                        n = -n;
+                    }
+                    let offset = 0.5 * ((found[k] - a).dot(n) + (found[(k + 1) % 4] - b).dot(n));
+                    if a.distance(b) > 15.0 {
+                        long.push(offset);
+                    } else {
+                        short.push(offset);
+                    }
+                }
+            }
+        }
+        assert!(
+            long.len() >= 60 && short.len() >= 60,
+            "{} long, {} short sides",
+            long.len(),
+            short.len()
+        );
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        let (ml, ms) = (mean(&long), mean(&short));
+        eprintln!(
+            "{} tags: mean outward offset, long sides {ml:+.3} px, short sides {ms:+.3} px",
+            long.len() / 2
+        );
+        assert!(ml.abs() < 0.1, "long sides {ml}");
+        assert!(ms.abs() < 0.04, "short sides {ms}");
+    }
+
     #[test]
     fn corrects_bit_errors_up_to_the_limit() {
         let mut img = blank(240, 240, 0.8);

@@ -479,7 +479,7 @@ pub(crate) mod tests {
     use rand_chacha::ChaCha8Rng;
 
     /// Separable Gaussian blur (clamped borders).
-    fn blur(img: &GrayF32, sigma: f64) -> GrayF32 {
+    pub(crate) fn blur(img: &GrayF32, sigma: f64) -> GrayF32 {
         let r = (3.0 * sigma).ceil() as isize;
         let k: Vec<f64> = (-r..=r)
             .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
