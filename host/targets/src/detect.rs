@@ -1327,9 +1327,13 @@ pub const MAX_RESIDUAL_CORRELATION: f64 = 0.3;
 fn allow_for_correlation(lines: &mut [Line; 4], points: &[Vec<(DVec2, f64)>; 4]) {
     let (mut lagged, mut squared) = (0.0, 0.0);
     for (line, pts) in lines.iter().zip(points) {
-        let r: Vec<f64> = pts.iter().map(|(p, _)| p.dot(line.n) - line.d).collect();
-        squared += r.iter().map(|v| v * v).sum::<f64>();
-        lagged += r.windows(2).map(|w| w[0] * w[1]).sum::<f64>();
+        let mut previous: Option<f64> = None;
+        for (p, _) in pts {
+            let r = p.dot(line.n) - line.d;
+            squared += r * r;
+            lagged += previous.map_or(0.0, |q| q * r);
+            previous = Some(r);
+        }
     }
     let rho = if squared > 0.0 {
         (lagged / squared).clamp(0.0, MAX_RESIDUAL_CORRELATION)
@@ -1397,8 +1401,7 @@ fn corner_covariance(
 /// gradient window. In a 1-D model of the estimator (`scripts/edge_pull_1d.py`) the edge
 /// reads outward by 0.08..0.29 px more where the cell behind is white than where it is black at
 /// 2 px cells, 0.05..0.21 px at 3 px, 0.01..0.13 px at 3.5 px, under blur of 0.5..1 px. The
-/// same size as [`SMALL_CELL_PX`]; on the rendered sessions 3.5 and 4 px did no better
-/// (docs/benchmarks-poses.md).
+/// same size as [`SMALL_CELL_PX`] (docs/benchmarks-poses.md, "Small tags").
 pub const INNER_EDGE_BIAS_MAX_CELL_PX: f64 = SMALL_CELL_PX;
 
 /// Fraction of a pair of sides' edge points that must see a white data cell behind the border,
@@ -2647,52 +2650,11 @@ mod tests {
     /// weaker pull of edges two cells in, which every point shares.
     #[test]
     fn a_foreshortened_small_tag_has_each_pair_of_sides_unbiased() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         let (mut long, mut short) = (Vec::new(), Vec::new());
-        for _ in 0..10 {
-            let (w, h) = (480, 360);
-            let mut img = blank(w, h, 1.0);
-            let mut truth = Vec::new();
-            for (i, (cx, cy)) in [
-                (80.0, 90.0),
-                (240.0, 90.0),
-                (400.0, 90.0),
-                (80.0, 270.0),
-                (240.0, 270.0),
-                (400.0, 270.0),
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                let half_w = 0.5 * rng.random_range(10.0..14.0);
-                let ang: f64 = rng.random_range(0.0..std::f64::consts::TAU);
-                let (s, c) = ang.sin_cos();
-                let corner = |x: f64, y: f64| {
-                    let (x, y) = (x * half_w, y * 2.0 * half_w);
-                    DVec2::new(cx + c * x - s * y, cy + s * x + c * y)
-                };
-                let q = [
-                    corner(-1.0, -1.0),
-                    corner(1.0, -1.0),
-                    corner(1.0, 1.0),
-                    corner(-1.0, 1.0),
-                ];
-                let id = 5 + 11 * i;
-                assert!(paint_tag(
-                    &mut img,
-                    &square_to_quad(&q).expect("homography"),
-                    id,
-                    0.05,
-                    1.0,
-                    4
-                ));
-                truth.push((id as u32, q));
-            }
-            let mut img = crate::profile::tests::blur(&img, 0.7);
-            for v in &mut img.data {
-                *v += rng.random_range(-0.01..0.01);
-            }
-            for d in detect(&img, &DetectorConfig::default()) {
+        for seed in 0..10 {
+            let sc = crate::profile::tests::stretched_scene(seed, (10.0, 14.0), 2.0, 1.0, 1.0, 0.7);
+            let (img, truth) = (&sc.img, &sc.truth);
+            for d in detect(img, &DetectorConfig::default()) {
                 let Some((_, q)) = truth.iter().find(|t| t.0 == d.id) else {
                     continue;
                 };

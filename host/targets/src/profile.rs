@@ -479,7 +479,7 @@ pub(crate) mod tests {
     use rand_chacha::ChaCha8Rng;
 
     /// Separable Gaussian blur (clamped borders).
-    pub(crate) fn blur(img: &GrayF32, sigma: f64) -> GrayF32 {
+    fn blur(img: &GrayF32, sigma: f64) -> GrayF32 {
         let r = (3.0 * sigma).ceil() as isize;
         let k: Vec<f64> = (-r..=r)
             .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
@@ -523,6 +523,19 @@ pub(crate) mod tests {
         white: f32,
         sigma: f64,
     ) -> Scene {
+        stretched_scene(seed, sides, 1.0, beyond, white, sigma)
+    }
+
+    /// As [`scene`], each tag `aspect` times as tall as it is wide (`sides` its width): a
+    /// foreshortened tag.
+    pub(crate) fn stretched_scene(
+        seed: u64,
+        sides: (f64, f64),
+        aspect: f64,
+        beyond: f32,
+        white: f32,
+        sigma: f64,
+    ) -> Scene {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let (w, h) = (480, 360);
         let mut img = GrayF32::new(w, h, vec![beyond; w * h]).expect("image");
@@ -543,6 +556,7 @@ pub(crate) mod tests {
             let (s, c) = ang.sin_cos();
             let half = 0.5 * side;
             let mut corner = |x: f64, y: f64| {
+                let y = y * aspect;
                 DVec2::new(cx + rng.random_range(-0.3..0.3), cy)
                     + DVec2::new(c * x - s * y, s * x + c * y) * half
             };
