@@ -47,9 +47,13 @@
 //!
 //! | surround beyond the one-cell ring | blur 0.6 | blur 1.0 | blur 1.5 |
 //! |---|---|---|---|
-//! | dark (0.2) | 0.094 -> 0.066 | 0.216 -> 0.132 | 0.412 -> 0.257 |
-//! | grey (0.55) | 0.071 -> 0.067 | 0.156 -> 0.152 | 0.288 -> 0.268 |
-//! | bright (1.0), ring 0.7 | 0.194 -> 0.082 | 0.393 -> 0.148 | 0.809 -> 0.400 |
+//! | dark (0.2) | 0.113 -> 0.066 | 0.249 -> 0.132 | 0.441 -> 0.255 |
+//! | grey (0.55) | 0.077 -> 0.067 | 0.157 -> 0.152 | 0.288 -> 0.269 |
+//! | bright (1.0), ring 0.7 | 0.172 -> 0.082 | 0.370 -> 0.148 | 0.809 -> 0.400 |
+//!
+//! The gradient centroid's figures include its small tags' refit without the border's
+//! inner-edge pull ([`crate::detect`], step 6), which takes off an outward pull: on a dark
+//! surround that pull had partly cancelled the surround's inward one.
 //!
 //! # Why it is off by default
 //!
