@@ -43,7 +43,9 @@
 //!    the white outer ring), so a lighting gradient across the tag does not flip bits. The 36 data
 //!    bits are matched against all 587 codes for each of the four corner orderings; the best
 //!    match within [`DetectorConfig::max_hamming`] wins. Quads whose black border is not dark are
-//!    rejected before decoding. Once the code is known, a tag with its smallest cell under
+//!    rejected before decoding. A small tag whose refined quad does not decode is read a second
+//!    time ([`UNREFINED_MAX_CELL_PX`]), with each cell's grey averaged over its middle, then
+//!    through its contour's quad; found so, its corners are all marked occluded. Once the code is known, a tag with its smallest cell under
 //!    [`INNER_EDGE_BIAS_MAX_CELL_PX`] has its sides refitted without the pull of the border's
 //!    inner edge, which lies one cell behind the outer edge where the data cell there is white
 //!    and, blurred, moves the outer edge's gradient centroid outward: one bias per pair of
@@ -164,16 +166,20 @@ pub const MIN_VISIBLE_NEAR: f64 = 0.5;
 /// partly an occluder's outline.
 pub const OCCLUDED_SIGMA_CELLS: f64 = 0.25;
 
-/// Largest cell, pixels, of a tag read through its contour's quad when its refined quad does
-/// not decode: on cells of a few pixels a neighbour's edge or the surround's within the
+/// Largest cell, pixels, of a tag read a second time when its refined quad does not decode
+/// (the same quad with each cell averaged over its middle, [`CELL_SPREAD_CELLS`], then its
+/// contour's quad): on cells of a few pixels the noise of a dark tag is as large as the
+/// contrast at a single sample, and a neighbour's edge or the surround's within the
 /// gradient window can pull a refined side by a cell, so the grid is sampled off by a cell
 /// while the binary contour is still right. On larger tags a refined quad that does not
 /// decode is mostly an occluded one, whose contour follows the occluder's outline.
 pub const UNREFINED_MAX_CELL_PX: f64 = 4.0;
 
-/// Standard deviation added to every corner of a tag read through its contour's quad, in
+/// Standard deviation added to every corner of a small tag read only on a second reading
+/// (through its refined quad with each cell averaged, or through its contour's quad), in
 /// cells: the contour's corners are only as good as the binary threshold's pixel grid, and the
-/// refined sides that disagree with them do not say which is right.
+/// refined sides that disagree with them do not say which is right; a refined quad whose cells
+/// read right only when averaged is as noisy, or as hidden, as its code.
 pub const UNREFINED_SIGMA_CELLS: f64 = 1.0;
 
 /// Half the span of the central difference that measures the edge gradient, pixels (the
@@ -187,6 +193,17 @@ pub const SMALL_CELL_PX: f64 = 3.0;
 /// Strength of the Laplacian sharpening of the sampled cell grid for small tags (the reference
 /// library's default `decode_sharpening`).
 pub const DECODE_SHARPENING: f64 = 0.25;
+
+/// Half-width, in cells, of the 3 x 3 points whose grey values are averaged into a cell's: on
+/// cells of [`AVERAGED_CELL_MIN_PX`] and more always, on smaller ones in the second reading of a
+/// small tag (`DecodeOptions::average_cells`). Averaging over the cell's middle lowers the
+/// noise of a dark or low-contrast tag; on cells of a few pixels it also takes in some of the
+/// blurred neighbours, so the first reading of a small tag samples the centre only.
+pub const CELL_SPREAD_CELLS: f64 = 0.2;
+
+/// Smallest cell, pixels, whose grey value is always averaged over its middle
+/// ([`CELL_SPREAD_CELLS`]).
+pub const AVERAGED_CELL_MIN_PX: f64 = 4.0;
 
 /// Detector settings.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -317,7 +334,8 @@ pub struct DetectStats {
     pub rejected_decode: usize,
     /// Duplicate detections removed.
     pub duplicates: usize,
-    /// Tags decoded through their contour's quad after their refined quad did not decode
+    /// Small tags decoded only on a second reading, through their refined quad with each cell
+    /// averaged or through their contour's quad, after their refined quad did not decode
     /// (every corner marked occluded).
     #[serde(default)]
     pub decoded_unrefined: usize,
@@ -397,25 +415,40 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
             };
             refined.corners = b;
         }
-        // A small tag whose refined quad does not decode is read once more through its
-        // contour's quad (UNREFINED_MAX_CELL_PX); its corners are all marked occluded, their
-        // covariance the refined quad's plus UNREFINED_SIGMA_CELLS. Not in the reference
-        // library's corner model, which reports that library's quads only.
-        let det = decode(img, &refined, cfg, unbias).or_else(|| {
-            if reference.is_some() || refined.cell_px > UNREFINED_MAX_CELL_PX {
+        // A small tag whose refined quad does not decode (UNREFINED_MAX_CELL_PX) is read a
+        // second time: through the same quad with each cell's grey averaged over its middle
+        // (a noisy, dark tag), then through its contour's quad, centre and averaged; its
+        // corners are all marked occluded, their covariance the refined quad's plus
+        // UNREFINED_SIGMA_CELLS. Not in the reference library's corner model, which reports
+        // that library's quads only.
+        let first = DecodeOptions {
+            unbias_inner_edges: unbias,
+            average_cells: false,
+        };
+        let det = decode(img, &refined, cfg, first).or_else(|| {
+            let cell_px = refined.cell_px;
+            if reference.is_some() || cell_px > UNREFINED_MAX_CELL_PX {
                 return None;
             }
-            let mut det = decode(
-                img,
-                &RefinedQuad {
+            let averaged = DecodeOptions {
+                average_cells: true,
+                ..first
+            };
+            let mut det = decode(img, &refined, cfg, averaged).or_else(|| {
+                let contour = RefinedQuad {
                     corners: quad,
                     ..refined
-                },
-                cfg,
-                false,
-            )?;
+                };
+                [false, true].into_iter().find_map(|average_cells| {
+                    let opts = DecodeOptions {
+                        unbias_inner_edges: false,
+                        average_cells,
+                    };
+                    decode(img, &contour, cfg, opts)
+                })
+            })?;
             stats.decoded_unrefined += 1;
-            let extra = (UNREFINED_SIGMA_CELLS * refined.cell_px).powi(2);
+            let extra = (UNREFINED_SIGMA_CELLS * cell_px).powi(2);
             for cov in &mut det.corner_cov_px2 {
                 cov[0] += extra;
                 cov[2] += extra;
@@ -517,7 +550,7 @@ fn threshold(img: &GrayF32, cfg: &DetectorConfig) -> Vec<bool> {
 /// black border of a tag with cells under 3 px (side under 24 px) holds at most
 /// `7/16 · 24² ≈ 250` px, so this leaves ample room while keeping the large dark regions of a
 /// scene (hair, shadow) out of the join.
-const MAX_JOIN_PX: usize = 2048;
+pub const MAX_JOIN_PX: usize = 2048;
 
 /// The dark pixels' components: 4-connected, and the 8-connected ones that join several of
 /// them.
@@ -2118,16 +2151,23 @@ fn border_is_dark(img: &GrayF32, q: &[DVec2; 4]) -> bool {
     bright <= MAX_BRIGHT_BORDER_UNREFINED
 }
 
+/// How a quad's code is read (`decode`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct DecodeOptions {
+    /// Refit a small tag's sides without its inner edges' pull (`unbias_inner_edges`) once
+    /// the code is known; off for a quad that is not the edge refinement's own.
+    unbias_inner_edges: bool,
+    /// Average each cell's grey over its middle ([`CELL_SPREAD_CELLS`]) whatever its size.
+    average_cells: bool,
+}
+
 /// Reads the code of a refined quad (step 6 of the method), tests its border's width (step 7)
 /// and reports the tag.
-///
-/// `unbias`: refit a small tag's sides without its inner edges' pull (`unbias_inner_edges`)
-/// once the code is known; off for a quad that is not the edge refinement's own.
 fn decode(
     img: &GrayF32,
     rq: &RefinedQuad,
     cfg: &DetectorConfig,
-    unbias: bool,
+    opts: DecodeOptions,
 ) -> Option<Detection> {
     let q = rq.corners;
     // Sample the grid once in the quad's own order; rotations permute the grid.
@@ -2136,7 +2176,11 @@ fn decode(
         .map(|k| q[k].distance(q[(k + 1) % 4]))
         .fold(f64::INFINITY, f64::min);
     let cell_px = side_px / tag36h11::WIDTH_AT_BORDER as f64;
-    let spread = if cell_px >= 4.0 { 0.2 } else { 0.0 };
+    let spread = if opts.average_cells || cell_px >= AVERAGED_CELL_MIN_PX {
+        CELL_SPREAD_CELLS
+    } else {
+        0.0
+    };
     let mut raw = [[None; 10]; 10];
     for (r, row) in raw.iter_mut().enumerate() {
         for (c, v) in row.iter_mut().enumerate() {
@@ -2319,7 +2363,7 @@ fn decode(
     }
     // A small tag's sides without the pull of its inner edges, now that the code says where
     // they are.
-    let unbiased = if unbias && cell_px < INNER_EDGE_BIAS_MAX_CELL_PX {
+    let unbiased = if opts.unbias_inner_edges && cell_px < INNER_EDGE_BIAS_MAX_CELL_PX {
         unbias_inner_edges(rq, &h, &white)
     } else {
         None

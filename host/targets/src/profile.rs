@@ -3,7 +3,7 @@
 //!
 //! # Why
 //!
-//! The gradient-centroid edge of [`crate::detect`] assumes the edge's gradient lobe stands
+//! The gradient-centroid edge of [`crate::detect`](mod@crate::detect) assumes the edge's gradient lobe stands
 //! alone. On a tag whose cells are only 1.5..4 px wide, blur of a pixel or more merges it with
 //! the lobes of the neighbouring edges a cell away: the inner edge of the black border (towards
 //! white data cells) and the outer edge of the white ring (towards whatever surrounds the tag).
@@ -52,7 +52,7 @@
 //! | bright (1.0), ring 0.7 | 0.172 -> 0.082 | 0.370 -> 0.148 | 0.809 -> 0.400 |
 //!
 //! The gradient centroid's figures include its small tags' refit without the border's
-//! inner-edge pull ([`crate::detect`], step 6), which takes off an outward pull: on a dark
+//! inner-edge pull ([`crate::detect`](mod@crate::detect), step 6), which takes off an outward pull: on a dark
 //! surround that pull had partly cancelled the surround's inward one.
 //!
 //! # Why it is off by default

@@ -268,3 +268,38 @@ fn a_small_tag_whose_refined_quad_does_not_decode_is_read_through_its_contour() 
     ids.sort_unstable();
     assert_eq!(ids, [31, 223, 438, 461, 507, 518]);
 }
+
+/// A 15 px tag (cells under 2 px) in a deep shadow, its grey levels 0..13 of 255: a crop of the
+/// recall benchmark's `shadow011.png` (`scripts/peers/apriltag_recall.py --images 24 --seed 3`,
+/// tag 394), which the AprilTag C library finds. Read at the cells' centres the quantisation
+/// noise flips four bits, over the Hamming limit; averaged over each cell's middle
+/// (`CELL_SPREAD_CELLS`) the refined quad reads it with one. Found only on that second
+/// reading, its corners are all marked occluded, with sigmas that cover their errors.
+#[test]
+fn a_small_tag_in_deep_shadow_is_read_with_its_cells_averaged() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/dark_small_tag.png");
+    let img = GrayF32::load(&path).expect("fixture loads");
+    // The benchmark's truth, less the crop's origin (661, 559), in the detector's order.
+    let truth = [
+        DVec2::new(48.7729, 34.1417),
+        DVec2::new(34.0309, 31.6385),
+        DVec2::new(31.5502, 46.3378),
+        DVec2::new(46.2897, 48.8438),
+    ];
+    let dets = detect(&img, &DetectorConfig::default());
+    let ids: Vec<u32> = dets.iter().map(|d| d.id).collect();
+    assert_eq!(ids, [394], "{dets:?}");
+    let d = &dets[0];
+    assert!(d.hamming <= 1, "hamming {}", d.hamming);
+    assert_eq!(d.occluded_corners, [true; 4]);
+    let sig = d.corner_sigma_px();
+    for j in 0..4 {
+        let e = d.corners_px[j].distance(truth[j]);
+        assert!(
+            e <= 3.0 * sig[j],
+            "corner {j}: error {e:.2} px, sigma {:.2} px",
+            sig[j]
+        );
+    }
+}
