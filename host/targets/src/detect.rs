@@ -41,16 +41,17 @@
 //! 6. **Decoding**: the homography from the tag square to the quad samples all 10 x 10 cells;
 //!    black and white levels are modelled as planes over the tag (fitted to the black border and
 //!    the white outer ring), so a lighting gradient across the tag does not flip bits. The 36 data
-//!    bits are matched against all 587 codes for each of the four corner orderings; the best
-//!    match within [`DetectorConfig::max_hamming`] wins. Quads whose black border is not dark are
+//!    bits are matched against all 587 codes for each of the four corner orderings; the best match
+//!    within [`DetectorConfig::max_hamming`] wins. Quads whose black border is not dark are
 //!    rejected before decoding. A small tag whose refined quad does not decode is read a second
 //!    time ([`UNREFINED_MAX_CELL_PX`]), with each cell's grey averaged over its middle, then
-//!    through its contour's quad; found so, its corners are all marked occluded. Once the code is known, a tag with its smallest cell under
-//!    [`INNER_EDGE_BIAS_MAX_CELL_PX`] has its sides refitted without the pull of the border's
-//!    inner edge, which lies one cell behind the outer edge where the data cell there is white
-//!    and, blurred, moves the outer edge's gradient centroid outward: one bias per pair of
-//!    opposite sides, fitted from the white-backed edge points against the black-backed ones
-//!    (`unbias_inner_edges`), taken off, its uncertainty carried into the corners' covariance.
+//!    through its contour's quad; found so, its corners are all marked occluded. Once the code is
+//!    known, a tag with its smallest cell under [`INNER_EDGE_BIAS_MAX_CELL_PX`] has its sides
+//!    refitted without the pull of the border's inner edge, which lies one cell behind the outer
+//!    edge where the data cell there is white and, blurred, moves the outer edge's gradient
+//!    centroid outward: one bias per pair of opposite sides, fitted from the white-backed edge
+//!    points against the black-backed ones (`unbias_inner_edges`), taken off, its uncertainty
+//!    carried into the corners' covariance.
 //! 7. **Border width** (a side displaced by an occluding edge): the black border is exactly one
 //!    cell wide, and the decoded code says where a data cell behind it is white, i.e. where the
 //!    border's inner edge (or, behind a black data cell, the next one, two cells in) is visible.
@@ -64,10 +65,13 @@
 //!    has the displacement added to both its corners' variance along that side's normal, and,
 //!    beyond [`BORDER_WIDTH_SIGMAS`] and [`MIN_BORDER_DISPLACEMENT_PX`], the corners marked
 //!    occluded. What is common to all sides (ink spread, a bloom of the white) is taken off
-//!    first; sides whose cells are under
-//!    [`MIN_WIDTH_TEST_CELL_PX`] across are not tested (their edges are too close to tell a
-//!    fraction of a pixel); every side of the family has a white cell within
-//!    [`MAX_INNER_EDGE_DEPTH`] cells of its border, so no side is left untested by its code.
+//!    first. Sides whose cells are under [`MIN_WIDTH_TEST_CELL_PX`] across are not tested on
+//!    their own (their edges are too close to tell a fraction of a pixel, and the inner edges'
+//!    pull differs between a foreshortened tag's two pairs of sides); such a pair, down to
+//!    [`MIN_PAIR_WIDTH_TEST_CELL_PX`], is compared with itself, the thinner side's border
+//!    against the other's, at each corner (`thinner_of_pair`). Every side of the family has a
+//!    white cell within [`MAX_INNER_EDGE_DEPTH`] cells of its border, so no side is left
+//!    untested by its code.
 //!
 //! [`DetectorConfig::corner_model`] can instead report the reference library's unrefined quad
 //! ([`CornerModel::BinaryBoundary`]: that library's quad stage, reimplemented in
@@ -1700,8 +1704,8 @@ pub const MIN_WIDTH_TEST_CELL_PX: f64 = SMALL_CELL_PX;
 pub const MIN_PAIR_WIDTH_TEST_CELL_PX: f64 = 1.5;
 
 /// Edge samples per independent one: the inner-edge samples are a pixel apart and each reads a
-/// central difference over up to ±1 px through bilinear interpolation, so neighbours share pixels and
-/// their noise; the scatter over the count is multiplied by this.
+/// central difference over up to ±1 px through bilinear interpolation, so neighbours share
+/// pixels and their noise; the scatter over the count is multiplied by this.
 const SAMPLES_PER_INDEPENDENT: f64 = 2.0;
 
 /// A side's outer edge is displaced (an occluder's edge along the border, see
@@ -1754,13 +1758,13 @@ struct InnerEdges {
 }
 
 /// Measures the edges behind the black border along each side of the quad (`h`: the quad's
-/// homography from the tag square, `white`: the decoded code's cells in the quad's frame)
-/// where the code puts a white data cell within [`MAX_INNER_EDGE_DEPTH`] cells of the outer
-/// edge and the cell across the edge is at least `min_cell_px`: the centroid of the squared dark-to-light gradient along the edge's normal (the outer
-/// edges' estimator, step 4), in a window re-centred over three passes. Samples whose contrast
-/// is below [`VISIBLE_CONTRAST`] of the tag's median are left out (the white cell is hidden).
-/// `None` for a side with no sample (no white cell within reach, all hidden, or cells under
-/// `min_cell_px` across it).
+/// homography from the tag square, `white`: the decoded code's cells in the quad's frame) where the
+/// code puts a white data cell within [`MAX_INNER_EDGE_DEPTH`] cells of the outer edge and the cell
+/// across the edge is at least `min_cell_px`: the centroid of the squared dark-to-light gradient
+/// along the edge's normal (the outer edges' estimator, step 4), in a window re-centred over three
+/// passes. Samples whose contrast is below [`VISIBLE_CONTRAST`] of the tag's median are left out
+/// (the white cell is hidden). `None` for a side with no sample (no white cell within reach, all
+/// hidden, or cells under `min_cell_px` across it).
 fn inner_edges(
     img: &GrayF32,
     h: &DMat3,

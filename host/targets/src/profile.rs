@@ -3,10 +3,11 @@
 //!
 //! # Why
 //!
-//! The gradient-centroid edge of [`crate::detect`](mod@crate::detect) assumes the edge's gradient lobe stands
-//! alone. On a tag whose cells are only 1.5..4 px wide, blur of a pixel or more merges it with
-//! the lobes of the neighbouring edges a cell away: the inner edge of the black border (towards
-//! white data cells) and the outer edge of the white ring (towards whatever surrounds the tag).
+//! The gradient-centroid edge of [`crate::detect`](mod@crate::detect) assumes the edge's
+//! gradient lobe stands alone. On a tag whose cells are only 1.5..4 px wide, blur of a pixel or
+//! more merges it with the lobes of the neighbouring edges a cell away: the inner edge of the
+//! black border (towards white data cells) and the outer edge of the white ring (towards
+//! whatever surrounds the tag).
 //! A surround darker than the ring pulls the centroid inward (-0.15..-0.28 px at blur 1..1.5
 //! px), a surround brighter than the ring pushes it outward (+0.3..+0.67 px), as measured in
 //! docs/benchmarks-poses.md. Modelling the neighbours removes that.
@@ -52,8 +53,8 @@
 //! | bright (1.0), ring 0.7 | 0.172 -> 0.082 | 0.370 -> 0.148 | 0.809 -> 0.400 |
 //!
 //! The gradient centroid's figures include its small tags' refit without the border's
-//! inner-edge pull ([`crate::detect`](mod@crate::detect), step 6), which takes off an outward pull: on a dark
-//! surround that pull had partly cancelled the surround's inward one.
+//! inner-edge pull ([`crate::detect`](mod@crate::detect), step 6), which takes off an outward
+//! pull: on a dark surround that pull had partly cancelled the surround's inward one.
 //!
 //! # Why it is off by default
 //!
