@@ -123,7 +123,6 @@ fn a_link_that_fails_after_every_reconnect_ends_with_a_report() {
         reconnect_window: Duration::from_secs(30),
         ..CaptureOptions::default()
     };
-    let started = std::time::Instant::now();
     let err = run_capture(connector, &plan(), &options, &mut Unattended).expect_err("gives up");
     let CaptureError::LinkUnusable {
         reconnects,
@@ -134,9 +133,9 @@ fn a_link_that_fails_after_every_reconnect_ends_with_a_report() {
     else {
         panic!("expected LinkUnusable, got {err}");
     };
+    // The bound on stalled reconnects ended it (the 30 s reconnect window would have ended it
+    // as `LinkLost`).
     assert_eq!(reconnects, options.max_stalled_reconnects);
     assert_eq!(shots_kept, 0);
     assert!(timeouts >= u64::from(reconnects), "{timeouts}");
-    // Well inside the 30 s reconnect window: the bound, not the window, ended it.
-    assert!(started.elapsed() < Duration::from_secs(20));
 }
