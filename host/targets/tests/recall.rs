@@ -233,6 +233,33 @@ fn every_small_oblique_packed_or_shadowed_tag_is_found_on_a_dark_surround() {
     check(&scene(0.3, 2), "dark surround");
 }
 
+/// Detects the tags of a crop fixture in `tests/data` and checks the one read only on a second
+/// reading: tag `id` is found, its corners are all marked occluded, and their sigmas cover
+/// their errors against `truth` (the benchmark's corners less the crop's origin, in the
+/// detector's order). Returns every detection of the crop.
+fn second_reading(file: &str, id: u32, truth: [DVec2; 4]) -> Vec<skinbrdf_targets::Detection> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(file);
+    let img = GrayF32::load(&path).expect("fixture loads");
+    let dets = detect(&img, &DetectorConfig::default());
+    let d = dets
+        .iter()
+        .find(|d| d.id == id)
+        .unwrap_or_else(|| panic!("tag {id} found in {file}: {dets:?}"));
+    assert_eq!(d.occluded_corners, [true; 4]);
+    let sig = d.corner_sigma_px();
+    for j in 0..4 {
+        let e = d.corners_px[j].distance(truth[j]);
+        assert!(
+            e <= 3.0 * sig[j],
+            "{file}, corner {j}: error {e:.2} px, sigma {:.2} px",
+            sig[j]
+        );
+    }
+    dets
+}
+
 /// A 15 px tag (cells under 2 px) at the corner of a tilted packed grid, on a grey surround: a
 /// crop of the recall benchmark's `packed018.png` (`scripts/peers/apriltag_recall.py --images 24
 /// --seed 3`, tag 461), which the AprilTag C library finds. The surround's edge within the
@@ -241,28 +268,14 @@ fn every_small_oblique_packed_or_shadowed_tag_is_found_on_a_dark_surround() {
 /// occluded, with sigmas that cover their errors.
 #[test]
 fn a_small_tag_whose_refined_quad_does_not_decode_is_read_through_its_contour() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/packed_small_tag.png");
-    let img = GrayF32::load(&path).expect("fixture loads");
-    // The benchmark's truth, less the crop's origin (1013, 591), in the detector's order.
+    // The crop's origin in the benchmark image: (1013, 591).
     let truth = [
         DVec2::new(33.54, 33.9487),
         DVec2::new(28.6659, 44.6212),
         DVec2::new(47.2967, 46.2809),
         DVec2::new(52.0367, 35.5226),
     ];
-    let dets = detect(&img, &DetectorConfig::default());
-    let d = dets.iter().find(|d| d.id == 461).expect("tag 461 found");
-    assert_eq!(d.occluded_corners, [true; 4]);
-    let sig = d.corner_sigma_px();
-    for j in 0..4 {
-        let e = d.corners_px[j].distance(truth[j]);
-        assert!(
-            e <= 3.0 * sig[j],
-            "corner {j}: error {e:.2} px, sigma {:.2} px",
-            sig[j]
-        );
-    }
+    let dets = second_reading("packed_small_tag.png", 461, truth);
     // Its neighbours in the crop are found through their refined quads, and nothing else.
     let mut ids: Vec<u32> = dets.iter().map(|d| d.id).collect();
     ids.sort_unstable();
@@ -277,29 +290,15 @@ fn a_small_tag_whose_refined_quad_does_not_decode_is_read_through_its_contour() 
 /// reading, its corners are all marked occluded, with sigmas that cover their errors.
 #[test]
 fn a_small_tag_in_deep_shadow_is_read_with_its_cells_averaged() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/dark_small_tag.png");
-    let img = GrayF32::load(&path).expect("fixture loads");
-    // The benchmark's truth, less the crop's origin (661, 559), in the detector's order.
+    // The crop's origin in the benchmark image: (661, 559).
     let truth = [
         DVec2::new(48.7729, 34.1417),
         DVec2::new(34.0309, 31.6385),
         DVec2::new(31.5502, 46.3378),
         DVec2::new(46.2897, 48.8438),
     ];
-    let dets = detect(&img, &DetectorConfig::default());
-    let ids: Vec<u32> = dets.iter().map(|d| d.id).collect();
-    assert_eq!(ids, [394], "{dets:?}");
-    let d = &dets[0];
-    assert!(d.hamming <= 1, "hamming {}", d.hamming);
-    assert_eq!(d.occluded_corners, [true; 4]);
-    let sig = d.corner_sigma_px();
-    for j in 0..4 {
-        let e = d.corners_px[j].distance(truth[j]);
-        assert!(
-            e <= 3.0 * sig[j],
-            "corner {j}: error {e:.2} px, sigma {:.2} px",
-            sig[j]
-        );
-    }
+    let dets = second_reading("dark_small_tag.png", 394, truth);
+    // Nothing else in the crop; read within one bit.
+    assert_eq!(dets.len(), 1, "{dets:?}");
+    assert!(dets[0].hamming <= 1, "hamming {}", dets[0].hamming);
 }
