@@ -1697,9 +1697,9 @@ pub const MIN_WIDTH_TEST_CELL_PX: f64 = SMALL_CELL_PX;
 /// other where [`MIN_WIDTH_TEST_CELL_PX`] leaves one of them unmeasured (`thinner_of_pair`).
 /// The inner edges' pull that keeps such sides from being tested on their own depends on the
 /// cell across the side and on the code behind it; two opposite sides share the first and
-/// differ in the second, so their difference leaves the code's share, which on whole tags of
-/// the synthetic sessions stays within four of its standard deviations down to this size
-/// (docs/benchmarks-poses.md). Under it (a square under 12 px) the border's two edges are within
+/// differ in the second, so their difference leaves only the code's share, small against the
+/// displacements to find down to this size on whole tags of the synthetic sessions (figures:
+/// docs/benchmarks-poses.md, "Small cells"). Under it (a square under 12 px) the border's two edges are within
 /// the gradient's reach of each other and a side yields too few samples.
 pub const MIN_PAIR_WIDTH_TEST_CELL_PX: f64 = 1.5;
 
@@ -2820,7 +2820,7 @@ mod tests {
             thinner_of_pair(edges(0.6, 0.03, [0.6; 2], 0.06), whole)[0],
             None
         );
-        let faint = edges(0.1 - 0.1, 0.04, [0.0; 2], 0.2);
+        let faint = edges(0.1 - 0.08, 0.04, [0.02; 2], 0.2);
         assert_eq!(thinner_of_pair(faint, whole), [None, None]);
         let slight = edges(0.1 - 0.2, 0.03, [-0.1; 2], 0.2);
         let s = thinner_of_pair(slight, whole)[0].expect("beyond two sigmas");

@@ -1,7 +1,8 @@
 //! Coded targets: AprilTag tag36h11 detection with sub-pixel corners, and printable target sheets.
 //!
 //! * [`tag36h11`]: the code table and bit layout ([`tag36h11::tag_bits`] renders a tag's cells).
-//! * [`detect`](mod@detect): the detector ([`detect::detect`]), corners in the project's pixel convention.
+//! * [`detect`](mod@detect): the detector ([`detect::detect`]), corners in the project's pixel
+//!   convention.
 //! * [`profile`]: edge-profile refinement of small tags (cells of a few pixels).
 //! * [`reference_quad`]: the reference C library's quad stage, for like-for-like comparisons.
 //! * [`render`]: painting tags into images through a homography (tests, synthetic images).

@@ -284,10 +284,10 @@ fn a_small_tag_whose_refined_quad_does_not_decode_is_read_through_its_contour() 
 
 /// A 15 px tag (cells under 2 px) in a deep shadow, its grey levels 0..13 of 255: a crop of the
 /// recall benchmark's `shadow011.png` (`scripts/peers/apriltag_recall.py --images 24 --seed 3`,
-/// tag 394), which the AprilTag C library finds. Read at the cells' centres the quantisation
-/// noise flips four bits, over the Hamming limit; averaged over each cell's middle
-/// (`CELL_SPREAD_CELLS`) the refined quad reads it with one. Found only on that second
-/// reading, its corners are all marked occluded, with sigmas that cover their errors.
+/// tag 394), which the AprilTag C library finds. Read at the cells' centres, the quantisation
+/// noise flips more bits than the Hamming limit allows; averaged over each cell's middle
+/// (`CELL_SPREAD_CELLS`) the refined quad reads it. Found only on that second reading, its
+/// corners are all marked occluded, with sigmas that cover their errors.
 #[test]
 fn a_small_tag_in_deep_shadow_is_read_with_its_cells_averaged() {
     // The crop's origin in the benchmark image: (661, 559).
