@@ -16,6 +16,10 @@ pub mod bounds {
     pub const SURVEY_REFERENCE_RMS_MM: f64 = 0.3;
     /// Surveyed headdress targets, RMS over targets, mm.
     pub const SURVEY_HEADDRESS_RMS_MM: f64 = 0.5;
+    /// Surveyed reference targets that light-position images see and no measurement or
+    /// standard image does (the flash stand's panel: they place the flash and nothing else),
+    /// RMS over targets, mm.
+    pub const SURVEY_FLASH_ONLY_RMS_MM: f64 = 1.5;
     /// Camera position, median, mm.
     pub const CAMERA_POSITION_MM: f64 = 1.0;
     /// Camera orientation, median, degrees.
@@ -47,8 +51,13 @@ pub struct SurveyMetrics {
     /// Of those, survey images (role `survey`: taken before the subject sits).
     #[serde(default)]
     pub survey_images: usize,
-    /// Reference targets against their true corners, RMS over targets, mm.
+    /// Reference targets against their true corners, RMS over targets, mm (those held to the
+    /// reference structure's bound: not the flash-only ones).
     pub reference_rms_error_mm: Option<f64>,
+    /// Reference targets that light-position images see and no measurement or standard image
+    /// does, RMS over targets, mm.
+    #[serde(default)]
+    pub flash_only_rms_error_mm: Option<f64>,
     /// Headdress targets against their true corners, RMS over targets, mm.
     pub headdress_rms_error_mm: Option<f64>,
 }
@@ -311,6 +320,15 @@ impl StageMetrics {
                     "mm",
                     bounds::SURVEY_HEADDRESS_RMS_MM,
                 );
+                if m.flash_only_rms_error_mm.is_some() {
+                    bounded(
+                        &mut r,
+                        "flash_only_rms_error",
+                        m.flash_only_rms_error_mm,
+                        "mm",
+                        bounds::SURVEY_FLASH_ONLY_RMS_MM,
+                    );
+                }
             }
             StageMetrics::Calibration(m) => {
                 opt(

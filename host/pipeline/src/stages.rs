@@ -304,11 +304,12 @@ pub fn survey_rms_error_mm(
     survey: &skinbrdf_poses::Survey,
     truth: &Truth,
     group: skinbrdf_session::TargetGroup,
+    flash_only: bool,
 ) -> Option<f64> {
     let errs: Vec<f64> = survey
         .targets
         .iter()
-        .filter(|t| t.group == group)
+        .filter(|t| t.group == group && t.flash_only == flash_only)
         .filter_map(|t| {
             let p = truth
                 .placements
@@ -332,7 +333,7 @@ pub fn survey_report(
     run_time_s: f64,
 ) -> StageReport {
     use skinbrdf_session::TargetGroup;
-    let err = |g| truth.and_then(|t| survey_rms_error_mm(survey, t, g));
+    let err = |g| truth.and_then(|t| survey_rms_error_mm(survey, t, g, false));
     let mut r = StageReport::ran(Stage::PlacementSurvey, run_time_s).with_figures(
         StageMetrics::Survey(SurveyMetrics {
             targets_surveyed: survey.targets.len(),
@@ -350,6 +351,8 @@ pub fn survey_report(
             survey_images: survey.survey_images_used,
             reference_rms_error_mm: err(TargetGroup::Reference),
             headdress_rms_error_mm: err(TargetGroup::Headdress),
+            flash_only_rms_error_mm: truth
+                .and_then(|t| survey_rms_error_mm(survey, t, TargetGroup::Reference, true)),
         }),
     );
     r.notes.push(format!("head frame: {:?}", survey.head_gauge));

@@ -356,3 +356,11 @@ fn survey_images() {
     // never do (survey_images.rs asserts what they add to the survey).
     run_scene("survey-images", DEFAULT, &[Stage::CameraCalibration]);
 }
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn survey_flash() {
+    // The flash stand's panel left to the survey, linked to the cage through the relay and the
+    // link shots (survey_flash.rs asserts the panel's and the flash's errors).
+    run_scene("survey-flash", DEFAULT, &[Stage::CameraCalibration]);
+}

@@ -73,7 +73,8 @@
 //! factor speaks for the typical body, not for one seen in three images with one bad view.
 //!
 //! The sigmas decide what is placed: a target placed less certainly than its group's accuracy
-//! target ([`MAX_SIGMA_REFERENCE_MM`], [`MAX_SIGMA_HEADDRESS_MM`]) is left out
+//! target ([`MAX_SIGMA_REFERENCE_MM`], [`MAX_SIGMA_HEADDRESS_MM`]; [`MAX_SIGMA_FLASH_ONLY_MM`]
+//! for a reference target only light-position images, and survey images, see) is left out
 //! ([`SurveyIssue::Uncertain`], with the advice that survey images seeing it from other
 //! directions would place it) rather than held fixed in the poses with that error.
 //!
@@ -157,6 +158,13 @@ pub const MAX_SIGMA_REFERENCE_MM: f64 = 0.3;
 /// The survey's accuracy target for the headdress, mm.
 pub const MAX_SIGMA_HEADDRESS_MM: f64 = 0.5;
 
+/// The survey's accuracy target for a reference target that light-position images see and no
+/// measurement or standard image does, mm: it places the cameras that place the flash and nothing else, so it is held
+/// to the flash's bound (the emitting point within 2 mm) with room for the light-position
+/// images' own error, not to the reference structure's. A panel on the flash stand, far from
+/// the cage and linked to it through a chain of survey shots, is placed to about a millimetre.
+pub const MAX_SIGMA_FLASH_ONLY_MM: f64 = 1.5;
+
 /// Settings of [`survey`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SurveyConfig {
@@ -205,6 +213,9 @@ pub struct SurveyConfig {
     pub max_sigma_reference_mm: f64,
     /// The same for a headdress target.
     pub max_sigma_headdress_mm: f64,
+    /// The same for a reference target seen in light-position images and in no measurement or
+    /// standard image (it serves the flash alone).
+    pub max_sigma_flash_only_mm: f64,
 }
 
 impl SurveyConfig {
@@ -231,6 +242,7 @@ impl SurveyConfig {
         not_rigid_variance_ratio: NOT_RIGID_VARIANCE_RATIO,
         max_sigma_reference_mm: MAX_SIGMA_REFERENCE_MM,
         max_sigma_headdress_mm: MAX_SIGMA_HEADDRESS_MM,
+        max_sigma_flash_only_mm: MAX_SIGMA_FLASH_ONLY_MM,
     };
 }
 
@@ -283,6 +295,11 @@ pub struct SurveyedTarget {
     pub orientation_sigma_deg: f64,
     /// Images whose corners were used.
     pub views: usize,
+    /// Seen in light-position images and in no measurement or standard image: it serves the
+    /// flash alone and is held to [`SurveyConfig::max_sigma_flash_only_mm`] (a reference
+    /// target; false for others).
+    #[serde(default)]
+    pub flash_only: bool,
     /// RMS reprojection error of its corners at the solution, pixels.
     pub rms_px: f64,
     /// Its body's own variance factor over the session's (its sigmas are scaled by the root of
@@ -1539,8 +1556,20 @@ fn survey_with(
             let centre = corners_m.iter().copied().sum::<DVec3>() * 0.25;
             let (ps, os) = sig(centre - gp.translation_m);
             let (views, rms) = reprojection(&r2, &index2, &obs, def.group, *id, &corners_m);
+            // A reference target that light-position images see and no measurement or standard
+            // image does serves the flash only.
+            let seen_by = |f: &dyn Fn(ImageRole) -> bool| {
+                file.images
+                    .iter()
+                    .zip(obs.iter())
+                    .any(|(e, o)| f(e.role) && o.contains_key(id))
+            };
+            let flash_only = def.group == TargetGroup::Reference
+                && seen_by(&|r| r == ImageRole::LightPosition)
+                && !seen_by(&|r| !matches!(r, ImageRole::LightPosition | ImageRole::Survey));
             let bound_mm = match def.group {
                 TargetGroup::Headdress => cfg.max_sigma_headdress_mm,
+                _ if flash_only => cfg.max_sigma_flash_only_mm,
                 _ => cfg.max_sigma_reference_mm,
             };
             if ps > bound_mm {
@@ -1562,6 +1591,7 @@ fn survey_with(
                 position_sigma_mm: ps,
                 orientation_sigma_deg: os,
                 views,
+                flash_only,
                 rms_px: rms,
                 variance_ratio: local,
             });
@@ -2390,6 +2420,7 @@ mod tests {
                 position_sigma_mm: 0.05,
                 orientation_sigma_deg: 0.05,
                 views: 6,
+                flash_only: false,
                 rms_px: 0.1,
                 variance_ratio: 1.0,
             }],

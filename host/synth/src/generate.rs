@@ -421,7 +421,7 @@ fn generate_into(
                 rec,
                 &[
                     crate::studio::origin_ids(&renderer, &rig, capture_shots, &scene),
-                    crate::studio::flash_panel_ids(&rig),
+                    crate::studio::stated_panel_ids(&rig),
                 ]
                 .concat(),
                 &crate::studio::most_seen(

@@ -69,6 +69,10 @@ pub struct Rig {
     /// Reference targets printed other than as a flat square of their own code (folded across
     /// a sheet's fold, or printed with another target's code), by id.
     pub prints: BTreeMap<u32, TagPrint>,
+    /// The relay's reference targets (`studio.flash_relay_targets`, [`relay_targets`]): on a
+    /// low stand between the head and the flash, linking the flash stand's panel to the cage
+    /// in survey shots. Empty without a relay.
+    pub relay_ids: Vec<u32>,
 }
 
 impl Rig {
@@ -392,6 +396,17 @@ pub fn build_rig(scene: &Scene) -> Rig {
         }
     }
 
+    // The relay between the flash stand's panel and the cage, when the scene has one.
+    let relay = relay_targets(
+        scene,
+        id.min(HEADDRESS_ID0),
+        flash_pos,
+        roi_centre_head,
+        &[roi_centre_head, std_pos],
+    );
+    let relay_ids: Vec<u32> = relay.iter().map(|t| t.id).collect();
+    reference.extend(relay);
+
     // Flash targets: a ring of eight around the diffuser, in the flash frame (+z out).
     let flash_targets = (0..8)
         .filter_map(|k| {
@@ -457,7 +472,89 @@ pub fn build_rig(scene: &Scene) -> Rig {
         world_from_standard,
         sheets,
         prints,
+        relay_ids,
     }
+}
+
+/// Distance of the relay's centre from the forehead's centre towards the flash (horizontally),
+/// metres: beyond the standard (0.15 m that way) and the head, within a survey camera's frame
+/// of the cage's near side.
+pub const RELAY_DISTANCE_M: f64 = 0.38;
+/// Height of the relay's centre below the forehead's centre, metres: under the flash's beam to
+/// the forehead and the standard (about 0.1 m above the forehead's height there), out of the
+/// measurement and light-position images' frames.
+pub const RELAY_DROP_M: f64 = 0.24;
+/// How far the relay's targets are turned from facing straight away from the flash towards
+/// the cage's facing azimuth, degrees: a survey camera behind the relay sees them with the
+/// panel beyond, one to the cage's facing side sees them with the cage.
+pub const RELAY_TURN_DEG: f64 = 35.0;
+/// Centre-to-centre spacing of the relay's targets, metres: wider than the paper needs, because
+/// the relay's orientation, known only as well as its targets' spread allows, is carried
+/// 1.2 m to the panel (a 0.05 mm error across 0.1 m is a 0.6 mm error there).
+pub const RELAY_SPACING_M: f64 = 0.15;
+/// Least distance of a relay target from the flash's beam to the forehead or the standard,
+/// metres (its shadow must not fall on either).
+pub const RELAY_BEAM_CLEARANCE_M: f64 = 0.06;
+
+/// The relay (`studio.flash_relay_targets` targets, ids from `first_id`): reference targets in
+/// a row, two rows when there are more than three, [`RELAY_SPACING_M`] apart, on a low stand [`RELAY_DISTANCE_M`] from
+/// the forehead towards the flash and [`RELAY_DROP_M`] below it, facing away from the flash
+/// turned [`RELAY_TURN_DEG`] towards the cage's facing azimuth.
+///
+/// Why it is there: the light-position images see the flash stand's panel and the flash ring
+/// and nothing of the cage (the cage's targets face the measurement arc, the panel faces the
+/// head, and at the long lens's 16 degrees no frame holds both 1.5 m apart). Without a link
+/// the panel's placement must be measured and stated. With the relay, a survey shot from
+/// behind it sees it with the panel beyond, and one from the cage's facing side sees it with
+/// the cage ([`crate::survey_shots::link_shots`]), so the survey chains the panel to the world.
+/// A target that would shadow the forehead or the standard (`lit`: the points the flash
+/// must reach), or whose id would reach the headdress's, is left out.
+fn relay_targets(
+    scene: &Scene,
+    first_id: u32,
+    flash_pos: DVec3,
+    roi: DVec3,
+    lit: &[DVec3],
+) -> Vec<Target> {
+    let n = scene.studio.flash_relay_targets;
+    let size = scene.targets.reference_size_m;
+    let pitch = RELAY_SPACING_M.max(target_pitch_m(size));
+    let u = (flash_pos - roi)
+        .truncate()
+        .extend(0.0)
+        .normalize_or(DVec3::Y);
+    let away = -u;
+    let facing = crate::shape::direction(facing_azimuth_deg(scene).to_radians(), 0.0);
+    // Turn `away` towards `facing` about the vertical, on the shorter side.
+    let side = away.cross(facing).z.signum();
+    let turn = glam::DQuat::from_rotation_z(side * RELAY_TURN_DEG.to_radians());
+    let normal = turn * away;
+    let right = DVec3::Z.cross(normal).normalize_or(DVec3::X);
+    let centre = roi + u * RELAY_DISTANCE_M - DVec3::Z * RELAY_DROP_M;
+    let rows = if n > 3 { 2 } else { 1 };
+    let cols = n.div_ceil(rows);
+    let beam_clear = |c: DVec3| {
+        lit.iter().all(|&p| {
+            let d = p - flash_pos;
+            let t = ((c - flash_pos).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+            c.distance(flash_pos + d * t) > RELAY_BEAM_CLEARANCE_M + paper_half_diagonal_m(size)
+        })
+    };
+    let mut out = Vec::new();
+    for k in 0..n {
+        let (r, c) = (k / cols, k % cols);
+        let dx = (f64::from(c) - 0.5 * f64::from(cols - 1)) * pitch;
+        let dz = (0.5 * f64::from(rows - 1) - f64::from(r)) * pitch;
+        let p = centre + right * dx + DVec3::Z * dz;
+        let id = first_id + out.len() as u32;
+        if id >= HEADDRESS_ID0 || !beam_clear(p) {
+            continue;
+        }
+        if let Some(tg) = Target::square(id, size, p, normal, DVec3::Z) {
+            out.push(tg);
+        }
+    }
+    out
 }
 
 /// Headdress targets (head frame): rows at fixed elevations (or heights on a cylinder), one

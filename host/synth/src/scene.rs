@@ -52,6 +52,10 @@ pub const BUILTIN_SCENES: &[(&str, &str)] = &[
         "survey-images",
         include_str!("../../../scenes/survey-images.toml"),
     ),
+    (
+        "survey-flash",
+        include_str!("../../../scenes/survey-flash.toml"),
+    ),
 ];
 
 /// Largest image side, pixels (a 100-megapixel frame is 12000 px wide).

@@ -165,6 +165,12 @@ pub struct StudioScene {
     pub headdress_band: bool,
     /// One reference target printed with another target's code, if any.
     pub duplicate_id: Option<DuplicateId>,
+    /// Reference targets on a low stand between the head and the flash (the relay,
+    /// `crate::layout::relay_targets`), seen with the flash stand's panel in some survey shots
+    /// and with the cage in others ([`crate::survey_shots::link_shots`]); 0: no relay, and
+    /// `rig.toml` states the panel's placement (no image links it to the cage).
+    #[serde(default)]
+    pub flash_relay_targets: u32,
     /// File number of the first file on the card.
     pub first_file_number: u32,
     /// Shutter count of the first file on the card.
@@ -1062,10 +1068,20 @@ pub fn rig_problems(scene: &Scene, rig: &Rig) -> Vec<String> {
     out
 }
 
+/// The flash stand's panel targets whose placement `rig.toml` states: all of them without a
+/// relay (no image links the panel to the cage, so the studio measured it with the stand),
+/// none with one (the link shots chain it to the cage and the survey places it).
+pub fn stated_panel_ids(rig: &Rig) -> Vec<u32> {
+    if rig.relay_ids.is_empty() {
+        flash_panel_ids(rig)
+    } else {
+        Vec::new()
+    }
+}
+
 /// The reference targets on the flash stand (the panel the light-position images see): the
-/// light-position images see no other reference target, so no image links the panel to the
-/// rest of the reference structure, and the studio states its placement (measured with the
-/// stand) instead of surveying it.
+/// light-position images see no other reference target, so without a relay
+/// (`flash_relay_targets`) no image links the panel to the rest of the reference structure.
 pub fn flash_panel_ids(rig: &Rig) -> Vec<u32> {
     let flash = rig.world_from_flash.translation_m;
     rig.reference

@@ -94,15 +94,148 @@ pub const SURVEY_INTERVAL_S: f64 = 20.0;
 /// and is fitted with the headdress in between).
 pub const SURVEY_LEAD_S: f64 = 600.0;
 
-/// The cage's targets: the reference targets but the flash stand's panel (which the rig states:
-/// no image links it to the cage).
+/// The cage's targets: the reference targets but the flash stand's panel and the relay.
 pub fn cage_ids(rig: &Rig) -> Vec<u32> {
     let panel = crate::studio::flash_panel_ids(rig);
     rig.reference
         .iter()
         .map(|t| t.id)
-        .filter(|id| !panel.contains(id))
+        .filter(|id| !panel.contains(id) && !rig.relay_ids.contains(id))
         .collect()
+}
+
+/// Link shots per link (relay and panel; relay and cage).
+pub const LINK_SHOTS: usize = 4;
+
+/// Targets of each kind a link shot must see: two targets on each side of a link fix the
+/// relative pose with one to spare.
+pub const LINK_MIN_TARGETS: usize = 2;
+
+/// Distances of the panel link's cameras behind the relay (away from the flash), metres.
+const PANEL_LINK_DISTANCES_M: [f64; 3] = [0.9, 1.3, 1.7];
+/// Sideways offsets of the panel link's cameras from the flash-relay line, metres: as wide as
+/// the relay's targets allow, so that the shots see the panel from different directions (one
+/// direction leaves its depth to the tags' apparent size).
+const PANEL_LINK_SIDEWAYS_M: [f64; 7] = [-0.6, -0.4, -0.2, 0.0, 0.2, 0.4, 0.6];
+/// Vertical offsets of the panel link's cameras from the flash-relay line, metres.
+const PANEL_LINK_HEIGHTS_M: [f64; 3] = [-0.2, 0.0, 0.2];
+/// Distances of the cage link's cameras from the point between the relay and the cage, metres.
+const CAGE_LINK_DISTANCES_M: [f64; 3] = [1.8, 2.2, 2.6];
+/// Azimuths of the cage link's cameras relative to the cage's facing azimuth, degrees.
+const CAGE_LINK_AZIMUTHS_DEG: [f64; 9] = [-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0];
+/// Elevations of the cage link's cameras, degrees.
+const CAGE_LINK_ELEVATIONS_DEG: [f64; 3] = [-10.0, 0.0, 10.0];
+
+/// The link shots of a scene with a relay (`studio.flash_relay_targets`; none without): the
+/// light-position images see the flash stand's panel and nothing of the cage, so without a
+/// chain of shots the survey cannot place the panel. [`LINK_SHOTS`] shots from behind the relay
+/// (away from the flash, aimed so that the relay and the panel beyond it share the frame) and
+/// [`LINK_SHOTS`] from the cage's facing side (the relay and the cage's near side), each seeing
+/// at least [`LINK_MIN_TARGETS`] targets of either side: the one seeing the most, then those
+/// seeing the far side (panel or cage) from the directions farthest from the kept ones'. The
+/// candidates are a fixed grid, so the choice is
+/// deterministic. Files are numbered after the scene's other survey shots.
+pub fn link_shots(scene: &Scene, rig: &Rig, renderer: &Renderer) -> Vec<Shot> {
+    if rig.relay_ids.is_empty() {
+        return Vec::new();
+    }
+    let panel = crate::studio::flash_panel_ids(rig);
+    let cage = cage_ids(rig);
+    let centre_of = |ids: &[u32]| {
+        let v: Vec<DVec3> = rig
+            .reference
+            .iter()
+            .filter(|t| ids.contains(&t.id))
+            .map(skinbrdf_session::Target::centre)
+            .collect();
+        v.iter().copied().sum::<DVec3>() / v.len().max(1) as f64
+    };
+    let relay_c = centre_of(&rig.relay_ids);
+    let panel_c = centre_of(&panel);
+    // The cage's near side: its targets within the relay's reach of the frame.
+    let near: Vec<u32> = rig
+        .reference
+        .iter()
+        .filter(|t| cage.contains(&t.id) && t.centre().distance(relay_c) < 0.6)
+        .map(|t| t.id)
+        .collect();
+    let cage_c = centre_of(if near.is_empty() { &cage } else { &near });
+    // An aim that puts two points at equal angles from the frame's centre.
+    let between = |eye: DVec3, a: DVec3, b: DVec3| {
+        eye + (a - eye).normalize_or_zero() + (b - eye).normalize_or_zero()
+    };
+    let mut panel_cands = Vec::new();
+    let back = (relay_c - panel_c).normalize_or(DVec3::Y);
+    let side = DVec3::Z.cross(back).normalize_or(DVec3::X);
+    for d in PANEL_LINK_DISTANCES_M {
+        for dx in PANEL_LINK_SIDEWAYS_M {
+            for dz in PANEL_LINK_HEIGHTS_M {
+                let eye = relay_c + back * d + side * dx + DVec3::Z * dz;
+                panel_cands.push((eye, between(eye, relay_c, panel_c)));
+            }
+        }
+    }
+    let mut cage_cands = Vec::new();
+    let mid = 0.5 * (relay_c + cage_c);
+    let face = facing_azimuth_deg(scene);
+    for d in CAGE_LINK_DISTANCES_M {
+        for el in CAGE_LINK_ELEVATIONS_DEG {
+            for off in CAGE_LINK_AZIMUTHS_DEG {
+                let dir = crate::shape::direction((face + off).to_radians(), el.to_radians());
+                let eye = mid + dir * d;
+                cage_cands.push((eye, between(eye, relay_c, cage_c)));
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for (cands, other, far_c) in [(panel_cands, &panel, panel_c), (cage_cands, &cage, cage_c)] {
+        let mut scored: Vec<(usize, usize, Shot)> = cands
+            .into_iter()
+            .filter_map(|(eye, aim)| survey_shot(scene, eye, aim, 0))
+            .filter_map(|shot| {
+                let seen = crate::visibility::usable_targets(renderer, rig, &shot);
+                let count = |ids: &[u32]| {
+                    seen.iter()
+                        .filter(|(l, id, _)| *l == Layout::Reference && ids.contains(id))
+                        .count()
+                };
+                let (r, o) = (count(&rig.relay_ids), count(other));
+                (r >= LINK_MIN_TARGETS && o >= LINK_MIN_TARGETS).then_some((r, o, shot))
+            })
+            .collect();
+        // The first: most of the scarcer side, then of the other (the earlier candidate on
+        // ties). Each next: of those seeing as many of the scarcer side as the first or one
+        // fewer, the one whose direction from the far side's centre is farthest from the kept
+        // shots' (the triangulation angle that fixes the far side's depth).
+        scored.sort_by_key(|(r, o, _)| std::cmp::Reverse(((*r).min(*o), *r + *o)));
+        let Some(best) = scored.first().map(|(r, o, _)| (*r).min(*o)) else {
+            continue;
+        };
+        let dir = |s: &Shot| (s.world_from_camera.translation_m - far_c).normalize_or_zero();
+        let mut pool: Vec<Shot> = scored
+            .into_iter()
+            .filter(|(r, o, _)| (*r).min(*o) + 1 >= best)
+            .map(|x| x.2)
+            .collect();
+        let mut kept: Vec<Shot> = vec![pool.remove(0)];
+        while kept.len() < LINK_SHOTS && !pool.is_empty() {
+            let spread = |s: &Shot| {
+                kept.iter()
+                    .map(|k| dir(k).angle_between(dir(s)))
+                    .fold(f64::INFINITY, f64::min)
+            };
+            let k = (0..pool.len())
+                .max_by(|&a, &b| {
+                    spread(&pool[a])
+                        .total_cmp(&spread(&pool[b]))
+                        .then(b.cmp(&a))
+                })
+                .unwrap_or(0);
+            kept.push(pool.remove(k));
+        }
+        out.extend(kept);
+    }
+    out
 }
 
 /// A survey shot from `eye` aimed at `aim` (no subject, no flash, room light, longer exposure),
@@ -221,6 +354,18 @@ impl Coverage {
 /// candidates, chosen for the targets the measurement shots `arc` see poorly. Files are
 /// numbered in the order chosen.
 pub fn survey_shots(scene: &Scene, rig: &Rig, renderer: &Renderer, arc: &[Shot]) -> Vec<Shot> {
+    let mut out = chosen_shots(scene, rig, renderer, arc);
+    let links = link_shots(scene, rig, renderer);
+    let n0 = out.len();
+    out.extend(links.into_iter().enumerate().map(|(j, s)| Shot {
+        file: file_name(ImageRole::Survey, n0 + j, scene),
+        ..s
+    }));
+    out
+}
+
+/// The `survey_images` shots chosen for the cage (the module docs).
+fn chosen_shots(scene: &Scene, rig: &Rig, renderer: &Renderer, arc: &[Shot]) -> Vec<Shot> {
     let n = scene.session.survey_images as usize;
     if n == 0 {
         return Vec::new();
@@ -341,6 +486,53 @@ mod tests {
             );
         }
         assert_eq!(well, cage.len(), "{well} of {} well surveyed", cage.len());
+    }
+
+    /// The default scene with a relay of four targets: the link shots see the relay with the
+    /// flash stand's panel (from behind the relay) and with the cage (from its facing side),
+    /// and the measurement and light-position images' usable targets are those without it.
+    #[test]
+    fn link_shots_see_the_relay_with_the_panel_and_with_the_cage() {
+        let mut scene = Scene::load("default").expect("scene");
+        scene.studio.flash_relay_targets = 4;
+        let rig = build_rig(&scene);
+        assert_eq!(rig.relay_ids.len(), 4, "{:?}", rig.relay_ids);
+        let renderer = Renderer::new(&scene, &rig).expect("renderer");
+        let shots = survey_shots(&scene, &rig, &renderer, &[]);
+        assert_eq!(shots.len(), 2 * LINK_SHOTS);
+        let panel = crate::studio::flash_panel_ids(&rig);
+        let cage = cage_ids(&rig);
+        for (k, s) in shots.iter().enumerate() {
+            assert_eq!(s.file, format!("images/survey{k:02}.png"));
+            let seen: Vec<u32> = crate::visibility::usable_targets(&renderer, &rig, s)
+                .into_iter()
+                .map(|v| v.1)
+                .collect();
+            let n = |ids: &[u32]| seen.iter().filter(|id| ids.contains(id)).count();
+            let other = if k < LINK_SHOTS { &panel } else { &cage };
+            let eye = s.world_from_camera.translation_m;
+            eprintln!(
+                "{}: relay {}, panel {}, cage {}; eye {eye:.2}",
+                s.file,
+                n(&rig.relay_ids),
+                n(&panel),
+                n(&cage)
+            );
+            assert!(n(&rig.relay_ids) >= LINK_MIN_TARGETS && n(other) >= LINK_MIN_TARGETS);
+        }
+        let without = build_rig(&Scene::load("default").expect("scene"));
+        let ren0 =
+            Renderer::new(&Scene::load("default").expect("scene"), &without).expect("renderer");
+        for shot in plan_shots(&scene, &rig) {
+            let ids = |r: &Rig, ren: &Renderer| -> Vec<u32> {
+                crate::visibility::usable_targets(ren, r, &shot)
+                    .into_iter()
+                    .filter(|v| !rig.relay_ids.contains(&v.1) || v.0 != Layout::Reference)
+                    .map(|v| v.1)
+                    .collect()
+            };
+            assert_eq!(ids(&rig, &renderer), ids(&without, &ren0), "{}", shot.file);
+        }
     }
 
     #[test]

@@ -113,7 +113,12 @@ fn every_builtin_scene_generates_a_loadable_session() {
         let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(
             s.file.images.len(),
-            9 + scene.session.survey_images as usize,
+            9 + scene.session.survey_images as usize
+                + if scene.studio.flash_relay_targets > 0 {
+                    2 * skinbrdf_synth::survey_shots::LINK_SHOTS
+                } else {
+                    0
+                },
             "{name}"
         );
     }
