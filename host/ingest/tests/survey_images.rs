@@ -30,7 +30,10 @@ fn studio(dir: &Path) -> (PathBuf, usize) {
         &s,
     )
     .expect("synthesis");
-    (s.join(STUDIO_DIR), scene.session.survey_images as usize)
+    (
+        s.join(STUDIO_DIR),
+        skinbrdf_synth::survey_shots::planned_count(&scene),
+    )
 }
 
 fn config(studio: &Path, survey: Option<PathBuf>, out: PathBuf) -> IngestConfig {

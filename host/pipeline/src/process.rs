@@ -285,7 +285,8 @@ pub fn process(
         out_dir: out_dir.clone(),
         facts,
         plan,
-        survey: None,
+        // The survey's placements are in the session; the pose stage reads its sds.
+        survey: surveyed.as_ref().map(|s| s.survey.clone()),
         detections: surveyed.as_ref().and_then(|s| s.detections.clone()),
         poses: None,
         samples: None,

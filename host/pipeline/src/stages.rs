@@ -418,7 +418,8 @@ impl StageUnit for PoseUnit {
         let run_time_s = t.elapsed().as_secs_f64();
         let path = ctx.out_dir.join(POSES_FILE);
         write_atomic(&path, &json_bytes(&path, &poses)?)?;
-        let reports = pose_stage_reports(&ctx.plan, &poses, ctx.truth, run_time_s);
+        let panel_sd_mm = ctx.survey.as_ref().and_then(flash_panel_sigma_mm);
+        let reports = pose_stage_reports(&ctx.plan, &poses, ctx.truth, run_time_s, panel_sd_mm);
         ctx.poses = Some(poses);
         Ok((reports, vec![POSES_FILE.into()]))
     }
@@ -440,12 +441,32 @@ pub fn read_poses(path: &Path) -> Result<SessionPoses, ProcessError> {
     })
 }
 
+/// The surveyed flash stand panel's placement sd, mm: the mean position sd of the surveyed
+/// targets that serve the flash alone (`SurveyedTarget::flash_only`); `None` when the survey
+/// placed none (the rig stated the panel).
+///
+/// The light-position cameras are posed against the panel held fixed, so the flash triangulated
+/// from them moves with the panel. The panel's errors are nearly one common shift (they come
+/// from the chain of survey shots that places it as a whole), so the mean of its targets' sds
+/// stands for the shift's.
+pub fn flash_panel_sigma_mm(survey: &skinbrdf_poses::Survey) -> Option<f64> {
+    let sd: Vec<f64> = survey
+        .targets
+        .iter()
+        .filter(|t| t.flash_only)
+        .map(|t| t.position_sigma_mm)
+        .collect();
+    (!sd.is_empty()).then(|| sd.iter().sum::<f64>() / sd.len() as f64)
+}
+
 /// The pose stages' reports: typed figures from the poses and, with truth, their errors.
+/// `panel_sd_mm` ([`flash_panel_sigma_mm`]) is added in quadrature to the flash's sd.
 pub fn pose_stage_reports(
     plan: &Plan,
     poses: &SessionPoses,
     truth: Option<&Truth>,
     run_time_s: f64,
+    panel_sd_mm: Option<f64>,
 ) -> Vec<StageReport> {
     let errs = truth.map(|t| skinbrdf_poses::session::compare_truth(poses, t));
     let corners = errs
@@ -538,12 +559,19 @@ pub fn pose_stage_reports(
                 .as_ref()
                 .and_then(|e| e.light_position_error_m)
                 .map(|e| e * 1e3),
-            flash_position_sigma_mm: (c.len() == 9)
-                .then(|| (c[0] + c[4] + c[8]).max(0.0).sqrt() * 1e3),
+            flash_position_sigma_mm: (c.len() == 9).then(|| {
+                let own_mm2 = (c[0] + c[4] + c[8]).max(0.0) * 1e6;
+                (own_mm2 + panel_sd_mm.unwrap_or(0.0).powi(2)).sqrt()
+            }),
         }),
     );
     if plan.runs(Stage::FlashTriangulation) {
         r.notes.push("timed together with camera poses".into());
+    }
+    if let Some(sd) = panel_sd_mm {
+        r.notes.push(format!(
+            "flash sd includes the surveyed panel's placement sd {sd:.3} mm"
+        ));
     }
     out.push(r);
 

@@ -1,5 +1,6 @@
-//! The flash stand's panel surveyed (scene `survey-flash`): a relay of reference targets on a
-//! low stand between the head and the flash, and link shots taken before the subject sits
+//! The flash stand's panel surveyed (scene `survey-flash`: the default scene with 16
+//! measurement images and a relay): a relay of reference targets on a low stand between the
+//! head and the flash, and link shots taken before the subject sits
 //! (from behind the relay with the panel beyond it; from the cage's facing side with the cage).
 //! `rig.toml` states nothing of the panel or the relay; the survey chains them to the cage
 //! through the link shots, and the flash is then placed from the light-position images against
@@ -37,6 +38,10 @@ const SIGMA_COVERAGE: f64 = 4.0;
 fn the_flash_panel_is_surveyed_through_the_relay() {
     let dir = tempfile::tempdir().expect("tempdir");
     let scene = Scene::load("survey-flash").expect("survey-flash scene");
+    assert!(
+        scene.studio.flash_relay_targets > 0,
+        "the scene has a relay"
+    );
     let rig = skinbrdf_synth::layout::build_rig(&scene);
     let panel = skinbrdf_synth::studio::flash_panel_ids(&rig);
     assert!(panel.len() >= 4, "the flash stand's panel: {panel:?}");
@@ -144,4 +149,14 @@ fn the_flash_panel_is_surveyed_through_the_relay() {
     );
     let flash = flash.expect("the flash was scored");
     assert!(flash < FLASH_MM, "flash {flash} mm");
+    // The flash's stated sd carries the panel's placement sd, and covers its error.
+    let flash_sd = report
+        .flash()
+        .and_then(|f| f.flash_position_sigma_mm)
+        .expect("the flash's sd");
+    eprintln!("flash {flash:.3} mm, stated sd {flash_sd:.3} mm");
+    assert!(
+        flash < SIGMA_COVERAGE * flash_sd,
+        "flash {flash} mm against its stated sd {flash_sd} mm"
+    );
 }

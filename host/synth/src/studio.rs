@@ -18,8 +18,8 @@
 //!                                     cut-outs (no pose places their flat layouts)
 //!   rig.toml                          what a studio states before any survey: the declared
 //!                                     origin, the printed flash and standard layouts, the flash
-//!                                     stand's panel and the ROI, in the textured scan's frame;
-//!                                     every sheet by its layout, unplaced
+//!                                     stand's panel (only without a relay) and the ROI, in the
+//!                                     textured scan's frame; every sheet by its layout, unplaced
 //!   scan.ply                          the head scan, head frame (already registered)
 //!   scan/head.obj, head.mtl, head.png the textured scan in the scanner's frame, headdress
 //!                                     included (crate::textured_scan), scan-truth.json;

@@ -107,6 +107,17 @@ pub fn cage_ids(rig: &Rig) -> Vec<u32> {
 /// Link shots per link (relay and panel; relay and cage).
 pub const LINK_SHOTS: usize = 4;
 
+/// The survey shots a scene plans: `survey_images` for the cage and, with a relay,
+/// [`LINK_SHOTS`] per link.
+pub fn planned_count(scene: &Scene) -> usize {
+    scene.session.survey_images as usize
+        + if scene.studio.flash_relay_targets > 0 {
+            2 * LINK_SHOTS
+        } else {
+            0
+        }
+}
+
 /// Targets of each kind a link shot must see: two targets on each side of a link fix the
 /// relative pose with one to spare.
 pub const LINK_MIN_TARGETS: usize = 2;
@@ -433,6 +444,7 @@ mod tests {
     fn survey_shots_see_the_cage_from_new_directions() {
         let mut scene = Scene::load("default").expect("scene");
         scene.session.survey_images = 8;
+        scene.studio.flash_relay_targets = 0;
         let rig = build_rig(&scene);
         let renderer = Renderer::new(&scene, &rig).expect("renderer");
         let arc = plan_shots(&scene, &rig);
@@ -520,9 +532,10 @@ mod tests {
             );
             assert!(n(&rig.relay_ids) >= LINK_MIN_TARGETS && n(other) >= LINK_MIN_TARGETS);
         }
-        let without = build_rig(&Scene::load("default").expect("scene"));
-        let ren0 =
-            Renderer::new(&Scene::load("default").expect("scene"), &without).expect("renderer");
+        let mut no_relay = scene.clone();
+        no_relay.studio.flash_relay_targets = 0;
+        let without = build_rig(&no_relay);
+        let ren0 = Renderer::new(&no_relay, &without).expect("renderer");
         for shot in plan_shots(&scene, &rig) {
             let ids = |r: &Rig, ren: &Renderer| -> Vec<u32> {
                 crate::visibility::usable_targets(ren, r, &shot)
@@ -537,7 +550,8 @@ mod tests {
 
     #[test]
     fn no_survey_images_no_shots() {
-        let scene = Scene::load("default").expect("scene");
+        let mut scene = Scene::load("default").expect("scene");
+        scene.studio.flash_relay_targets = 0;
         let rig = build_rig(&scene);
         let renderer = Renderer::new(&scene, &rig).expect("renderer");
         assert!(survey_shots(&scene, &rig, &renderer, &[]).is_empty());

@@ -113,12 +113,7 @@ fn every_builtin_scene_generates_a_loadable_session() {
         let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(
             s.file.images.len(),
-            9 + scene.session.survey_images as usize
-                + if scene.studio.flash_relay_targets > 0 {
-                    2 * skinbrdf_synth::survey_shots::LINK_SHOTS
-                } else {
-                    0
-                },
+            9 + skinbrdf_synth::survey_shots::planned_count(&scene),
             "{name}"
         );
     }
@@ -133,7 +128,7 @@ fn survey_images_are_taken_without_the_subject_before_the_session() {
     let dir = tempfile::tempdir().unwrap();
     let mut scene = Scene::load("survey-images").unwrap();
     scene.session.measurement_images = 3;
-    let n = scene.session.survey_images as usize;
+    let n = skinbrdf_synth::survey_shots::planned_count(&scene);
     assert!(n > 0);
     // The studio's 14-bit rows need an even width of superpixels x 2 photosites.
     let opts = SynthOptions {
