@@ -74,7 +74,8 @@
 //!
 //! The sigmas decide what is placed: a target placed less certainly than its group's accuracy
 //! target ([`MAX_SIGMA_REFERENCE_MM`], [`MAX_SIGMA_HEADDRESS_MM`]; [`MAX_SIGMA_FLASH_ONLY_MM`]
-//! for a reference target only light-position images, and survey images, see) is left out
+//! for a reference target that light-position images see and no measurement or standard image
+//! does) is left out
 //! ([`SurveyIssue::Uncertain`], with the advice that survey images seeing it from other
 //! directions would place it) rather than held fixed in the poses with that error.
 //!
@@ -159,10 +160,10 @@ pub const MAX_SIGMA_REFERENCE_MM: f64 = 0.3;
 pub const MAX_SIGMA_HEADDRESS_MM: f64 = 0.5;
 
 /// The survey's accuracy target for a reference target that light-position images see and no
-/// measurement or standard image does, mm: it places the cameras that place the flash and nothing else, so it is held
-/// to the flash's bound (the emitting point within 2 mm) with room for the light-position
-/// images' own error, not to the reference structure's. A panel on the flash stand, far from
-/// the cage and linked to it through a chain of survey shots, is placed to about a millimetre.
+/// measurement or standard image does, mm: it places the cameras that place the flash and
+/// nothing else, so it is held to the flash's bound (the emitting point within 2 mm) with room
+/// for the light-position images' own error, not to the reference structure's (a panel on the
+/// flash stand is far from the cage, linked to it only through a chain of survey shots).
 pub const MAX_SIGMA_FLASH_ONLY_MM: f64 = 1.5;
 
 /// Settings of [`survey`].

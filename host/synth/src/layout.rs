@@ -69,7 +69,7 @@ pub struct Rig {
     /// Reference targets printed other than as a flat square of their own code (folded across
     /// a sheet's fold, or printed with another target's code), by id.
     pub prints: BTreeMap<u32, TagPrint>,
-    /// The relay's reference targets (`studio.flash_relay_targets`, [`relay_targets`]): on a
+    /// The relay's reference targets (`studio.flash_relay_targets`, `relay_targets`): on a
     /// low stand between the head and the flash, linking the flash stand's panel to the cage
     /// in survey shots. Empty without a relay.
     pub relay_ids: Vec<u32>,
@@ -497,9 +497,9 @@ pub const RELAY_SPACING_M: f64 = 0.15;
 pub const RELAY_BEAM_CLEARANCE_M: f64 = 0.06;
 
 /// The relay (`studio.flash_relay_targets` targets, ids from `first_id`): reference targets in
-/// a row, two rows when there are more than three, [`RELAY_SPACING_M`] apart, on a low stand [`RELAY_DISTANCE_M`] from
-/// the forehead towards the flash and [`RELAY_DROP_M`] below it, facing away from the flash
-/// turned [`RELAY_TURN_DEG`] towards the cage's facing azimuth.
+/// a row, two rows when there are more than three, [`RELAY_SPACING_M`] apart, on a low stand
+/// [`RELAY_DISTANCE_M`] from the forehead towards the flash and [`RELAY_DROP_M`] below it,
+/// facing away from the flash turned [`RELAY_TURN_DEG`] towards the cage's facing azimuth.
 ///
 /// Why it is there: the light-position images see the flash stand's panel and the flash ring
 /// and nothing of the cage (the cage's targets face the measurement arc, the panel faces the
