@@ -136,6 +136,10 @@ const CAGE_LINK_DISTANCES_M: [f64; 3] = [1.8, 2.2, 2.6];
 const CAGE_LINK_AZIMUTHS_DEG: [f64; 9] = [-40.0, -30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 30.0, 40.0];
 /// Elevations of the cage link's cameras, degrees.
 const CAGE_LINK_ELEVATIONS_DEG: [f64; 3] = [-10.0, 0.0, 10.0];
+/// The cage's near side, which the cage link's cameras frame with the relay: its targets
+/// within this of the relay's centre, metres (about the width of the frame at the cameras'
+/// distance, less the relay's own half-width).
+const CAGE_NEAR_SIDE_M: f64 = 0.6;
 
 /// The link shots of a scene with a relay (`studio.flash_relay_targets`; none without): the
 /// light-position images see the flash stand's panel and nothing of the cage, so without a
@@ -144,30 +148,21 @@ const CAGE_LINK_ELEVATIONS_DEG: [f64; 3] = [-10.0, 0.0, 10.0];
 /// [`LINK_SHOTS`] from the cage's facing side (the relay and the cage's near side), each seeing
 /// at least [`LINK_MIN_TARGETS`] targets of either side: the one seeing the most, then those
 /// seeing the far side (panel or cage) from the directions farthest from the kept ones'. The
-/// candidates are a fixed grid, so the choice is
-/// deterministic. Files are numbered after the scene's other survey shots.
+/// candidates are a fixed grid, so the choice is deterministic. Files are numbered after the
+/// scene's other survey shots.
 pub fn link_shots(scene: &Scene, rig: &Rig, renderer: &Renderer) -> Vec<Shot> {
     if rig.relay_ids.is_empty() {
         return Vec::new();
     }
     let panel = crate::studio::flash_panel_ids(rig);
     let cage = cage_ids(rig);
-    let centre_of = |ids: &[u32]| {
-        let v: Vec<DVec3> = rig
-            .reference
-            .iter()
-            .filter(|t| ids.contains(&t.id))
-            .map(skinbrdf_session::Target::centre)
-            .collect();
-        v.iter().copied().sum::<DVec3>() / v.len().max(1) as f64
-    };
+    let centre_of = |ids: &[u32]| mean(&centres_of(rig, ids));
     let relay_c = centre_of(&rig.relay_ids);
     let panel_c = centre_of(&panel);
-    // The cage's near side: its targets within the relay's reach of the frame.
     let near: Vec<u32> = rig
         .reference
         .iter()
-        .filter(|t| cage.contains(&t.id) && t.centre().distance(relay_c) < 0.6)
+        .filter(|t| cage.contains(&t.id) && t.centre().distance(relay_c) < CAGE_NEAR_SIDE_M)
         .map(|t| t.id)
         .collect();
     let cage_c = centre_of(if near.is_empty() { &cage } else { &near });
@@ -270,14 +265,7 @@ fn survey_shot(scene: &Scene, eye: DVec3, aim: DVec3, k: usize) -> Option<Shot> 
 /// The aim points: the cage's centroid, then the centroid of each quarter of the cage (its
 /// targets by azimuth about the head's axis, quarters starting at the facing azimuth).
 fn aim_points(scene: &Scene, rig: &Rig) -> Vec<DVec3> {
-    let ids = cage_ids(rig);
-    let centres: Vec<DVec3> = rig
-        .reference
-        .iter()
-        .filter(|t| ids.contains(&t.id))
-        .map(skinbrdf_session::Target::centre)
-        .collect();
-    let mean = |v: &[DVec3]| v.iter().copied().sum::<DVec3>() / v.len().max(1) as f64;
+    let centres = centres_of(rig, &cage_ids(rig));
     let mut out = vec![mean(&centres)];
     let face = facing_azimuth_deg(scene).to_radians();
     let mut quarters: [Vec<DVec3>; 4] = Default::default();
@@ -288,6 +276,20 @@ fn aim_points(scene: &Scene, rig: &Rig) -> Vec<DVec3> {
     }
     out.extend(quarters.iter().filter(|q| !q.is_empty()).map(|q| mean(q)));
     out
+}
+
+/// The centres of the reference targets `ids`, in the rig's order.
+fn centres_of(rig: &Rig, ids: &[u32]) -> Vec<DVec3> {
+    rig.reference
+        .iter()
+        .filter(|t| ids.contains(&t.id))
+        .map(skinbrdf_session::Target::centre)
+        .collect()
+}
+
+/// The mean of points (the origin for none).
+fn mean(v: &[DVec3]) -> DVec3 {
+    v.iter().copied().sum::<DVec3>() / v.len().max(1) as f64
 }
 
 /// Every candidate survey shot, in a fixed order (aim point, distance, elevation, azimuth).
