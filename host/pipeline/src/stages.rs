@@ -442,8 +442,9 @@ pub fn read_poses(path: &Path) -> Result<SessionPoses, ProcessError> {
 }
 
 /// The surveyed flash stand panel's placement sd, mm: the mean position sd of the surveyed
-/// targets that serve the flash alone (`SurveyedTarget::flash_only`); `None` when the survey
-/// placed none (the rig stated the panel).
+/// targets that serve the flash alone and that the light-position images see
+/// (`SurveyedTarget::flash_only` and `light_position`; a relay's targets, placed far better,
+/// would understate it); `None` when the survey placed none (the rig stated the panel).
 ///
 /// The light-position cameras are posed against the panel held fixed, so the flash triangulated
 /// from them moves with the panel. The panel's errors are nearly one common shift (they come
@@ -453,7 +454,7 @@ pub fn flash_panel_sigma_mm(survey: &skinbrdf_poses::Survey) -> Option<f64> {
     let sd: Vec<f64> = survey
         .targets
         .iter()
-        .filter(|t| t.flash_only)
+        .filter(|t| t.flash_only && t.light_position)
         .map(|t| t.position_sigma_mm)
         .collect();
     (!sd.is_empty()).then(|| sd.iter().sum::<f64>() / sd.len() as f64)

@@ -74,8 +74,8 @@
 //!
 //! The sigmas decide what is placed: a target placed less certainly than its group's accuracy
 //! target ([`MAX_SIGMA_REFERENCE_MM`], [`MAX_SIGMA_HEADDRESS_MM`]; [`MAX_SIGMA_FLASH_ONLY_MM`]
-//! for a reference target that light-position images see and no measurement or standard image
-//! does) is left out
+//! for a reference target that serves the flash alone: no measurement or standard image sees
+//! it, and light-position images do or a link shot shows it with one they see) is left out
 //! ([`SurveyIssue::Uncertain`], with the advice that survey images seeing it from other
 //! directions would place it) rather than held fixed in the poses with that error.
 //!
@@ -159,11 +159,13 @@ pub const MAX_SIGMA_REFERENCE_MM: f64 = 0.3;
 /// The survey's accuracy target for the headdress, mm.
 pub const MAX_SIGMA_HEADDRESS_MM: f64 = 0.5;
 
-/// The survey's accuracy target for a reference target that light-position images see and no
-/// measurement or standard image does, mm: it places the cameras that place the flash and
-/// nothing else, so it is held to the flash's bound (the emitting point within 2 mm) with room
-/// for the light-position images' own error, not to the reference structure's (a panel on the
-/// flash stand is far from the cage, linked to it only through a chain of survey shots).
+/// The survey's accuracy target for a reference target that serves the flash alone, mm: one
+/// that light-position images see and no measurement or standard image does (a panel on the
+/// flash stand), or one that links such a target to the rest without being seen by a
+/// measurement or standard image either (a relay). It places the cameras that place the flash
+/// and nothing else, so it is held to the flash's bound (the emitting point within 2 mm) with
+/// room for the light-position images' own error, not to the reference structure's (the panel
+/// is far from the cage, linked to it only through a chain of survey shots).
 pub const MAX_SIGMA_FLASH_ONLY_MM: f64 = 1.5;
 
 /// Settings of [`survey`].
@@ -296,11 +298,16 @@ pub struct SurveyedTarget {
     pub orientation_sigma_deg: f64,
     /// Images whose corners were used.
     pub views: usize,
-    /// Seen in light-position images and in no measurement or standard image: it serves the
-    /// flash alone and is held to [`SurveyConfig::max_sigma_flash_only_mm`] (a reference
-    /// target; false for others).
+    /// Seen in no measurement or standard image, and either seen in light-position images or
+    /// seen together with such a target (a relay's link shots): it serves the flash alone and
+    /// is held to [`SurveyConfig::max_sigma_flash_only_mm`] (a reference target; false for
+    /// others).
     #[serde(default)]
     pub flash_only: bool,
+    /// Seen in light-position images (with `flash_only`: the flash stand's panel, which
+    /// places the light-position cameras; without: a link to it).
+    #[serde(default)]
+    pub light_position: bool,
     /// RMS reprojection error of its corners at the solution, pixels.
     pub rms_px: f64,
     /// Its body's own variance factor over the session's (its sigmas are scaled by the root of
@@ -1510,6 +1517,12 @@ fn survey_with(
     }
 
     // Results.
+    let reference: HashSet<u32> = defs
+        .iter()
+        .filter(|d| d.group == TargetGroup::Reference)
+        .flat_map(|d| d.members.iter().map(|m| m.0))
+        .collect();
+    let (flash_only, lit) = flash_only_ids(file, &obs, &reference);
     let mut targets = Vec::new();
     let mut sheets = Vec::new();
     for (b, def) in defs.iter().enumerate() {
@@ -1557,17 +1570,7 @@ fn survey_with(
             let centre = corners_m.iter().copied().sum::<DVec3>() * 0.25;
             let (ps, os) = sig(centre - gp.translation_m);
             let (views, rms) = reprojection(&r2, &index2, &obs, def.group, *id, &corners_m);
-            // A reference target that light-position images see and no measurement or standard
-            // image does serves the flash only.
-            let seen_by = |f: &dyn Fn(ImageRole) -> bool| {
-                file.images
-                    .iter()
-                    .zip(obs.iter())
-                    .any(|(e, o)| f(e.role) && o.contains_key(id))
-            };
-            let flash_only = def.group == TargetGroup::Reference
-                && seen_by(&|r| r == ImageRole::LightPosition)
-                && !seen_by(&|r| !matches!(r, ImageRole::LightPosition | ImageRole::Survey));
+            let flash_only = def.group == TargetGroup::Reference && flash_only.contains(id);
             let bound_mm = match def.group {
                 TargetGroup::Headdress => cfg.max_sigma_headdress_mm,
                 _ if flash_only => cfg.max_sigma_flash_only_mm,
@@ -1593,6 +1596,7 @@ fn survey_with(
                 orientation_sigma_deg: os,
                 views,
                 flash_only,
+                light_position: flash_only && lit.contains(id),
                 rms_px: rms,
                 variance_ratio: local,
             });
@@ -1952,6 +1956,43 @@ fn change_point(
         shift_mm,
         worst_px,
     })
+}
+
+/// The reference targets that serve the flash alone. No measurement or standard image sees
+/// them, so no camera or head pose of the measurement rests on them; they place the
+/// light-position cameras, hence the flash, and nothing else. They are those the light-position
+/// images see (the flash stand's panel) and those seen in an image (a link shot) together with
+/// one of these (a relay's targets that the shots from behind it frame with the panel). Each is
+/// held to the flash's bound, not the reference structure's. Returns them, and those of the
+/// first kind.
+fn flash_only_ids(
+    file: &SessionFile,
+    obs: &[HashMap<u32, Obs>],
+    reference: &HashSet<u32>,
+) -> (HashSet<u32>, HashSet<u32>) {
+    let measured: HashSet<u32> = file
+        .images
+        .iter()
+        .zip(obs)
+        .filter(|(e, _)| !matches!(e.role, ImageRole::LightPosition | ImageRole::Survey))
+        .flat_map(|(_, o)| o.keys().copied())
+        .collect();
+    let unmeasured = |id: &u32| reference.contains(id) && !measured.contains(id);
+    let lit: HashSet<u32> = file
+        .images
+        .iter()
+        .zip(obs)
+        .filter(|(e, _)| e.role == ImageRole::LightPosition)
+        .flat_map(|(_, o)| o.keys().copied().filter(|id| unmeasured(id)))
+        .collect();
+    // One step only: a target seen with the cage's and not with the panel's is, from the
+    // images alone, no different from a cage target that only survey shots see.
+    let links = obs
+        .iter()
+        .filter(|o| o.keys().any(|id| lit.contains(id)))
+        .flat_map(|o| o.keys().copied().filter(|id| unmeasured(id)));
+    let all = lit.iter().copied().chain(links).collect();
+    (all, lit)
 }
 
 /// Views and RMS reprojection error of one target at the solution.
@@ -2422,6 +2463,7 @@ mod tests {
                 orientation_sigma_deg: 0.05,
                 views: 6,
                 flash_only: false,
+                light_position: false,
                 rms_px: 0.1,
                 variance_ratio: 1.0,
             }],

@@ -276,6 +276,11 @@ pub struct DuplicateId {
 /// Largest sheet tilt a scene may ask for, degrees (a sheet taped on crooked, not turned
 /// away from the cameras).
 pub const MAX_SHEET_TILT_DEG: f64 = 30.0;
+
+/// Most relay targets a scene may ask for: six columns of two rows at the relay's spacing span
+/// 0.75 m, as wide as a low stand between the head and the flash can be without reaching into
+/// the measurement images' frames.
+pub const MAX_RELAY_TARGETS: u32 = 12;
 /// Largest fold of a bent sheet, degrees.
 pub const MAX_BEND_DEG: f64 = 45.0;
 
@@ -359,6 +364,17 @@ impl StudioScene {
             if !(m.shift_mm.iter().all(|v| v.is_finite()) && m.rotate_deg.is_finite()) {
                 out.push("`studio.moved_target` shift and rotation must be finite".into());
             }
+        }
+        if self.flash_relay_targets != 0
+            && !(crate::survey_shots::LINK_MIN_TARGETS as u32..=MAX_RELAY_TARGETS)
+                .contains(&self.flash_relay_targets)
+        {
+            out.push(format!(
+                "`studio.flash_relay_targets` must be 0 (no relay) or in [{}, {MAX_RELAY_TARGETS}], \
+                 got {}",
+                crate::survey_shots::LINK_MIN_TARGETS,
+                self.flash_relay_targets
+            ));
         }
         if !(self.sheet_tilt_deg.is_finite()
             && (0.0..=MAX_SHEET_TILT_DEG).contains(&self.sheet_tilt_deg))
@@ -1230,6 +1246,20 @@ pub fn write_card_file(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_relay_is_none_or_two_to_twelve_targets() {
+        let mut scene = Scene::load("default").expect("scene");
+        for (n, ok) in [(0, true), (1, false), (2, true), (12, true), (13, false)] {
+            scene.studio.flash_relay_targets = n;
+            let p = scene.studio.problems();
+            assert_eq!(
+                p.iter().all(|m| !m.contains("flash_relay_targets")),
+                ok,
+                "{n}: {p:?}"
+            );
+        }
+    }
 
     #[test]
     fn a_moved_target_is_printed_where_its_corners_are() {
