@@ -322,13 +322,7 @@ fn a_moved_target_and_targets_seen_apart_are_named_and_left_out() {
     // images see (and they see no other reference target), is left unplaced. The survey must
     // name its targets and those images, and place nothing of it.
     let rig = skinbrdf_synth::layout::build_rig(&scene);
-    let flash_m = rig.world_from_flash.translation_m;
-    let panel: Vec<u32> = rig
-        .reference
-        .iter()
-        .filter(|t| t.centre().distance(flash_m) < PANEL_RADIUS_M)
-        .map(|t| t.id)
-        .collect();
+    let panel = skinbrdf_synth::studio::flash_panel_ids(&rig);
     assert!(panel.len() >= 4, "the flash stand's panel: {panel:?}");
     let mut unlinked = session.clone();
     let file = &mut unlinked.file;
@@ -379,7 +373,3 @@ fn a_moved_target_and_targets_seen_apart_are_named_and_left_out() {
     assert!(light.iter().all(|f| images.contains(f)), "{images:?}");
     assert!(sv.targets.iter().all(|t| !panel.contains(&t.id)));
 }
-
-/// Reference targets within this distance of the flash are the flash stand's panel (the
-/// synthetic rig puts two columns each side of the flash's 82 mm ring, within 0.2 m).
-const PANEL_RADIUS_M: f64 = 0.3;
