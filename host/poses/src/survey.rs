@@ -718,6 +718,109 @@ fn mean_pose(poses: &[Pose]) -> Option<Pose> {
     Some(Pose::new(q, t / poses.len() as f64))
 }
 
+/// A single target's pose from its corners triangulated over `views` (their cameras in the
+/// group frame, `gfc`): each corner is the point nearest all its rays in the least-squares
+/// sense, and the pose maps the target's square onto the triangulated one (origin at the
+/// centroids, axes from the square's edge directions). Several views of a small tag place it
+/// far better this way than the mean of its single-view poses, whose orientations scatter by
+/// tens of degrees when the tag is 20 px across. `None` for a body of several targets (a
+/// sheet's single-view poses are already good), when a corner has fewer than two rays or rays
+/// closer than [`MIN_TRIANGULATION_ANGLE_DEG`], or when the triangulated square's edges are
+/// off its printed size by more than [`MAX_TRIANGULATED_EDGE_ERROR`].
+fn triangulated_pose(
+    def: &BodyDef,
+    views: &[usize],
+    gfc: &[Option<Pose>],
+    obs: &[HashMap<u32, Obs>],
+    camera: &CameraModel,
+) -> Option<Pose> {
+    let [(id, size_m, body)] = def.members.as_slice() else {
+        return None;
+    };
+    let mut corners = [DVec3::ZERO; 4];
+    for (k, corner) in corners.iter_mut().enumerate() {
+        let rays: Vec<(DVec3, DVec3)> = views
+            .iter()
+            .filter_map(|&i| {
+                let wc = gfc.get(i).copied().flatten()?;
+                let o = obs.get(i)?.get(id)?;
+                if o.occluded[k] {
+                    return None;
+                }
+                let d = camera.pixel_ray(o.corners_px[k])?;
+                Some((wc.translation_m, wc.rotation * d))
+            })
+            .collect();
+        let widest = rays
+            .iter()
+            .flat_map(|a| rays.iter().map(move |b| a.1.angle_between(b.1)))
+            .fold(0.0f64, f64::max);
+        if rays.len() < 2 || widest.to_degrees() < MIN_TRIANGULATION_ANGLE_DEG {
+            return None;
+        }
+        // Σ (I − d dᵀ) X = Σ (I − d dᵀ) o.
+        let mut a = glam::DMat3::ZERO;
+        let mut rhs = DVec3::ZERO;
+        for (o, d) in &rays {
+            let m = glam::DMat3::IDENTITY - glam::DMat3::from_cols(*d * d.x, *d * d.y, *d * d.z);
+            a += m;
+            rhs += m * *o;
+        }
+        if a.determinant().abs() < 1e-12 {
+            return None;
+        }
+        *corner = a.inverse() * rhs;
+    }
+    let edge_ok = (0..4).all(|k| {
+        let e = corners[k].distance(corners[(k + 1) % 4]);
+        (e / size_m - 1.0).abs() <= MAX_TRIANGULATED_EDGE_ERROR
+    });
+    if !edge_ok {
+        return None;
+    }
+    let frame = |p: &[DVec3; 4]| {
+        let x = ((p[1] - p[0]) + (p[2] - p[3])).normalize_or_zero();
+        let y0 = (p[0] - p[3]) + (p[1] - p[2]);
+        let z = x.cross(y0).normalize_or_zero();
+        let y = z.cross(x);
+        let c = p.iter().copied().sum::<DVec3>() * 0.25;
+        (glam::DMat3::from_cols(x, y, z), c)
+    };
+    let (rb, cb) = frame(body);
+    let (rg, cg) = frame(&corners);
+    let r = rg * rb.transpose();
+    if !r.is_finite() || (r.determinant() - 1.0).abs() > 1e-6 {
+        return None;
+    }
+    let q = DQuat::from_mat3(&r).normalize();
+    Some(Pose::new(q, cg - q * cb))
+}
+
+/// Share of the camera-to-body range added to [`SurveyConfig::consensus_position_m`] in the
+/// consensus: a camera chained through small targets is up to about a degree off (a link
+/// shot posed from a relay 1 m away), which moves a body 2.5 m away by 2.5 % of the range
+/// less the part the chain's errors share.
+const CONSENSUS_RANGE_FRACTION: f64 = 0.01;
+
+/// The consensus distance stays below this share of [`SurveyConfig::two_places_min_m`], so
+/// that two places remain two sets.
+const CONSENSUS_MAX_OF_TWO_PLACES: f64 = 0.9;
+
+/// A body seen smaller than this in either of two views (its largest target's mean edge, px)
+/// has their single-view orientations left out of the consensus: at 20 px a tag's orientation
+/// scatters by tens of degrees (its planar flip among them), while its position still agrees.
+/// Its orientation then comes from the corners triangulated over the agreeing views.
+const CONSENSUS_ORIENTATION_MIN_SIDE_PX: f64 = 40.0;
+
+/// Least angle between two rays of a corner for [`triangulated_pose`], degrees: below it the
+/// depth rests on the tag's apparent size, as in a single view.
+const MIN_TRIANGULATION_ANGLE_DEG: f64 = 5.0;
+
+/// Largest relative error of a triangulated square's edge against the printed size for
+/// [`triangulated_pose`] to be used: beyond it the cameras are too far off for triangulation
+/// to beat the single-view mean.
+const MAX_TRIANGULATED_EDGE_ERROR: f64 = 0.2;
+
 /// Per image: id → observation (ids detected twice are removed and reported).
 fn observations(
     session: &Session,
@@ -819,32 +922,52 @@ fn init_group(
                 continue;
             }
             // Single-view poses of the body in every image with a camera (parallel).
-            let cands: Vec<(usize, Pose)> = obs
+            // Each with how large the body appears (its largest target's mean edge, px) and
+            // how far it is from the camera (m).
+            let seen: Vec<(usize, Pose, f64, f64)> = obs
                 .par_iter()
                 .enumerate()
                 .filter_map(|(i, o)| {
                     let wc = gfc[i]?;
                     let mut pts = Vec::new();
+                    let mut side_px = 0.0f64;
                     for (id, _, c) in &g.defs[b].members {
                         if let Some(d) = o.get(id) {
                             pts.extend(points(*id, c, d));
+                            let c = &d.corners_px;
+                            let edge = (0..4).map(|k| c[k].distance(c[(k + 1) % 4])).sum::<f64>();
+                            side_px = side_px.max(0.25 * edge);
                         }
                     }
                     if pts.len() < 4 {
                         return None;
                     }
-                    estimate_pose(camera, &pts, None, &pnp_n(1))
-                        .ok()
-                        .map(|e| (i, wc * e.frame_from_camera.inverse()))
+                    estimate_pose(camera, &pts, None, &pnp_n(1)).ok().map(|e| {
+                        let p = wc * e.frame_from_camera.inverse();
+                        let range_m = p.translation_m.distance(wc.translation_m);
+                        (i, p, side_px, range_m)
+                    })
                 })
                 .collect();
-            let agree = |a: &Pose, b: &Pose| {
-                a.translation_m.distance(b.translation_m) < cfg.consensus_position_m
-                    && angle_deg(a.rotation, b.rotation) < cfg.consensus_angle_deg
+            let look: HashMap<usize, (f64, f64)> = seen.iter().map(|c| (c.0, (c.2, c.3))).collect();
+            let cands: Vec<(usize, Pose)> = seen.iter().map(|c| (c.0, c.1)).collect();
+            // Positions agree within the configured distance plus a share of the range (the
+            // chained cameras' angular error carried to the body), below the distance that
+            // makes two places; orientations only where both views see the body large enough
+            // for a single view's orientation to mean anything.
+            let agree = |a: &(usize, Pose), b: &(usize, Pose)| {
+                let (sa, ra) = look.get(&a.0).copied().unwrap_or_default();
+                let (sb, rb) = look.get(&b.0).copied().unwrap_or_default();
+                let tol_m = (cfg.consensus_position_m + CONSENSUS_RANGE_FRACTION * ra.max(rb))
+                    .min(CONSENSUS_MAX_OF_TWO_PLACES * cfg.two_places_min_m)
+                    .max(cfg.consensus_position_m);
+                a.1.translation_m.distance(b.1.translation_m) < tol_m
+                    && (sa.min(sb) < CONSENSUS_ORIENTATION_MIN_SIDE_PX
+                        || angle_deg(a.1.rotation, b.1.rotation) < cfg.consensus_angle_deg)
             };
             let largest = |cs: &[(usize, Pose)]| -> Vec<(usize, Pose)> {
                 cs.iter()
-                    .map(|c| cs.iter().filter(|d| agree(&c.1, &d.1)).copied().collect())
+                    .map(|c| cs.iter().filter(|d| agree(c, d)).copied().collect())
                     .max_by_key(|v: &Vec<(usize, Pose)>| v.len())
                     .unwrap_or_default()
             };
@@ -854,7 +977,9 @@ fn init_group(
                 continue;
             }
             let poses = |v: &[(usize, Pose)]| v.iter().map(|c| c.1).collect::<Vec<_>>();
-            let here = mean_pose(&poses(&best));
+            let views: Vec<usize> = best.iter().map(|c| c.0).collect();
+            let here = triangulated_pose(&g.defs[b], &views, &gfc, obs, camera)
+                .or_else(|| mean_pose(&poses(&best)));
             // A second consistent placement far from the first: the same id printed twice (or a
             // target that moved far): named, not averaged in.
             let rest: Vec<(usize, Pose)> = cands
