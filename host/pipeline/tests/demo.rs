@@ -23,10 +23,15 @@ fn demo_runs_end_to_end_and_process_resumes() {
     // The capture ran the method's plan on the simulator.
     assert_eq!(out.capture.exposures.len(), 36);
     assert!(out.capture.complete);
-    assert_eq!(out.synth.images, 36);
+    // The exposures' images and the relay's link shots (survey shots, not in the record).
+    let scene = skinbrdf_synth::Scene::load("default").expect("default scene");
+    let survey = skinbrdf_synth::survey_shots::planned_count(&scene);
+    assert!(survey > 0, "the default studio's relay has link shots");
+    assert_eq!(out.synth.images, 36 + survey);
     // The real path: the session came from the studio's files, with placements to survey.
     let ingest = out.ingest.as_ref().expect("the demo ingests the studio");
     assert_eq!(ingest.images.len(), 36);
+    assert_eq!(ingest.survey_images.len(), survey);
     assert!(ingest.unplaced_targets > 40, "{}", ingest.unplaced_targets);
     let session_toml =
         std::fs::read_to_string(dir.path().join("session/session.toml")).expect("session.toml");
@@ -40,6 +45,14 @@ fn demo_runs_end_to_end_and_process_resumes() {
     let survey = r.survey().expect("the survey ran");
     let ref_mm = survey.reference_rms_error_mm.expect("scored against truth");
     let head_mm = survey.headdress_rms_error_mm.expect("scored against truth");
+    // The flash stand's panel was surveyed through the relay, not stated.
+    let panel_mm = survey
+        .flash_only_rms_error_mm
+        .expect("the panel surveyed and scored");
+    assert!(
+        panel_mm < bounds::SURVEY_FLASH_ONLY_RMS_MM,
+        "panel survey {panel_mm} mm"
+    );
     assert!(
         ref_mm < bounds::SURVEY_REFERENCE_RMS_MM,
         "reference survey {ref_mm} mm"

@@ -41,6 +41,9 @@ fn camera_position_difference_median_mm(png_out: &Path, raw_out: &Path) -> f64 {
             .as_array()
             .expect("images")
             .iter()
+            // The capture's exposures: the generator's own session also holds the survey
+            // shots, which the studio keeps apart (this ingest states every placement).
+            .filter(|im| im["role"] != "survey")
             .map(|im| {
                 let t = im["world_from_camera"]["pose"]["translation_m"].as_array()?;
                 Some([t[0].as_f64()?, t[1].as_f64()?, t[2].as_f64()?])

@@ -28,11 +28,19 @@
 //! plane homography of its four corners, refined). Per group, rounds alternate: (1) each image
 //! that sees at least two already placed targets of the group (one, when no image sees two)
 //! gets `group_from_camera` by PnP over them; (2) each unplaced body seen in such images gets
-//! one candidate `group_from_camera · camera_from_body` per image. A body is placed at the mean
-//! of the largest set of candidates that agree (within [`SurveyConfig::consensus_position_m`]
-//! and [`SurveyConfig::consensus_angle_deg`] of one of them), when that set has at least
-//! [`SurveyConfig::min_views`] members. A single small tag's pose can be its planar flip; the
-//! flipped candidates disagree with the others and are outvoted.
+//! one candidate `group_from_camera · camera_from_body` per image. A body is placed from the
+//! largest set of candidates that agree with one of them, when that set has at least
+//! [`SurveyConfig::min_views`] members. Positions agree within
+//! [`SurveyConfig::consensus_position_m`] plus 1 % of the camera-to-body range (a camera chained
+//! through small targets is up to about a degree off, which moves a body 2.5 m away by
+//! centimetres), at most 0.9 of [`SurveyConfig::two_places_min_m`]. Orientations agree within
+//! [`SurveyConfig::consensus_angle_deg`], tested only where both views see the body at least
+//! 40 px across: a single small tag's pose can be its planar flip, and at 20 px its orientation
+//! scatters by tens of degrees while its position still agrees. A single target is then placed
+//! from its corners triangulated over the agreeing views (each corner the least-squares point
+//! nearest its rays, the square fitted to them; used when the rays are at least 5 deg apart and
+//! the triangulated edges within 20 % of the printed size); a sheet, or a target the views do
+//! not triangulate, at the mean of the agreeing candidates.
 //!
 //! # Robustness
 //!
@@ -139,8 +147,8 @@ pub const MOVED_MIN_SHIFT_MM: f64 = 0.3;
 
 /// Two consistent groups of single-view placements this far apart, metres, are two places: a
 /// target pitch of the printed sheets (a copy elsewhere on the rig), well beyond the
-/// single-view scatter the consensus allows (15 mm) and a planar flip (which turns the target
-/// about its centre rather than moving it).
+/// single-view scatter the consensus allows (15 mm, up to 45 mm for a body far from the
+/// cameras) and a planar flip (which turns the target about its centre rather than moving it).
 pub const TWO_PLACES_MIN_M: f64 = 0.05;
 
 /// A flat sheet's layout fits a single view's corners to their noise (a few tenths of a pixel
@@ -223,7 +231,8 @@ pub struct SurveyConfig {
 
 impl SurveyConfig {
     /// Defaults. The consensus tolerances cover a single-tag start (a camera posed from one
-    /// 25-35 mm tag is about a degree off, a few millimetres at the neighbouring targets) and
+    /// 25-35 mm tag is about a degree off, a few millimetres at the neighbouring targets; the
+    /// range-dependent share is added in the consensus) and, where the orientation is tested,
     /// are far below a planar flip (tens of degrees).
     pub const DEFAULT: Self = Self {
         detector: DetectorConfig::DEFAULT,
@@ -797,9 +806,9 @@ fn triangulated_pose(
 }
 
 /// Share of the camera-to-body range added to [`SurveyConfig::consensus_position_m`] in the
-/// consensus: a camera chained through small targets is up to about a degree off (a link
-/// shot posed from a relay 1 m away), which moves a body 2.5 m away by 2.5 % of the range
-/// less the part the chain's errors share.
+/// consensus: a camera chained through small targets (a link shot posed from a relay 1 m
+/// away) is off by a fraction of a degree to a degree, so its candidates for a body 2.5 m
+/// away scatter by centimetres; with the fixed part, 1 % allows about 40 mm there.
 const CONSENSUS_RANGE_FRACTION: f64 = 0.01;
 
 /// The consensus distance stays below this share of [`SurveyConfig::two_places_min_m`], so

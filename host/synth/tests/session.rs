@@ -25,16 +25,20 @@ fn default_scene_writes_a_valid_36_image_session_with_truth() {
     let dir = tempfile::tempdir().unwrap();
     let scene = Scene::load("default").unwrap();
     let sum = generate(&scene, &small(1), dir.path()).unwrap();
-    assert_eq!(sum.images, 36);
+    // The capture's 36 exposures and the survey shots (the relay's link shots).
+    let survey = skinbrdf_synth::survey_shots::planned_count(&scene);
+    assert!(survey > 0, "the default studio's relay has link shots");
+    assert_eq!(sum.images, 36 + survey);
     let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(s.file.images.len(), 36);
+    assert_eq!(s.file.images.len(), 36 + survey);
+    assert_eq!(s.images_with_role(ImageRole::Survey).count(), survey);
     assert_eq!(s.images_with_role(ImageRole::Measurement).count(), 30);
     assert_eq!(s.images_with_role(ImageRole::LightPosition).count(), 3);
     assert_eq!(s.images_with_role(ImageRole::ReferenceStandard).count(), 1);
     assert_eq!(s.images_with_role(ImageRole::StandardPosition).count(), 2);
     assert!(matches!(s.file.geometry, GeometrySpec::Scan { .. }));
     let truth = s.load_truth().unwrap().unwrap();
-    assert_eq!(truth.images.len(), 36);
+    assert_eq!(truth.images.len(), 36 + survey);
     assert!(truth.surface.scan_vertices > 1000);
     for it in &truth.images {
         let visible = |layout: &str| {
@@ -90,7 +94,14 @@ fn default_scene_writes_a_valid_36_image_session_with_truth() {
                     visible("standard")
                 );
             }
-            ImageRole::Survey => panic!("{}: the default scene takes no survey images", it.file),
+            // The relay's link shots: each sees at least two relay targets and two of the
+            // panel or the cage (asserted in the synth crate's link-shot test).
+            ImageRole::Survey => assert!(
+                visible("reference") >= 4,
+                "{}: {} reference targets",
+                it.file,
+                visible("reference")
+            ),
         }
     }
     // The images are not blank and the skin is brighter than the background.
@@ -286,18 +297,27 @@ fn a_capture_record_drives_the_session() {
         resolution: Some((200, 133)),
         ..small(1)
     };
-    let sum = generate(&Scene::load("default").unwrap(), &opts, dir.path()).unwrap();
+    let scene = Scene::load("default").unwrap();
+    let sum = generate(&scene, &opts, dir.path()).unwrap();
     assert_eq!(
-        sum.images, 4,
-        "the exposure whose camera did not fire has no image"
+        sum.images,
+        4 + skinbrdf_synth::survey_shots::planned_count(&scene),
+        "the exposure whose camera did not fire has no image (the survey shots are not in the record)"
     );
     let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
     let cap = s.capture.as_ref().unwrap();
     assert_eq!(cap.exposures[2].image.as_deref(), Some("images/m01.png"));
     assert_eq!(cap.exposures[1].image, None);
-    assert_eq!(s.file.images[1].exposure_index, Some(2));
+    // The exposures' images follow the survey shots, which come first (taken before).
+    let first = s
+        .file
+        .images
+        .iter()
+        .position(|e| e.role != ImageRole::Survey)
+        .expect("the exposures' images");
+    assert_eq!(s.file.images[first + 1].exposure_index, Some(2));
     let truth = s.load_truth().unwrap().unwrap();
-    assert_eq!(truth.images[1].exposure_us, 5_080_000);
+    assert_eq!(truth.images[first + 1].exposure_us, 5_080_000);
     // Head motion is keyed to exposure time: different shots, different head poses.
-    assert!(truth.images[0].world_from_head != truth.images[1].world_from_head);
+    assert!(truth.images[first].world_from_head != truth.images[first + 1].world_from_head);
 }
