@@ -20,16 +20,22 @@ use skinbrdf_synth::studio::STUDIO_DIR;
 use skinbrdf_synth::Scene;
 
 /// Reference targets surveyed within this RMS of the truth, mm (the issue's bound), over every
-/// target the survey placed: it leaves out those it cannot place that well (`Uncertain`).
+/// target of the reference structure the survey placed: it leaves out those it cannot place
+/// that well (`Uncertain`).
 const REFERENCE_RMS_MM: f64 = 0.3;
+/// The flash stand's panel and the relay targets framed with it (`flash_only`) within this
+/// RMS, mm: they place the light-position cameras, hence the flash, and are held to the
+/// flash's bound (the report's `flash_only_rms_error`).
+const FLASH_ONLY_RMS_MM: f64 = skinbrdf_pipeline::metrics::bounds::SURVEY_FLASH_ONLY_RMS_MM;
 /// Headdress targets within this RMS, mm (the issue's bound).
 const HEADDRESS_RMS_MM: f64 = 0.5;
 /// Every placed target's error within this many of its stated standard deviations: the sigmas
 /// are what decides which targets are placed, so they must cover the errors (a Gaussian 3-D
 /// error exceeds 4 sigma-of-the-trace with probability well under 1e-3).
 const SIGMA_COVERAGE: f64 = 4.0;
-/// At least this many reference targets placed (of the 52 the studio's cage and panel hold,
-/// 11 placed by the rig; the rest seen in at least two images).
+/// At least this many targets of the reference structure placed (the cage's, besides the
+/// flash-only ones; the rig places the 3 origin targets; the rest seen in at least two
+/// images).
 const MIN_REFERENCE_SURVEYED: usize = 30;
 /// The samples of the surveyed session against those of the same card ingested with every
 /// placement given (the measured rig and the registered scan), percentage points of median
@@ -104,20 +110,28 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
         truth_of(TargetGroup::Reference),
         truth_of(TargetGroup::Headdress),
     );
-    let surveyed = |g: TargetGroup, min_views: usize| -> HashMap<u32, [DVec3; 4]> {
+    let surveyed_if = |keep: &dyn Fn(&skinbrdf_poses::survey::SurveyedTarget) -> bool| {
         survey
             .targets
             .iter()
-            .filter(|t| t.group == g && t.views >= min_views)
+            .filter(|t| keep(t))
             .map(|t| (t.id, t.corners_m))
-            .collect()
+            .collect::<HashMap<u32, [DVec3; 4]>>()
     };
-    let (ref_rms, ref_worst, ref_n) =
-        corner_rms_mm(&surveyed(TargetGroup::Reference, 0), &truth_ref);
+    let surveyed = |g: TargetGroup| surveyed_if(&|t| t.group == g);
+    let (ref_rms, ref_worst, ref_n) = corner_rms_mm(
+        &surveyed_if(&|t| t.group == TargetGroup::Reference && !t.flash_only),
+        &truth_ref,
+    );
+    let (flash_rms, flash_worst, flash_n) = corner_rms_mm(
+        &surveyed_if(&|t| t.group == TargetGroup::Reference && t.flash_only),
+        &truth_ref,
+    );
     let (head_rms, head_worst, head_n) =
-        corner_rms_mm(&surveyed(TargetGroup::Headdress, 0), &truth_head);
+        corner_rms_mm(&surveyed(TargetGroup::Headdress), &truth_head);
     eprintln!(
         "survey: reference {ref_n} targets rms {ref_rms:.3} mm (worst {ref_worst:.3}); \
+         flash-only {flash_n} targets rms {flash_rms:.3} mm (worst {flash_worst:.3}); \
          headdress {head_n} targets rms {head_rms:.3} mm (worst {head_worst:.3}); {:?}",
         survey.timing
     );
@@ -143,6 +157,12 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
     );
     assert!(head_n >= 8, "{head_n} headdress targets surveyed");
     assert!(ref_rms < REFERENCE_RMS_MM, "reference rms {ref_rms} mm");
+    // The default studio surveys its flash stand's panel through the relay.
+    assert!(flash_n >= 4, "{flash_n} flash-only targets surveyed");
+    assert!(
+        flash_rms < FLASH_ONLY_RMS_MM,
+        "flash-only rms {flash_rms} mm"
+    );
     assert!(head_rms < HEADDRESS_RMS_MM, "headdress rms {head_rms} mm");
     assert!(
         worst_ratio < SIGMA_COVERAGE,
@@ -169,7 +189,7 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
     assert!(head.head_position_error_median_mm.expect("scored") < bounds::HEAD_POSITION_MM);
     // The head frame: the rigid motion between the registered headdress and the true one (in
     // the scan's frame) is the registration's error.
-    let est: Vec<(u32, [DVec3; 4])> = surveyed(TargetGroup::Headdress, 0).into_iter().collect();
+    let est: Vec<(u32, [DVec3; 4])> = surveyed(TargetGroup::Headdress).into_iter().collect();
     let tru: Vec<(u32, [DVec3; 4])> = truth_head.iter().map(|(k, v)| (*k, *v)).collect();
     let frame = skinbrdf_register::align(
         &est,
