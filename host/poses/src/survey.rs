@@ -313,8 +313,8 @@ pub struct SurveyedTarget {
     /// others).
     #[serde(default)]
     pub flash_only: bool,
-    /// Seen in light-position images (with `flash_only`: the flash stand's panel, which
-    /// places the light-position cameras; without: a link to it).
+    /// Serves the flash alone and is seen in light-position images: the flash stand's panel,
+    /// which places the light-position cameras (false for the relay and for others).
     #[serde(default)]
     pub light_position: bool,
     /// RMS reprojection error of its corners at the solution, pixels.
@@ -2352,6 +2352,93 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    /// A 21 mm target 2.5 m from cameras spread over `spread_deg` of azimuth, seen about 20 px
+    /// across at 762 px and 16 deg: its observations and cameras for [`triangulated_pose`].
+    #[allow(clippy::type_complexity)]
+    fn small_tag_views(
+        spread_deg: f64,
+        sigma_px: f64,
+    ) -> (
+        BodyDef,
+        Pose,
+        Vec<Option<Pose>>,
+        Vec<HashMap<u32, Obs>>,
+        CameraModel,
+    ) {
+        let camera = CameraModel::from_fov(762, 506, 16f64.to_radians());
+        let corners = tag_corners(0.021);
+        let def = BodyDef {
+            group: TargetGroup::Reference,
+            sheet: None,
+            members: vec![(7, 0.021, corners)],
+        };
+        let truth = Pose::new(
+            DQuat::from_rotation_x(std::f64::consts::FRAC_PI_2) * DQuat::from_rotation_y(0.3),
+            DVec3::new(0.1, -0.05, 0.2),
+        );
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let (mut gfc, mut obs) = (Vec::new(), Vec::new());
+        for i in 0..4 {
+            let az = (-0.5 * spread_deg + spread_deg * f64::from(i) / 3.0).to_radians();
+            let eye = truth.translation_m + DVec3::new(2.5 * az.sin(), 2.5 * az.cos(), 0.2);
+            let wc = Pose::look_at(eye, truth.translation_m, DVec3::Z).expect("camera");
+            let cw = wc.inverse();
+            let mut px = [DVec2::ZERO; 4];
+            for (k, p) in px.iter_mut().enumerate() {
+                let noise = DVec2::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5)
+                    * (sigma_px * 12f64.sqrt());
+                *p = camera
+                    .project(cw.transform_point(truth.transform_point(corners[k])))
+                    .expect("in view")
+                    + noise;
+            }
+            gfc.push(Some(wc));
+            obs.push(HashMap::from([(
+                7,
+                Obs {
+                    corners_px: px,
+                    sigma_px: [sigma_px; 4],
+                    occluded: [false; 4],
+                },
+            )]));
+        }
+        (def, truth, gfc, obs, camera)
+    }
+
+    #[test]
+    fn a_small_tag_is_placed_from_its_triangulated_corners() {
+        // Exact corners: the pose itself.
+        let (def, truth, gfc, obs, camera) = small_tag_views(40.0, 0.0);
+        let p = triangulated_pose(&def, &[0, 1, 2, 3], &gfc, &obs, &camera).expect("placed");
+        assert!(p.translation_m.distance(truth.translation_m) < 1e-9);
+        assert!(angle_deg(p.rotation, truth.rotation) < 1e-6);
+        // Corner noise of 0.1 px: millimetres and a few degrees, where single views of a 20 px
+        // tag scatter by tens of degrees.
+        let (def, truth, gfc, obs, camera) = small_tag_views(40.0, 0.1);
+        let p = triangulated_pose(&def, &[0, 1, 2, 3], &gfc, &obs, &camera).expect("placed");
+        let e_mm = p.translation_m.distance(truth.translation_m) * 1e3;
+        let e_deg = angle_deg(p.rotation, truth.rotation);
+        assert!(e_mm < 2.0 && e_deg < 10.0, "{e_mm} mm, {e_deg} deg");
+    }
+
+    #[test]
+    fn a_tag_seen_from_one_direction_or_in_a_sheet_is_not_triangulated() {
+        // Rays under 5 deg apart: the depth would rest on the tag's size.
+        let (def, _, gfc, obs, camera) = small_tag_views(3.0, 0.1);
+        assert!(triangulated_pose(&def, &[0, 1, 2, 3], &gfc, &obs, &camera).is_none());
+        // One view.
+        let (def, _, gfc, obs, camera) = small_tag_views(40.0, 0.1);
+        assert!(triangulated_pose(&def, &[2], &gfc, &obs, &camera).is_none());
+        // The triangulated square is not the printed one (a 21 mm tag taken for 35 mm).
+        let mut wrong = def.clone();
+        wrong.members[0] = (7, 0.035, tag_corners(0.035));
+        assert!(triangulated_pose(&wrong, &[0, 1, 2, 3], &gfc, &obs, &camera).is_none());
+        // A body of two targets keeps the single-view mean.
+        let mut sheet = def.clone();
+        sheet.members.push((8, 0.021, tag_corners(0.021)));
+        assert!(triangulated_pose(&sheet, &[0, 1, 2, 3], &gfc, &obs, &camera).is_none());
     }
 
     fn placed() -> Pose {
