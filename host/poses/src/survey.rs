@@ -675,12 +675,25 @@ fn outward(c: &[DVec3; 4]) -> DVec3 {
     -(x.cross(y)).normalize_or_zero()
 }
 
-/// One detection: corners, sigmas, occluded flags.
+/// One detection: corners, sigmas, occluded flags, apparent side.
 #[derive(Debug, Clone, Copy)]
 struct Obs {
     corners_px: [DVec2; 4],
     sigma_px: [f64; 4],
     occluded: [bool; 4],
+    /// Mean side, pixels ([`skinbrdf_targets::Detection::side_px`]).
+    side_px: f64,
+}
+
+/// One image's single-view placement of a body in the chained start.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    image: usize,
+    group_from_body: Pose,
+    /// The body's apparent size there: its largest seen target's mean side, pixels.
+    side_px: f64,
+    /// Distance from the camera, metres.
+    range_m: f64,
 }
 
 fn points(id: u32, corners_m: &[DVec3; 4], o: &Obs) -> Vec<PointObs> {
@@ -845,6 +858,7 @@ fn observations(
                 corners_px: t.corners_px,
                 sigma_px: t.corner_sigma_px(),
                 occluded: t.occluded_corners,
+                side_px: t.side_px(),
             };
             if m.insert(t.id, o).is_some() && dup.insert(t.id) {
                 issues.push(SurveyIssue::Duplicated {
@@ -931,9 +945,7 @@ fn init_group(
                 continue;
             }
             // Single-view poses of the body in every image with a camera (parallel).
-            // Each with how large the body appears (its largest target's mean edge, px) and
-            // how far it is from the camera (m).
-            let seen: Vec<(usize, Pose, f64, f64)> = obs
+            let cands: Vec<Candidate> = obs
                 .par_iter()
                 .enumerate()
                 .filter_map(|(i, o)| {
@@ -943,9 +955,7 @@ fn init_group(
                     for (id, _, c) in &g.defs[b].members {
                         if let Some(d) = o.get(id) {
                             pts.extend(points(*id, c, d));
-                            let c = &d.corners_px;
-                            let edge = (0..4).map(|k| c[k].distance(c[(k + 1) % 4])).sum::<f64>();
-                            side_px = side_px.max(0.25 * edge);
+                            side_px = side_px.max(d.side_px);
                         }
                     }
                     if pts.len() < 4 {
@@ -953,31 +963,33 @@ fn init_group(
                     }
                     estimate_pose(camera, &pts, None, &pnp_n(1)).ok().map(|e| {
                         let p = wc * e.frame_from_camera.inverse();
-                        let range_m = p.translation_m.distance(wc.translation_m);
-                        (i, p, side_px, range_m)
+                        Candidate {
+                            image: i,
+                            group_from_body: p,
+                            side_px,
+                            range_m: p.translation_m.distance(wc.translation_m),
+                        }
                     })
                 })
                 .collect();
-            let look: HashMap<usize, (f64, f64)> = seen.iter().map(|c| (c.0, (c.2, c.3))).collect();
-            let cands: Vec<(usize, Pose)> = seen.iter().map(|c| (c.0, c.1)).collect();
             // Positions agree within the configured distance plus a share of the range (the
             // chained cameras' angular error carried to the body), below the distance that
             // makes two places; orientations only where both views see the body large enough
             // for a single view's orientation to mean anything.
-            let agree = |a: &(usize, Pose), b: &(usize, Pose)| {
-                let (sa, ra) = look.get(&a.0).copied().unwrap_or_default();
-                let (sb, rb) = look.get(&b.0).copied().unwrap_or_default();
-                let tol_m = (cfg.consensus_position_m + CONSENSUS_RANGE_FRACTION * ra.max(rb))
-                    .min(CONSENSUS_MAX_OF_TWO_PLACES * cfg.two_places_min_m)
-                    .max(cfg.consensus_position_m);
-                a.1.translation_m.distance(b.1.translation_m) < tol_m
-                    && (sa.min(sb) < CONSENSUS_ORIENTATION_MIN_SIDE_PX
-                        || angle_deg(a.1.rotation, b.1.rotation) < cfg.consensus_angle_deg)
+            let agree = |a: &Candidate, b: &Candidate| {
+                let (pa, pb) = (a.group_from_body, b.group_from_body);
+                let tol_m = (cfg.consensus_position_m
+                    + CONSENSUS_RANGE_FRACTION * a.range_m.max(b.range_m))
+                .min(CONSENSUS_MAX_OF_TWO_PLACES * cfg.two_places_min_m)
+                .max(cfg.consensus_position_m);
+                pa.translation_m.distance(pb.translation_m) < tol_m
+                    && (a.side_px.min(b.side_px) < CONSENSUS_ORIENTATION_MIN_SIDE_PX
+                        || angle_deg(pa.rotation, pb.rotation) < cfg.consensus_angle_deg)
             };
-            let largest = |cs: &[(usize, Pose)]| -> Vec<(usize, Pose)> {
+            let largest = |cs: &[Candidate]| -> Vec<Candidate> {
                 cs.iter()
                     .map(|c| cs.iter().filter(|d| agree(c, d)).copied().collect())
-                    .max_by_key(|v: &Vec<(usize, Pose)>| v.len())
+                    .max_by_key(|v: &Vec<Candidate>| v.len())
                     .unwrap_or_default()
             };
             let best = largest(&cands);
@@ -985,15 +997,15 @@ fn init_group(
             if best.len() < cfg.min_views {
                 continue;
             }
-            let poses = |v: &[(usize, Pose)]| v.iter().map(|c| c.1).collect::<Vec<_>>();
-            let views: Vec<usize> = best.iter().map(|c| c.0).collect();
+            let poses = |v: &[Candidate]| v.iter().map(|c| c.group_from_body).collect::<Vec<_>>();
+            let views: Vec<usize> = best.iter().map(|c| c.image).collect();
             let here = triangulated_pose(&g.defs[b], &views, &gfc, obs, camera)
                 .or_else(|| mean_pose(&poses(&best)));
             // A second consistent placement far from the first: the same id printed twice (or a
             // target that moved far): named, not averaged in.
-            let rest: Vec<(usize, Pose)> = cands
+            let rest: Vec<Candidate> = cands
                 .iter()
-                .filter(|c| !best.iter().any(|d| d.0 == c.0))
+                .filter(|c| !best.iter().any(|d| d.image == c.image))
                 .copied()
                 .collect();
             let second = largest(&rest);
@@ -1002,8 +1014,8 @@ fn init_group(
                 let apart = a.translation_m.distance(z.translation_m);
                 if second.len() >= cfg.min_views && apart > cfg.two_places_min_m {
                     two_places.insert(b);
-                    let imgs = |v: &[(usize, Pose)]| -> Vec<String> {
-                        let mut i: Vec<usize> = v.iter().map(|c| c.0).collect();
+                    let imgs = |v: &[Candidate]| -> Vec<String> {
+                        let mut i: Vec<usize> = v.iter().map(|c| c.image).collect();
                         i.sort_unstable();
                         i.into_iter().map(|i| names[i].clone()).collect()
                     };
@@ -2354,6 +2366,20 @@ mod tests {
             .collect()
     }
 
+    /// A whole detection with these corners and corner sigma (its side as the detector's).
+    fn seen(corners_px: [DVec2; 4], sigma_px: f64) -> Obs {
+        let side_px = (0..4)
+            .map(|k| corners_px[k].distance(corners_px[(k + 1) % 4]))
+            .sum::<f64>()
+            / 4.0;
+        Obs {
+            corners_px,
+            sigma_px: [sigma_px; 4],
+            occluded: [false; 4],
+            side_px,
+        }
+    }
+
     /// A 21 mm target 2.5 m from cameras spread over `spread_deg` of azimuth, seen about 20 px
     /// across at 762 px and 16 deg: its observations and cameras for [`triangulated_pose`].
     #[allow(clippy::type_complexity)]
@@ -2395,14 +2421,7 @@ mod tests {
                     + noise;
             }
             gfc.push(Some(wc));
-            obs.push(HashMap::from([(
-                7,
-                Obs {
-                    corners_px: px,
-                    sigma_px: [sigma_px; 4],
-                    occluded: [false; 4],
-                },
-            )]));
+            obs.push(HashMap::from([(7, seen(px, sigma_px))]));
         }
         (def, truth, gfc, obs, camera)
     }
@@ -2505,14 +2524,7 @@ mod tests {
                                 )
                                 .expect("in view")
                         });
-                        (
-                            k as u32,
-                            Obs {
-                                corners_px,
-                                sigma_px: [0.08; 4],
-                                occluded: [false; 4],
-                            },
-                        )
+                        (k as u32, seen(corners_px, 0.08))
                     })
                     .collect()
             })
@@ -2552,10 +2564,11 @@ mod tests {
                 let cw = Pose::look_at(eye, DVec3::ZERO, DVec3::Z)
                     .expect("camera")
                     .inverse();
-                let see = |c: &[DVec3; 4]| Obs {
-                    corners_px: c.map(|p| camera.project(cw.transform_point(p)).expect("in view")),
-                    sigma_px: [0.08; 4],
-                    occluded: [false; 4],
+                let see = |c: &[DVec3; 4]| {
+                    seen(
+                        c.map(|p| camera.project(cw.transform_point(p)).expect("in view")),
+                        0.08,
+                    )
                 };
                 let mut o: HashMap<u32, Obs> = placed.iter().map(|(id, c)| (*id, see(c))).collect();
                 let at = if i < split { a } else { b };

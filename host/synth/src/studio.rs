@@ -1250,7 +1250,14 @@ mod tests {
     #[test]
     fn a_relay_is_none_or_two_to_twelve_targets() {
         let mut scene = Scene::load("default").expect("scene");
-        for (n, ok) in [(0, true), (1, false), (2, true), (12, true), (13, false)] {
+        let max = MAX_RELAY_TARGETS;
+        for (n, ok) in [
+            (0, true),
+            (1, false),
+            (2, true),
+            (max, true),
+            (max + 1, false),
+        ] {
             scene.studio.flash_relay_targets = n;
             let p = scene.studio.problems();
             assert_eq!(
