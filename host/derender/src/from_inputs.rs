@@ -85,7 +85,7 @@ pub struct OwnedImage {
 }
 
 impl OwnedImage {
-    /// A view for [`derender_image`].
+    /// A view for [`crate::image::derender_image`].
     pub fn view(&self) -> ImageView<'_> {
         ImageView {
             width: self.width,

@@ -13,7 +13,7 @@
 //!   the convexity test that decides whether shadow rays are needed at all.
 //! * [`image`]: one image to samples ([`derender_image`]), every dropped pixel counted by reason.
 //! * [`calibrate`]: C from the standard's pixels, robust average with its spread.
-//! * [`session`]: the whole derender from plain data ([`derender_with_loader`]: poses per
+//! * [`from_inputs`]: the whole derender from plain data ([`derender_with_loader`]: poses per
 //!   image, light, C or the standard, images loaded one at a time), timings per stage.
 //! * [`poses`]: the poses as plain, already-resolved data ([`ResolvedPoses`], each quantity
 //!   with its [`PoseSource`]) and the one constructor of [`DerenderInputs`] from a session.

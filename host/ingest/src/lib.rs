@@ -3,7 +3,7 @@
 //! * [`matching`]: which camera file is which of the controller's exposures, by time (the camera
 //!   clock's offset and drift estimated by a monotone alignment), with test shots, missing files,
 //!   duplicates and other bodies reported by name and ambiguous cases refused.
-//! * [`ingest`]: the card, the capture record, the rig file and the scan to a session
+//! * [`mod@ingest`]: the card, the capture record, the rig file and the scan to a session
 //!   directory (`skinbrdf ingest`); see `docs/ingest.md`.
 
 pub mod ingest;

@@ -9,10 +9,10 @@
 //!    the camera's raw files on a card, the controller's record, a rig file stating only the
 //!    declared origin and the printed flash ring and standard frame, the textured head scan in
 //!    its scanner's frame) and the ground truth for scoring.
-//! 3. **Ingest**: [`skinbrdf_ingest::ingest`] matches the card's raw files to the controller's
+//! 3. **Ingest**: [`skinbrdf_ingest::ingest()`] matches the card's raw files to the controller's
 //!    record and writes `session/` from the studio's files alone: no target placement, no
 //!    registered scan, nothing of the truth.
-//! 4. **Processing**: the planned pipeline ([`crate::process`]) surveys the unmeasured targets,
+//! 4. **Processing**: the planned pipeline ([`crate::process()`]) surveys the unmeasured targets,
 //!    registers the headdress to the textured scan, recovers poses from the images, derenders,
 //!    smooths and fits, scored against the studio's truth.
 //! 5. **Report**: `report.md` with every stage's accuracy against the ground truth and its run

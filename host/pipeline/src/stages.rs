@@ -145,7 +145,7 @@ fn json_bytes<T: serde::Serialize>(path: &Path, v: &T) -> Result<Vec<u8>, Proces
 
 // --- placement survey ------------------------------------------------------------------------
 
-/// The placement survey (see [`skinbrdf_poses::survey`]).
+/// The placement survey (see [`skinbrdf_poses::survey()`]).
 #[derive(Debug)]
 pub struct SurveyUnit;
 

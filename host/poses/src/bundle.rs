@@ -6,7 +6,7 @@
 //! posed, the head pose (`world_from_head`); for the session, the flash pose
 //! (`world_from_flash`), the standard's pose (`world_from_standard`) and optionally the camera
 //! intrinsics (`fx, fy, cx, cy, k1, k2, k3, p1, p2`). Poses given in `session.toml` stay fixed.
-//! For the placement survey ([`crate::survey`]) the problem also has **bodies**: a target or a
+//! For the placement survey ([`crate::survey()`]) the problem also has **bodies**: a target or a
 //! printed sheet whose placement in its group's frame (world or head) is unknown, with its pose
 //! `group_from_body` (6 parameters) and optionally a print-scale factor `k` (1 parameter); a
 //! corner given in the body's frame as `p` is at `group_from_body · (k p)`.

@@ -80,7 +80,7 @@ pub enum AlignKind {
     Similarity,
 }
 
-/// Rejection settings of [`crate::align`].
+/// Rejection settings of [`crate::align()`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AlignConfig {
     /// Absolute floor of the rejection threshold, millimetres ([`MAX_TARGET_RESIDUAL_MM`]).

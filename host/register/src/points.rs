@@ -12,7 +12,7 @@
 //!
 //! At least three points that are not collinear are needed (three corners of one target
 //! suffice; corners of several targets spread over the band constrain the rotation better).
-//! [`align_points`] fits the survey's corners to them as [`crate::align`] does, rejecting a
+//! [`align_points`] fits the survey's corners to them as [`crate::align()`] does, rejecting a
 //! target whose points do not fit.
 
 use std::path::Path;
@@ -154,7 +154,7 @@ pub fn parse_point_pairs(text: &str, path: &Path) -> Result<Vec<ScanPoint>, Regi
 }
 
 /// Aligns the survey's corners to picked scan points (matched by target and corner), with the
-/// rejection of [`crate::align`]. Points of targets the survey does not have are listed in
+/// rejection of [`crate::align()`]. Points of targets the survey does not have are listed in
 /// [`Alignment::unmatched`].
 pub fn align_points(
     survey: &[(u32, [DVec3; 4])],

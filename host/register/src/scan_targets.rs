@@ -6,7 +6,7 @@
 //!    rendered by ray casting ([`skinbrdf_mesh::MeshBvh`]) from [`ScanTargetConfig::overview_views`]
 //!    pinhole cameras spread evenly over a sphere around the scan's centroid (a Fibonacci
 //!    lattice: the scan's frame is arbitrary, so no side is privileged), each framing the whole
-//!    scan. The tags are detected with the project's detector ([`skinbrdf_targets::detect`]).
+//!    scan. The tags are detected with the project's detector ([`skinbrdf_targets::detect()`]).
 //! 2. **Back-projection.** Each detected corner's pixel ray is cast onto the mesh; the hit is
 //!    the corner on the scan. A detection is kept when all four corners hit, its sides are the
 //!    target's size within [`ScanTargetConfig::max_size_error`], and it is seen from the

@@ -7,7 +7,7 @@
 //! A pinhole camera looks at the mesh's bounding-sphere centre from [`RenderConfig::view_dir`]
 //! (mesh frame; the synthetic head's face looks along +y). Each pixel is sampled on a regular
 //! `s x s` grid ([`RenderConfig::supersample`]); every sample's primary ray is traced through
-//! [`MeshBvh`] (obvhs) and a shadow ray goes from the hit towards the point light. The light
+//! [`skinbrdf_mesh::MeshBvh`] (obvhs) and a shadow ray goes from the hit towards the point light. The light
 //! sits at [`RenderConfig::light_distance_rel`] bounding radii from the centre, rotated from the
 //! camera direction by [`RenderConfig::light_azimuth_deg`] about the up axis and raised by
 //! [`RenderConfig::light_elevation_deg`] (0, 0 = a flash at the camera's side of the head).

@@ -24,7 +24,7 @@
 //! * [`SessionFile`] and its parts are the `session.toml` types; [`Session::write_file`] writes one.
 //! * [`Rig`] (`rig.toml`): a studio's targets, flash and standard, with or without placements.
 //! * [`Truth`] (`truth.json`): every pose, the light position, C, the BRDF and per-image masks.
-//! * [`write`]: atomic writers (JSON, TOML, 16-bit PNG, EXR, masks) and [`load_mask`].
+//! * [`mod@write`]: atomic writers (JSON, TOML, 16-bit PNG, EXR, masks) and [`load_mask`].
 //!
 //! # Radiometric convention
 //!

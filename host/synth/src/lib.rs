@@ -11,7 +11,7 @@
 //!   band) and how a real sheet differs from its layout (tilt, print scale, fold, wrap).
 //! * [`photograph`]: the synthetic photographer: ray casting (obvhs through `skinbrdf-mesh`,
 //!   rayon over rows) and shading of the studio photographs.
-//! * [`generate`]: writes a session directory that `skinbrdf_session::Session::load` accepts,
+//! * [`mod@generate`]: writes a session directory that `skinbrdf_session::Session::load` accepts,
 //!   with `truth.json` and truth masks. Entry point: [`generate::generate`].
 //! * [`studio`]: with `--studio`, what a studio holds after the capture: the camera's raw
 //!   files (DNG), the controller's record, the rig files and the scan.

@@ -27,11 +27,11 @@
 //! traced; the rest are background (exactly what tracing them would give, and tested so).
 //!
 //! Cost: the camera rays come from the undistortion table; every mesh (the large skin one and
-//! the small ones) is traced for a band of [`BAND_ROWS`] pixel rows at once with the coherent
+//! the small ones) is traced for a band of `BAND_ROWS` pixel rows at once with the coherent
 //! tile tracer ([`MeshBvh::intersect_grid_into`], the same closest hits as ray-by-ray
 //! traversal; a tile that sees none of a mesh costs one frustum test); a skin hit is moved onto
 //! the analytic surface by a Newton iteration along the ray that reuses one directional
-//! derivative ([`refine_on_ray`]).
+//! derivative (`refine_on_ray`).
 
 use std::sync::Arc;
 
