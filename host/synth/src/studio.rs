@@ -1081,6 +1081,18 @@ pub fn rig_problems(scene: &Scene, rig: &Rig) -> Vec<String> {
             ));
         }
     }
+    // The layout leaves out a relay target that would shadow the forehead or the standard (or
+    // whose id would run into the headdress's): a relay smaller than asked is not the scene
+    // that was written.
+    let placed = rig.relay_ids.len();
+    if placed != st.flash_relay_targets as usize {
+        out.push(format!(
+            "`studio.flash_relay_targets`: {} asked, {placed} placed (the others would shadow \
+             the forehead or the standard from the flash, or their ids would reach the \
+             headdress's)",
+            st.flash_relay_targets
+        ));
+    }
     out
 }
 
@@ -1266,6 +1278,33 @@ mod tests {
                 "{n}: {p:?}"
             );
         }
+    }
+
+    #[test]
+    fn every_scene_places_the_relay_it_asks_for() {
+        for (name, _) in crate::scene::BUILTIN_SCENES {
+            let scene = Scene::load(name).expect("scene");
+            let rig = crate::layout::build_rig(&scene);
+            assert_eq!(
+                rig.relay_ids.len(),
+                scene.studio.flash_relay_targets as usize,
+                "{name}"
+            );
+            assert!(rig_problems(&scene, &rig).is_empty(), "{name}");
+        }
+    }
+
+    #[test]
+    fn a_relay_short_of_what_was_asked_is_a_problem() {
+        let scene = Scene::load("default").expect("scene");
+        let mut rig = crate::layout::build_rig(&scene);
+        assert!(rig_problems(&scene, &rig).is_empty());
+        rig.relay_ids.pop();
+        let p = rig_problems(&scene, &rig);
+        assert!(
+            p.len() == 1 && p[0].contains("flash_relay_targets") && p[0].contains("placed"),
+            "{p:?}"
+        );
     }
 
     #[test]
