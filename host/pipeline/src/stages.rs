@@ -83,10 +83,14 @@ pub trait StageUnit {
     fn unit(&self) -> Unit;
     /// The stage announced when it starts.
     fn first_stage(&self) -> Stage;
-    /// Whether the plan runs any of its stages.
-    fn planned(&self, ctx: &Ctx<'_>) -> bool;
-    /// The reports of its stages when none runs.
-    fn skipped(&self, ctx: &Ctx<'_>) -> Vec<StageReport>;
+    /// Whether the plan runs any of its stages; by default a unit always runs.
+    fn planned(&self, _ctx: &Ctx<'_>) -> bool {
+        true
+    }
+    /// The reports of its stages when none runs; by default none (a unit that always runs).
+    fn skipped(&self, _ctx: &Ctx<'_>) -> Vec<StageReport> {
+        Vec::new()
+    }
     /// The fingerprint of everything it reads.
     fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError>;
     /// Runs: writes its outputs and returns its stages' reports and the files it wrote
@@ -898,12 +902,6 @@ impl StageUnit for DerenderUnit {
     fn first_stage(&self) -> Stage {
         Stage::Derender
     }
-    fn planned(&self, _ctx: &Ctx<'_>) -> bool {
-        true
-    }
-    fn skipped(&self, _ctx: &Ctx<'_>) -> Vec<StageReport> {
-        Vec::new()
-    }
     fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
         let mut fp = session_fingerprint(ctx.session)?;
         if ctx.poses.is_some() {
@@ -1057,12 +1055,6 @@ impl StageUnit for FitUnit {
     }
     fn first_stage(&self) -> Stage {
         Stage::Fit
-    }
-    fn planned(&self, _ctx: &Ctx<'_>) -> bool {
-        true
-    }
-    fn skipped(&self, _ctx: &Ctx<'_>) -> Vec<StageReport> {
-        Vec::new()
     }
     fn fingerprint(&self, ctx: &Ctx<'_>) -> Result<Fingerprint, ProcessError> {
         let mut fp = FingerprintBuilder::new()
