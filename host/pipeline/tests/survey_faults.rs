@@ -4,8 +4,9 @@
 //! reference targets within the survey test's all-target bound. Then, on the same images, the
 //! flash stand's panel is left unplaced: the light-position images that alone see it share no
 //! target with the rest, and the survey must name the panel's targets and those images
-//! ([`SurveyIssue::Unlinked`]). Scored against the studio's truth, which the path under test
-//! never reads.
+//! ([`SurveyIssue::Unlinked`]). A target moved far (beyond the two-places distance) is named
+//! as seen at two places ([`SurveyIssue::TwoPlaces`]) with the images of each, and left out.
+//! Scored against the studio's truth, which the path under test never reads.
 //!
 //! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
 
@@ -375,4 +376,77 @@ fn a_moved_target_and_targets_seen_apart_are_named_and_left_out() {
     assert!(!light.is_empty());
     assert!(light.iter().all(|f| images.contains(f)), "{images:?}");
     assert!(sv.targets.iter().all(|t| !panel.contains(&t.id)));
+}
+
+/// How far the far-moved target goes, mm: beyond the survey's two-places distance
+/// (`TWO_PLACES_MIN_M`, 50 mm), along its own normal so that it covers no other target's face.
+const FAR_MOVE_MM: f64 = 80.0;
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn a_target_that_moved_far_is_seen_at_two_places_and_left_out() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = Scene::load("survey-moved").expect("survey-moved scene");
+    let mut moved = scene
+        .studio
+        .moved_target
+        .clone()
+        .expect("the scene moves a target");
+    let rig = skinbrdf_synth::layout::build_rig(&scene);
+    let normal = rig
+        .reference
+        .iter()
+        .find(|t| t.id == moved.id)
+        .expect("the moved target is on the rig")
+        .outward_normal();
+    moved.shift_mm = (normal * FAR_MOVE_MM).to_array();
+    moved.rotate_deg = 0.0;
+    scene.studio.moved_target = Some(moved.clone());
+    let (s, s2) = common::studio_session(dir.path(), &scene);
+    let session = Session::load(&s2).expect("session");
+    let sv = survey(&session, &SurveyConfig::default()).expect("survey");
+    for i in &sv.issues {
+        eprintln!("  {}: {i}", i.label());
+    }
+    let two_places: Vec<(u32, f64, usize, usize)> = sv
+        .issues
+        .iter()
+        .filter_map(|i| match i {
+            SurveyIssue::TwoPlaces {
+                id,
+                apart_mm,
+                first,
+                second,
+            } => Some((*id, *apart_mm, first.len(), second.len())),
+            _ => None,
+        })
+        .collect();
+    // Named once, at about the distance it moved, with the images of each place.
+    assert_eq!(
+        two_places.len(),
+        1,
+        "one target at two places: {:?}",
+        sv.issues
+    );
+    let (id, apart_mm, first, second) = two_places[0];
+    assert_eq!(id, moved.id);
+    assert!(
+        (apart_mm - FAR_MOVE_MM).abs() < 0.1 * FAR_MOVE_MM,
+        "{apart_mm} mm apart"
+    );
+    assert!(first >= 2 && second >= 2, "{first} and {second} images");
+    // Left out, no other target named moved, and the rest placed as well as ever.
+    assert!(sv.targets.iter().all(|t| t.id != moved.id));
+    assert!(
+        sv.issues
+            .iter()
+            .all(|i| !matches!(i, SurveyIssue::Moved { .. })),
+        "{:?}",
+        sv.issues
+    );
+    let truth = Truth::load(&s.join(STUDIO_DIR).join("truth.json")).expect("truth");
+    let (rms_mm, n) = group_rms_mm(&sv, &truth, TargetGroup::Reference);
+    eprintln!("moved far: {n} reference targets, rms {rms_mm:.3} mm");
+    assert!(n >= 20, "{n} reference targets surveyed");
+    assert!(rms_mm < ALL_TARGETS_RMS_MM, "reference rms {rms_mm} mm");
 }
