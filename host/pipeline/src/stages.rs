@@ -360,6 +360,13 @@ pub fn survey_report(
         }),
     );
     r.notes.push(format!("head frame: {:?}", survey.head_gauge));
+    if survey.intrinsics_restart {
+        r.notes.push(
+            "camera to be calibrated: surveyed twice, the second time starting from the \
+             intrinsics the first refined (timings are the second's, the total both)"
+                .into(),
+        );
+    }
     let helped = survey
         .issues
         .iter()

@@ -277,3 +277,84 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
         "{unplaced:?} still unplaced, the survey left out {left_out}"
     );
 }
+
+/// The self-calibrated survey's focal length within this of the truth, pixels: a tenth of a
+/// per cent of the half-resolution images' ~1500 px (the full-size studio session's camera
+/// calibration is within 0.2-0.5 px of its ~3000 px, `docs/benchmarks.md`).
+const SELF_CALIBRATED_FOCAL_PX: f64 = 1.5;
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn a_camera_to_be_calibrated_is_surveyed_from_the_intrinsics_it_refines() {
+    // The card ingested without the camera's calibration: the survey starts from the guessed
+    // intrinsics, refines them, and surveys again from those. From the guess alone, a focal
+    // length a few per cent off puts each target's single views tens of millimetres apart by
+    // their range, and targets seen from near and far were named at two places.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut scene = Scene::load("default").expect("default scene");
+    scene.session.measurement_images = 16;
+    let s = common::half_resolution_studio(dir.path(), &scene);
+    let s2 = dir.path().join("S2");
+    let mut cfg = studio_ingest_config(&s, &scene, s2.clone());
+    cfg.camera = None;
+    ingest(&cfg).expect("ingest");
+    let session = Session::load(&s2).expect("session");
+    assert!(
+        matches!(
+            session.file.camera,
+            skinbrdf_session::CameraSpec::ToBeCalibrated { .. }
+        ),
+        "the session should calibrate its camera"
+    );
+    let sv =
+        skinbrdf_poses::survey(&session, &skinbrdf_poses::SurveyConfig::default()).expect("survey");
+    for i in &sv.issues {
+        eprintln!("  {}: {i}", i.label());
+    }
+    assert!(sv.intrinsics_restart, "surveyed once only");
+    let split: Vec<String> = sv
+        .issues
+        .iter()
+        .filter(|i| {
+            matches!(
+                i,
+                skinbrdf_poses::SurveyIssue::TwoPlaces { .. }
+                    | skinbrdf_poses::SurveyIssue::Moved { .. }
+            )
+        })
+        .map(|i| i.to_string())
+        .collect();
+    assert!(
+        split.is_empty(),
+        "targets that stayed put were split: {split:?}"
+    );
+    let truth =
+        skinbrdf_session::Truth::load(&s.join(STUDIO_DIR).join("truth.json")).expect("truth");
+    let focal_err_px = (sv.camera.fx_px - truth.camera.fx_px).abs();
+    let of_group = |g: TargetGroup| -> HashMap<u32, [DVec3; 4]> {
+        truth
+            .placements
+            .iter()
+            .filter(|p| p.group == g)
+            .map(|p| (p.id, p.corners_m))
+            .collect()
+    };
+    let surveyed: HashMap<u32, [DVec3; 4]> = sv
+        .targets
+        .iter()
+        .filter(|t| t.group == TargetGroup::Reference && !t.flash_only)
+        .map(|t| (t.id, t.corners_m))
+        .collect();
+    let (rms_mm, worst_mm, n) = corner_rms_mm(&surveyed, &of_group(TargetGroup::Reference));
+    eprintln!(
+        "self-calibrated survey: {n} reference targets at {rms_mm:.3} mm RMS (worst \
+         {worst_mm:.3}), focal {focal_err_px:.2} px off, {:.2} s",
+        sv.timing.total_ms / 1e3
+    );
+    assert!(
+        focal_err_px < SELF_CALIBRATED_FOCAL_PX,
+        "focal {focal_err_px} px off"
+    );
+    assert!(n >= MIN_REFERENCE_SURVEYED, "{n} reference targets");
+    assert!(rms_mm < REFERENCE_RMS_MM, "reference rms {rms_mm} mm");
+}

@@ -646,6 +646,12 @@ pub struct Survey {
     pub survey_images_used: usize,
     /// Timings.
     pub timing: SurveyTiming,
+    /// The camera was to be calibrated and the survey ran twice: a first round from the
+    /// guessed intrinsics, then the whole survey again starting from the intrinsics that round
+    /// refined (the single-view placements of the chained start need them; see
+    /// [`survey_detected`]). The timings are the second round's, the total both.
+    #[serde(default)]
+    pub intrinsics_restart: bool,
 }
 
 /// One body of the survey (a cut-out target or a sheet).
@@ -1199,9 +1205,22 @@ pub fn survey_detected(
     // Sheets found bent are surveyed again target by target; each round splits at least one
     // more sheet, so the rounds end.
     let mut split: BTreeMap<String, SurveyIssue> = BTreeMap::new();
+    // The intrinsics the chained start uses when the camera is to be calibrated: first the
+    // guess, then (once) what the first complete round refined.
+    let guessed = matches!(file.camera, CameraSpec::ToBeCalibrated { .. });
+    let mut refined_start: Option<CameraModel> = None;
     loop {
-        match survey_with(session, cfg, detected, &split, t0)? {
+        match survey_with(session, cfg, detected, &split, refined_start.as_ref(), t0)? {
+            Round::Done(s) if guessed && refined_start.is_none() => {
+                // The chained start's single-view placements rest on the guessed intrinsics:
+                // a focal length a few per cent off moves each view's placement along its
+                // line of sight by that share of its range, so views from different distances
+                // disagree by tens of millimetres (enough to look like two places). Start
+                // again from the intrinsics the first round refined.
+                refined_start = Some(s.camera);
+            }
             Round::Done(mut s) => {
+                s.intrinsics_restart = refined_start.is_some();
                 s.issues.extend(split.into_values());
                 return Ok((*s, detections));
             }
@@ -1220,12 +1239,14 @@ pub fn survey_detected(
     }
 }
 
-/// One round of the survey, with the sheets in `split` surveyed target by target.
+/// One round of the survey, with the sheets in `split` surveyed target by target; a camera
+/// to be calibrated starts from `refined_start` when given, else from its guess.
 fn survey_with(
     session: &Session,
     cfg: &SurveyConfig,
     detected: &[Detected],
     split: &BTreeMap<String, SurveyIssue>,
+    refined_start: Option<&CameraModel>,
     t0: Instant,
 ) -> Result<Round, PoseError> {
     let file = &session.file;
@@ -1269,13 +1290,17 @@ fn survey_with(
     }
     let names: Vec<String> = file.images.iter().map(|e| e.file.clone()).collect();
     // The camera: given, or a starting guess refined by the adjustment.
-    let (camera, refine_intrinsics) = match &file.camera {
-        CameraSpec::Calibrated(m) => (*m, cfg.bundle.refine_intrinsics),
-        CameraSpec::ToBeCalibrated {
-            width_px,
-            height_px,
-            focal_guess_px,
-        } => {
+    let (camera, refine_intrinsics) = match (&file.camera, refined_start) {
+        (CameraSpec::Calibrated(m), _) => (*m, cfg.bundle.refine_intrinsics),
+        (CameraSpec::ToBeCalibrated { .. }, Some(c)) => (*c, true),
+        (
+            CameraSpec::ToBeCalibrated {
+                width_px,
+                height_px,
+                focal_guess_px,
+            },
+            None,
+        ) => {
             let c = match focal_guess_px {
                 Some(f) => CameraModel {
                     fx_px: *f,
@@ -1780,6 +1805,7 @@ fn survey_with(
             bundle_ms,
             total_ms: t0.elapsed().as_secs_f64() * 1e3,
         },
+        intrinsics_restart: false,
     })))
 }
 
@@ -2715,6 +2741,7 @@ mod tests {
             images_used: 6,
             survey_images_used: 0,
             timing: SurveyTiming::default(),
+            intrinsics_restart: false,
         };
         let out = survey.placed_rig(&rig);
         assert!(out.sheets.is_empty());

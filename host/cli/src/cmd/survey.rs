@@ -99,6 +99,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("{}: {i}", i.label());
     }
     println!("head frame: {:?}", sv.head_gauge);
+    if sv.intrinsics_restart {
+        println!(
+            "camera to be calibrated: surveyed twice, the second time from the intrinsics the \
+             first refined"
+        );
+    }
     println!(
         "{} targets from {} images ({} survey images): reprojection rms {:.3} px, {} parameters, {:.2} s",
         sv.targets.len(),
