@@ -42,6 +42,13 @@
 //! the triangulated edges within 20 % of the printed size); a sheet, or a target the views do
 //! not triangulate, at the mean of the agreeing candidates.
 //!
+//! The single-view poses rest on the intrinsics. When the camera is to be calibrated they start
+//! from a guess (the EXIF focal length): a focal length off by a share `e` moves each view's
+//! placement along its line of sight by `e` times its range, so views of one target from
+//! different distances disagree by centimetres and could pass for two places. The whole survey
+//! is then run twice ([`Survey::intrinsics_restart`]): the second round starts from the
+//! intrinsics the first refined.
+//!
 //! # Robustness
 //!
 //! The adjustment runs twice: ungated with the robust loss (the chained start is a few
