@@ -341,8 +341,8 @@ pub struct DetectStats {
     /// Small tags decoded only on a second reading, through their refined quad with each cell
     /// averaged or through their contour's quad, after their refined quad did not decode
     /// (every corner marked occluded).
-    #[serde(default)]
-    pub decoded_unrefined: usize,
+    #[serde(default, alias = "decoded_unrefined")]
+    pub decoded_on_second_reading: usize,
 }
 
 /// Detects tag36h11 tags.
@@ -451,7 +451,7 @@ pub fn detect_with_stats(img: &GrayF32, cfg: &DetectorConfig) -> (Vec<Detection>
                     decode(img, &contour, cfg, opts)
                 })
             })?;
-            stats.decoded_unrefined += 1;
+            stats.decoded_on_second_reading += 1;
             let extra = (UNREFINED_SIGMA_CELLS * cell_px).powi(2);
             for cov in &mut det.corner_cov_px2 {
                 cov[0] += extra;
