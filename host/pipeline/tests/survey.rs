@@ -46,6 +46,16 @@ const SAMPLE_ERROR_VS_GIVEN_PP: f64 = 0.1;
 const HEAD_FRAME_ROTATION_DEG: f64 = 0.05;
 
 /// RMS over targets of the mean corner distance, mm, and the worst target.
+/// The true corners of a group's targets, by id.
+fn truth_corners(truth: &skinbrdf_session::Truth, group: TargetGroup) -> HashMap<u32, [DVec3; 4]> {
+    truth
+        .placements
+        .iter()
+        .filter(|p| p.group == group)
+        .map(|p| (p.id, p.corners_m))
+        .collect()
+}
+
 fn corner_rms_mm(
     surveyed: &HashMap<u32, [DVec3; 4]>,
     truth: &HashMap<u32, [DVec3; 4]>,
@@ -98,17 +108,9 @@ fn the_survey_and_the_scan_registration_place_the_unmeasured_targets_within_the_
         eprintln!("  left out: {i:?}");
     }
     let truth = skinbrdf_session::Truth::load(&st.join("truth.json")).expect("truth");
-    let truth_of = |g: TargetGroup| -> HashMap<u32, [DVec3; 4]> {
-        truth
-            .placements
-            .iter()
-            .filter(|p| p.group == g)
-            .map(|p| (p.id, p.corners_m))
-            .collect()
-    };
     let (truth_ref, truth_head) = (
-        truth_of(TargetGroup::Reference),
-        truth_of(TargetGroup::Headdress),
+        truth_corners(&truth, TargetGroup::Reference),
+        truth_corners(&truth, TargetGroup::Headdress),
     );
     let surveyed_if = |keep: &dyn Fn(&skinbrdf_poses::survey::SurveyedTarget) -> bool| {
         survey
@@ -289,7 +291,7 @@ fn a_camera_to_be_calibrated_is_surveyed_from_the_intrinsics_it_refines() {
     // The card ingested without the camera's calibration: the survey starts from the guessed
     // intrinsics, refines them, and surveys again from those. From the guess alone, a focal
     // length a few per cent off puts each target's single views tens of millimetres apart by
-    // their range, and targets seen from near and far were named at two places.
+    // their range, so targets seen from near and far would pass for two places.
     let dir = tempfile::tempdir().expect("tempdir");
     let mut scene = Scene::load("default").expect("default scene");
     scene.session.measurement_images = 16;
@@ -331,21 +333,14 @@ fn a_camera_to_be_calibrated_is_surveyed_from_the_intrinsics_it_refines() {
     let truth =
         skinbrdf_session::Truth::load(&s.join(STUDIO_DIR).join("truth.json")).expect("truth");
     let focal_err_px = (sv.camera.fx_px - truth.camera.fx_px).abs();
-    let of_group = |g: TargetGroup| -> HashMap<u32, [DVec3; 4]> {
-        truth
-            .placements
-            .iter()
-            .filter(|p| p.group == g)
-            .map(|p| (p.id, p.corners_m))
-            .collect()
-    };
     let surveyed: HashMap<u32, [DVec3; 4]> = sv
         .targets
         .iter()
         .filter(|t| t.group == TargetGroup::Reference && !t.flash_only)
         .map(|t| (t.id, t.corners_m))
         .collect();
-    let (rms_mm, worst_mm, n) = corner_rms_mm(&surveyed, &of_group(TargetGroup::Reference));
+    let (rms_mm, worst_mm, n) =
+        corner_rms_mm(&surveyed, &truth_corners(&truth, TargetGroup::Reference));
     eprintln!(
         "self-calibrated survey: {n} reference targets at {rms_mm:.3} mm RMS (worst \
          {worst_mm:.3}), focal {focal_err_px:.2} px off, {:.2} s",
