@@ -7,6 +7,7 @@
 //! that runs reports its accuracy and its cost (see [`report`]).
 
 pub mod bench;
+pub mod checks;
 pub mod demo;
 pub mod ledger;
 pub mod metrics;

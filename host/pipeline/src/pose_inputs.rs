@@ -553,6 +553,7 @@ pub(crate) mod tests {
                 plan: crate::plan::Plan::derive(&facts, &cfg.plan),
                 survey: None,
                 detections: None,
+                stated_camera: s.file.camera,
                 poses: None,
                 samples: None,
                 fit: None,

@@ -137,6 +137,22 @@ pub enum ProcessError {
     /// No samples survived derendering.
     #[error("no BRDF samples survived derendering (see the derender stage's drop counts); nothing to fit")]
     NoSamples,
+    /// A stage's self-checks failed: the stages after it did not run (the report, written,
+    /// says so).
+    #[error(
+        "{stage} FAILED its checks, so the stages that depend on it did not run (report: {}; \
+         `--accept-failed-checks` goes on):\n{}",
+        report.display(),
+        failed.iter().map(|c| format!("  - {}", c.to_line())).collect::<Vec<_>>().join("\n")
+    )]
+    ChecksFailed {
+        /// The stage whose checks failed first.
+        stage: &'static str,
+        /// Every check that failed.
+        failed: Vec<crate::checks::Check>,
+        /// The report written.
+        report: PathBuf,
+    },
 }
 
 /// Settings of `process`.
@@ -161,6 +177,9 @@ pub struct ProcessConfig {
     /// Score against this ground truth instead of the session's own `truth.json` (keyed to the
     /// session's images by exposure index; see [`skinbrdf_session::Truth::keyed_to`]).
     pub truth_file: Option<PathBuf>,
+    /// Go on after a stage FAILED its self-checks ([`crate::checks`]); the report still says
+    /// FAILED.
+    pub accept_failed_checks: bool,
 }
 
 impl ProcessConfig {
@@ -181,6 +200,7 @@ impl ProcessConfig {
             out_dir: None,
             skip_bad_images: false,
             truth_file: None,
+            accept_failed_checks: false,
         }
     }
 }
@@ -288,6 +308,7 @@ pub fn process(
         // The survey's placements are in the session; the pose stage reads its sds.
         survey: surveyed.as_ref().map(|s| s.survey.clone()),
         detections: surveyed.as_ref().and_then(|s| s.detections.clone()),
+        stated_camera: session.file.camera,
         poses: None,
         samples: None,
         fit: None,
@@ -299,8 +320,26 @@ pub fn process(
         reports.push(r);
     }
     let units: [&dyn StageUnit; 4] = [&PoseUnit, &DerenderUnit, &FitUnit, &RenderUnit];
+    let mut failed: Option<(Stage, Vec<crate::checks::Check>)> = None;
     for unit in units {
-        for mut r in run_unit(unit, &mut ctx, &mut ledger, cfg.force, on_event)? {
+        if let Some((stage, _)) = &failed {
+            reports.extend(not_run_after(&ctx.plan, &reports, *stage));
+            break;
+        }
+        let planned = unit.planned(&ctx);
+        let mut unit_reports = run_unit(unit, &mut ctx, &mut ledger, cfg.force, on_event)?;
+        if planned {
+            let checks = unit.checks(&ctx, &unit_reports);
+            let failures = crate::checks::attach(&mut unit_reports, checks);
+            if !failures.is_empty() && !cfg.accept_failed_checks {
+                let stage = unit_reports
+                    .iter()
+                    .find(|r| r.failed())
+                    .map_or(unit.first_stage(), |r| r.stage);
+                failed = Some((stage, failures));
+            }
+        }
+        for mut r in unit_reports {
             if reports.is_empty() {
                 r.metrics.insert(0, input_metric.clone());
                 r.notes.extend(input_notes.iter().cloned());
@@ -328,11 +367,30 @@ pub fn process(
     };
     report.total_time_s = t0.elapsed().as_secs_f64();
     write_reports(dir, &out_dir, &report, &input_notes)?;
+    if let Some((stage, failed)) = failed {
+        return Err(ProcessError::ChecksFailed {
+            stage: stage.name(),
+            failed,
+            report: out_dir.join("report.md"),
+        });
+    }
     Ok(ProcessOutput {
         report,
         out_dir,
         fit: ctx.fit,
     })
+}
+
+/// The reports of the planned stages after `failed` that have none yet: skipped, because
+/// `failed` FAILED its checks.
+fn not_run_after(plan: &Plan, reports: &[StageReport], failed: Stage) -> Vec<StageReport> {
+    let reason = format!("not run: {} FAILED its checks", failed.name());
+    Stage::ALL
+        .iter()
+        .skip_while(|&&s| s != failed)
+        .filter(|&&s| plan.runs(s) && !reports.iter().any(|r| r.stage == s))
+        .map(|&s| StageReport::skipped(s, &reason))
+        .collect()
 }
 
 /// Runs (or reuses) the placement survey unit: its reports, the session with the surveyed
@@ -358,6 +416,7 @@ pub(crate) fn survey_step(
         plan: plan.clone(),
         survey: None,
         detections: None,
+        stated_camera: session.file.camera,
         poses: None,
         samples: None,
         fit: None,
@@ -520,8 +579,14 @@ fn write_reports(
         let items: String = input_notes.iter().map(|n| format!("- {n}\n")).collect();
         format!("## Input\n\n{items}\n")
     };
+    let checks = report.checks_markdown();
+    let checks_section = if checks.is_empty() {
+        String::new()
+    } else {
+        format!("## Self-checks\n\n{checks}\n")
+    };
     let md = format!(
-        "# skinbrdf process: {}\n\n{}\n{input_section}## Stages: accuracy and run time\n\n{}\n\nFigures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the head rendering (Lambertian vs fitted): `render/head_comparison.png`; the same report with the figures inline: `report.html`.\n",
+        "# skinbrdf process: {}\n\n{}\n{input_section}## Stages: accuracy and run time\n\n{}\n\n{checks_section}Figures and the fit: `fit/report.md`, `fit/*.png`, `fit/*.svg`; the head rendering (Lambertian vs fitted): `render/head_comparison.png`; the same report with the figures inline: `report.html`.\n",
         dir.display(),
         "```text\n".to_string() + &report.plan.to_text() + "```\n",
         report.to_markdown()

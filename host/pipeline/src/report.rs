@@ -92,6 +92,9 @@ pub struct StageReport {
     /// Free-form notes (warnings, diagnostics).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// The stage's self-checks ([`crate::checks`]): one that failed marks the stage FAILED.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub checks: Vec<crate::checks::Check>,
 }
 
 impl StageReport {
@@ -104,6 +107,7 @@ impl StageReport {
             figures: StageMetrics::None,
             metrics: Vec::new(),
             notes: Vec::new(),
+            checks: Vec::new(),
         }
     }
 
@@ -125,6 +129,27 @@ impl StageReport {
             figures: StageMetrics::None,
             metrics: Vec::new(),
             notes: Vec::new(),
+            checks: Vec::new(),
+        }
+    }
+
+    /// Whether one of its self-checks failed.
+    pub fn failed(&self) -> bool {
+        self.checks.iter().any(crate::checks::Check::failed)
+    }
+
+    /// The status as one word or phrase: `ran`, `reused`, `skipped: why`, with `, FAILED its
+    /// checks` when one failed.
+    pub fn status_text(&self) -> String {
+        let status = match &self.status {
+            StageStatus::Ran => "ran".to_string(),
+            StageStatus::Reused => "reused".to_string(),
+            StageStatus::Skipped { reason } => format!("skipped: {reason}"),
+        };
+        if self.failed() {
+            format!("FAILED its checks ({status})")
+        } else {
+            status
         }
     }
 
@@ -234,12 +259,20 @@ impl RunReport {
                 StageStatus::Reused => "  reused  ".to_string(),
                 StageStatus::Skipped { reason } => format!("  skipped ({reason})"),
             };
+            let status = if s.failed() {
+                format!("{status}  FAILED its checks")
+            } else {
+                status
+            };
             out.push_str(&format!("{:<30} {status}\n", s.stage.name()));
             for m in &s.metrics {
                 out.push_str(&format!("    {:<40} {}\n", m.name, fmt_metric(m)));
             }
             for n in &s.notes {
                 out.push_str(&format!("    note: {n}\n"));
+            }
+            for c in s.checks.iter().filter(|c| c.failed()) {
+                out.push_str(&format!("    FAILED check {}\n", c.to_line()));
             }
         }
         out.push_str(&format!("{:<30} {:>8.3} s\n", "total", self.total_time_s));
@@ -250,11 +283,7 @@ impl RunReport {
     pub fn to_markdown(&self) -> String {
         let mut out = String::from("| stage | status | time (s) | figure | value | bound |\n|---|---|---:|---|---:|---:|\n");
         for s in &self.stages {
-            let status = match &s.status {
-                StageStatus::Ran => "ran".to_string(),
-                StageStatus::Reused => "reused".to_string(),
-                StageStatus::Skipped { reason } => format!("skipped: {reason}"),
-            };
+            let status = s.status_text();
             if s.metrics.is_empty() {
                 out.push_str(&format!(
                     "| {} | {status} | {:.3} | | | |\n",
@@ -292,6 +321,80 @@ impl RunReport {
     }
 }
 
+impl RunReport {
+    /// Every self-check of every stage, with its stage.
+    pub fn checks(&self) -> impl Iterator<Item = (&StageReport, &crate::checks::Check)> {
+        self.stages
+            .iter()
+            .flat_map(|s| s.checks.iter().map(move |c| (s, c)))
+    }
+
+    /// The checks that failed.
+    pub fn failed_checks(&self) -> Vec<(&StageReport, &crate::checks::Check)> {
+        self.checks().filter(|(_, c)| c.failed()).collect()
+    }
+
+    /// The self-checks as a Markdown table (empty when no stage has any).
+    pub fn checks_markdown(&self) -> String {
+        use crate::checks::Outcome;
+        let mut out = String::new();
+        for (s, c) in self.checks() {
+            let figure = c.figure.map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit));
+            let outcome = match &c.outcome {
+                Outcome::Passed => "passed".to_string(),
+                Outcome::Failed { likely_cause } => format!("**FAILED**: {likely_cause}"),
+                Outcome::NotChecked { why } => format!("not checked: {why}"),
+            };
+            out.push_str(&format!(
+                "| {} | {} | {} | {figure} | ≤ {} {} | {outcome} |\n",
+                s.stage.name(),
+                c.name,
+                c.what,
+                sig(c.bound),
+                c.unit
+            ));
+        }
+        if out.is_empty() {
+            return out;
+        }
+        format!(
+            "| stage | check | what | figure | bound | outcome |\n|---|---|---|---:|---:|---|\n{out}"
+        )
+    }
+
+    /// The self-checks as an HTML table (empty when no stage has any).
+    pub fn checks_html(&self) -> String {
+        use crate::checks::Outcome;
+        let mut rows = String::new();
+        for (s, c) in self.checks() {
+            let figure = c.figure.map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit));
+            let outcome = match &c.outcome {
+                Outcome::Passed => "passed".to_string(),
+                Outcome::Failed { likely_cause } => format!(
+                    "<span class=\"bad\">FAILED</span>: {}",
+                    html_escape(likely_cause)
+                ),
+                Outcome::NotChecked { why } => format!("not checked: {}", html_escape(why)),
+            };
+            rows.push_str(&format!(
+                "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">≤ {} {}</td><td>{outcome}</td></tr>\n",
+                html_escape(s.stage.name()),
+                html_escape(&c.name),
+                html_escape(&c.what),
+                html_escape(&figure),
+                sig(c.bound),
+                html_escape(&c.unit)
+            ));
+        }
+        if rows.is_empty() {
+            return rows;
+        }
+        format!(
+            "<h2>Self-checks</h2>\n<table>\n<tr><th>stage</th><th>check</th><th>what</th><th>figure</th><th>bound</th><th>outcome</th></tr>\n{rows}</table>\n"
+        )
+    }
+}
+
 /// Escapes text for HTML.
 pub fn html_escape(s: &str) -> String {
     s.replace('&', "&amp;")
@@ -307,16 +410,16 @@ impl RunReport {
             "<table>\n<tr><th>stage</th><th>status</th><th>time (s)</th><th>figure</th><th>value</th><th>bound</th></tr>\n",
         );
         for s in &self.stages {
-            let status = match &s.status {
-                StageStatus::Ran => "ran".to_string(),
-                StageStatus::Reused => "reused".to_string(),
-                StageStatus::Skipped { reason } => format!("skipped: {reason}"),
-            };
+            let status = s.status_text();
             let n = s.metrics.len().max(1) + s.notes.len();
             out.push_str(&format!(
                 "<tr><td rowspan=\"{n}\">{}</td><td rowspan=\"{n}\">{}</td><td rowspan=\"{n}\" class=\"num\">{:.3}</td>",
                 html_escape(s.stage.name()),
-                html_escape(&status),
+                if s.failed() {
+                    format!("<span class=\"bad\">{}</span>", html_escape(&status))
+                } else {
+                    html_escape(&status)
+                },
                 s.run_time_s
             ));
             if s.metrics.is_empty() {
@@ -370,6 +473,7 @@ pub fn html_page(
     h.push_str(&html_escape(&report.plan.to_text()));
     h.push_str("</pre>\n<h2>Stages: accuracy and run time</h2>\n");
     h.push_str(&report.to_html_table());
+    h.push_str(&report.checks_html());
     let v = report.violations();
     if v.is_empty() {
         h.push_str("<p>Every figure with a stated bound is within it.</p>\n");

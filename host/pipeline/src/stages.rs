@@ -69,6 +69,9 @@ pub struct Ctx<'a> {
     /// The tags the survey found in the session's images, when it ran in this run (the pose
     /// stage uses them instead of detecting again when they fit its session and detector).
     pub detections: Option<std::sync::Arc<skinbrdf_poses::SessionDetections>>,
+    /// The camera as the session states it before the survey (the survey writes its own
+    /// focal length in as the pose stage's guess; the checks compare with the files').
+    pub stated_camera: skinbrdf_session::CameraSpec,
     /// The pose stage's result, when it ran or was reused.
     pub poses: Option<SessionPoses>,
     /// The derendered samples.
@@ -98,6 +101,10 @@ pub trait StageUnit {
     fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError>;
     /// Reads a previous run's outputs back into the context (`recorded`: that run's reports).
     fn load(&self, ctx: &mut Ctx<'_>, recorded: &[StageReport]) -> Result<(), ProcessError>;
+    /// Its self-checks ([`crate::checks`]) on what it ran or reused, by stage; by default none.
+    fn checks(&self, _ctx: &Ctx<'_>, _reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+        Vec::new()
+    }
 }
 
 /// Every file a session's stages read: `session.toml`, the images and their masks, the scan
@@ -418,6 +425,7 @@ impl StageUnit for PoseUnit {
         Ok(session_fingerprint(ctx.session)?
             .value("poses", &ctx.cfg.poses)
             .value("skip_bad_images", &ctx.cfg.skip_bad_images)
+            .value("start_camera", &ctx.session.file.camera)
             .finish())
     }
     fn run(&self, ctx: &mut Ctx<'_>) -> Result<(Vec<StageReport>, Vec<String>), ProcessError> {
@@ -437,6 +445,16 @@ impl StageUnit for PoseUnit {
     fn load(&self, ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
         ctx.poses = Some(read_poses(&ctx.out_dir.join(POSES_FILE))?);
         Ok(())
+    }
+    fn checks(&self, ctx: &Ctx<'_>, _reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+        ctx.poses.as_ref().map_or_else(Vec::new, |p| {
+            crate::checks::pose_checks(
+                p,
+                crate::checks::PoseCheckInputs {
+                    stated_camera: &ctx.stated_camera,
+                },
+            )
+        })
     }
 }
 
@@ -943,6 +961,9 @@ impl StageUnit for DerenderUnit {
         ctx.samples = Some(samples);
         Ok(())
     }
+    fn checks(&self, _ctx: &Ctx<'_>, reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+        crate::checks::derender_checks(reports)
+    }
 }
 
 /// Within 5 degrees of the incidence plane (`phi_d` near 0 or pi).
@@ -1119,6 +1140,9 @@ impl StageUnit for FitUnit {
     }
     fn load(&self, _ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
         Ok(())
+    }
+    fn checks(&self, _ctx: &Ctx<'_>, reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+        crate::checks::fit_checks(reports)
     }
 }
 

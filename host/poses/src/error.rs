@@ -5,6 +5,15 @@ use serde::{Deserialize, Serialize};
 /// A pose could not be estimated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PoseError {
+    /// A camera to be calibrated has no starting focal length and none can be found.
+    #[error(
+        "no starting focal length for the camera to be calibrated: {why}; state the lens \
+         (`focal_guess_px` under [camera] in session.toml, or `--camera` at ingest)"
+    )]
+    NoFocalStart {
+        /// Why none was found.
+        why: &'static str,
+    },
     /// Not enough targets or points were seen.
     #[error("too few targets: {found} targets ({points} points) found, {needed} needed")]
     TooFewTargets {

@@ -129,7 +129,7 @@ use crate::bundle::{
     bundle_adjust, BundleBody, BundleConfig, BundleImage, BundleProblem, BundleReport, Frame,
     GATE_MIN_PX,
 };
-use crate::calib::guess_camera;
+use crate::calib::focal_from_squares;
 use crate::error::PoseError;
 use crate::pnp::{estimate_pose, target_points, PnpConfig, PointObs};
 use crate::session::{Detected, SessionDetections};
@@ -1246,6 +1246,32 @@ pub fn survey_detected(
     }
 }
 
+/// The starting camera of a survey whose camera is to be calibrated and states no focal
+/// length: the focal length every tag seen implies ([`focal_from_squares`]; tags with a
+/// corner marked occluded are left out), the principal point at the centre, no distortion.
+fn squares_start(
+    width_px: u32,
+    height_px: u32,
+    detected: &[Detected],
+) -> Result<CameraModel, PoseError> {
+    let squares: Vec<[DVec2; 4]> = detected
+        .iter()
+        .flat_map(|d| &d.dets)
+        .filter(|t| !t.occluded_corners.contains(&true))
+        .map(|t| t.corners_px)
+        .collect();
+    let f_px = focal_from_squares(width_px, height_px, &squares).ok_or(
+        PoseError::NoFocalStart {
+            why: "the tags seen do not determine a focal length",
+        },
+    )?;
+    Ok(CameraModel {
+        fx_px: f_px,
+        fy_px: f_px,
+        ..CameraModel::from_fov(width_px, height_px, 1.0)
+    })
+}
+
 /// One round of the survey, with the sheets in `split` surveyed target by target; a camera
 /// to be calibrated starts from `refined_start` when given, else from its guess.
 fn survey_with(
@@ -1314,7 +1340,7 @@ fn survey_with(
                     fy_px: *f,
                     ..CameraModel::from_fov(*width_px, *height_px, 1.0)
                 },
-                None => guess_camera(*width_px, *height_px, &[]),
+                None => squares_start(*width_px, *height_px, detected)?,
             };
             (c, true)
         }
@@ -2281,8 +2307,14 @@ impl Survey {
 
     /// The session with the surveyed placements: every surveyed reference and headdress target
     /// moves from `targets.unplaced` into its group's list; the targets the survey could not
-    /// place or left out are dropped from the session (listed in [`Survey::issues`]).
+    /// place or left out are dropped from the session (listed in [`Survey::issues`]). A camera
+    /// still to be calibrated keeps that status, with the focal length the survey's adjustment
+    /// refined as its guess: the pose stage's calibration refines the survey's, it does not
+    /// start again.
     pub fn apply_to(&self, file: &mut SessionFile) {
+        if let CameraSpec::ToBeCalibrated { focal_guess_px, .. } = &mut file.camera {
+            *focal_guess_px = Some(self.camera.fx_px);
+        }
         for t in &self.targets {
             let target = Target {
                 id: t.id,

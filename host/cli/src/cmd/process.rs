@@ -48,6 +48,10 @@ pub struct Args {
     /// images with the truth's by exposure index.
     #[arg(long)]
     pub truth: Option<PathBuf>,
+    /// Go on when a stage FAILED its self-checks (the report still says FAILED); by default
+    /// the stages after it do not run and the exit status is non-zero.
+    #[arg(long)]
+    pub accept_failed_checks: bool,
 }
 
 /// Validates the flags into a pipeline configuration.
@@ -73,6 +77,7 @@ pub fn config(args: &Args) -> anyhow::Result<ProcessConfig> {
         }
     }
     cfg.truth_file = args.truth.clone();
+    cfg.accept_failed_checks = args.accept_failed_checks;
     Ok(cfg)
 }
 
