@@ -12,11 +12,12 @@
 //! |---|---|---|---|
 //! | camera calibration | `focal_vs_files` | calibrated fx against the focal length the files state | more than [`FOCAL_VS_FILES_MAX_REL`] apart |
 //! | camera poses | `reprojection_chi2` | median over images of `(rms / sigma)²`, the per-image reprojection RMS against the median stated corner sigma | above [`REPROJECTION_CHI2_MAX`] |
-//! | camera poses | `camera_distance_spread` | relative sd of the measurement cameras' distances to the head | above [`CAMERA_DISTANCE_SPREAD_MAX`] |
+//! | camera poses | `camera_distance_spread` | relative sd of the measurement cameras' distances to the point their optical axes meet | above [`CAMERA_DISTANCE_SPREAD_MAX`] |
 //! | flash triangulation | `flash_sigma` | the flash position's stated sd | above [`FLASH_SIGMA_MAX_MM`] |
 //! | radiometric calibration (in derender) | `c_spread` | C's relative spread over the standard | above [`C_SPREAD_MAX_PCT`] |
 //! | fit | `fit_vs_smoother` | the model's log residual against the samples over the smoother's | above [`FIT_VS_SMOOTHER_MAX`] |
 
+use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 use skinbrdf_core::stats::median;
 use skinbrdf_poses::SessionPoses;
@@ -37,8 +38,9 @@ pub const FOCAL_VS_FILES_MAX_REL: f64 = 0.25;
 /// systematic residual many times larger.
 pub const REPROJECTION_CHI2_MAX: f64 = 25.0;
 
-/// Relative standard deviation of the measurement cameras' distances to the head. The method
-/// places the camera on one circle around the subject; the head sways millimetres.
+/// Relative standard deviation of the measurement cameras' distances to the point their
+/// optical axes meet. The method places the camera on one circle around the subject, aimed at
+/// the forehead; an operator's aim and position vary by centimetres at 2 m.
 pub const CAMERA_DISTANCE_SPREAD_MAX: f64 = 0.15;
 
 /// The flash position's stated sd, mm: beyond this the incident direction at the forehead is
@@ -145,15 +147,31 @@ impl Check {
             .map_or_else(|| "not computable".to_string(), |f| format!("{f:.4}"));
         match &self.outcome {
             Outcome::Passed => format!(
-                "{}: {figure} {} <= {} {} (passed)",
-                self.name, self.unit, self.bound, self.unit
+                "{}: {figure}{} <= {}{} (passed)",
+                self.name,
+                unit_suffix(&self.unit),
+                self.bound,
+                unit_suffix(&self.unit)
             ),
             Outcome::Failed { likely_cause } => format!(
-                "{}: {} is {figure} {}, above the bound {} {}; likely cause: {likely_cause}",
-                self.name, self.what, self.unit, self.bound, self.unit
+                "{}: {} is {figure}{}, above the bound {}{}; likely cause: {likely_cause}",
+                self.name,
+                self.what,
+                unit_suffix(&self.unit),
+                self.bound,
+                unit_suffix(&self.unit)
             ),
             Outcome::NotChecked { why } => format!("{}: not checked ({why})", self.name),
         }
+    }
+}
+
+/// ` unit`, or nothing for a unitless figure.
+fn unit_suffix(unit: &str) -> String {
+    if unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {unit}")
     }
 }
 
@@ -177,7 +195,8 @@ pub fn pose_checks(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Vec<(St
 
 fn focal_vs_files(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Check {
     const NAME: &str = "focal_vs_files";
-    const WHAT: &str = "the calibrated focal length against the files' (relative)";
+    const WHAT: &str =
+        "the calibrated focal length against the one the session states from the files (relative)";
     match inputs.stated_camera {
         CameraSpec::Calibrated(_) => Check::not_checked(
             NAME,
@@ -254,26 +273,32 @@ fn reprojection_chi2(poses: &SessionPoses) -> Check {
 
 fn camera_distance_spread(poses: &SessionPoses) -> Check {
     const NAME: &str = "camera_distance_spread";
-    const WHAT: &str = "the relative sd of the measurement cameras' distances to the head";
-    let d: Vec<f64> = poses
+    const WHAT: &str =
+        "the relative sd of the measurement cameras' distances to their common aim point";
+    let axes: Vec<(DVec3, DVec3)> = poses
         .images
         .iter()
         .filter(|i| i.role == ImageRole::Measurement)
         .filter_map(|i| {
-            let c = i.world_from_camera.as_ref()?.pose.translation_m;
-            let h = i.world_from_head.as_ref()?.pose.translation_m;
-            Some(c.distance(h))
+            let p = &i.world_from_camera.as_ref()?.pose;
+            Some((p.translation_m, p.rotation * DVec3::Z))
         })
         .collect();
-    if d.len() < 3 {
+    let aim = if axes.len() >= 3 {
+        aim_point(&axes)
+    } else {
+        None
+    };
+    let Some(aim) = aim else {
         return Check::not_checked(
             NAME,
             WHAT,
             "",
             CAMERA_DISTANCE_SPREAD_MAX,
-            "fewer than three measurement images have camera and head poses",
+            "fewer than three measurement images have camera poses, or their axes are parallel",
         );
-    }
+    };
+    let d: Vec<f64> = axes.iter().map(|(c, _)| c.distance(aim)).collect();
     let mean = d.iter().sum::<f64>() / d.len() as f64;
     let sd = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (d.len() - 1) as f64).sqrt();
     Check::at_most(
@@ -282,9 +307,23 @@ fn camera_distance_spread(poses: &SessionPoses) -> Check {
         sd / mean,
         "",
         CAMERA_DISTANCE_SPREAD_MAX,
-        "the cameras are not on one circle around the head: wrong intrinsics scale each \
-         distance by how much of the reference field an image sees",
+        "the cameras are not on one circle around the forehead they aim at: wrong intrinsics \
+         scale each image's distance by how much of the reference field it sees",
     )
+}
+
+/// The point closest, in least squares, to every camera's optical axis (`(centre, direction)`,
+/// unit directions): `Σ (I - d dᵀ) p = Σ (I - d dᵀ) c`; `None` when the axes are (nearly)
+/// parallel.
+fn aim_point(axes: &[(DVec3, DVec3)]) -> Option<DVec3> {
+    let mut a = DMat3::ZERO;
+    let mut b = DVec3::ZERO;
+    for (c, d) in axes {
+        let m = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += m;
+        b += m * *c;
+    }
+    (a.determinant().abs() > 1e-9).then(|| a.inverse() * b)
 }
 
 fn flash_sigma(poses: &SessionPoses) -> Check {
@@ -414,7 +453,11 @@ mod tests {
         assert_eq!(ok.outcome, Outcome::Passed);
         let bad = Check::at_most("x", "x", 3.0, "", 2.0, "cause");
         assert!(bad.failed());
-        assert!(bad.to_line().contains("likely cause: cause"), "{}", bad.to_line());
+        assert!(
+            bad.to_line().contains("likely cause: cause"),
+            "{}",
+            bad.to_line()
+        );
         let nan = Check::at_most("x", "x", f64::NAN, "", 2.0, "cause");
         assert!(nan.failed());
         assert_eq!(nan.figure, None);
@@ -442,8 +485,14 @@ mod tests {
         let failed = attach(
             &mut reports,
             vec![
-                (Stage::CameraPoses, Check::at_most("a", "a", 3.0, "", 2.0, "c")),
-                (Stage::CameraCalibration, Check::at_most("b", "b", 1.0, "", 2.0, "c")),
+                (
+                    Stage::CameraPoses,
+                    Check::at_most("a", "a", 3.0, "", 2.0, "c"),
+                ),
+                (
+                    Stage::CameraCalibration,
+                    Check::at_most("b", "b", 1.0, "", 2.0, "c"),
+                ),
             ],
         );
         assert_eq!(failed.len(), 1);

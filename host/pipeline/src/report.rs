@@ -339,7 +339,9 @@ impl RunReport {
         use crate::checks::Outcome;
         let mut out = String::new();
         for (s, c) in self.checks() {
-            let figure = c.figure.map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit));
+            let figure = c
+                .figure
+                .map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit));
             let outcome = match &c.outcome {
                 Outcome::Passed => "passed".to_string(),
                 Outcome::Failed { likely_cause } => format!("**FAILED**: {likely_cause}"),
@@ -367,7 +369,9 @@ impl RunReport {
         use crate::checks::Outcome;
         let mut rows = String::new();
         for (s, c) in self.checks() {
-            let figure = c.figure.map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit));
+            let figure = c
+                .figure
+                .map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit));
             let outcome = match &c.outcome {
                 Outcome::Passed => "passed".to_string(),
                 Outcome::Failed { likely_cause } => format!(

@@ -102,7 +102,11 @@ pub trait StageUnit {
     /// Reads a previous run's outputs back into the context (`recorded`: that run's reports).
     fn load(&self, ctx: &mut Ctx<'_>, recorded: &[StageReport]) -> Result<(), ProcessError>;
     /// Its self-checks ([`crate::checks`]) on what it ran or reused, by stage; by default none.
-    fn checks(&self, _ctx: &Ctx<'_>, _reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+    fn checks(
+        &self,
+        _ctx: &Ctx<'_>,
+        _reports: &[StageReport],
+    ) -> Vec<(Stage, crate::checks::Check)> {
         Vec::new()
     }
 }
@@ -446,7 +450,11 @@ impl StageUnit for PoseUnit {
         ctx.poses = Some(read_poses(&ctx.out_dir.join(POSES_FILE))?);
         Ok(())
     }
-    fn checks(&self, ctx: &Ctx<'_>, _reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+    fn checks(
+        &self,
+        ctx: &Ctx<'_>,
+        _reports: &[StageReport],
+    ) -> Vec<(Stage, crate::checks::Check)> {
         ctx.poses.as_ref().map_or_else(Vec::new, |p| {
             crate::checks::pose_checks(
                 p,
@@ -961,7 +969,11 @@ impl StageUnit for DerenderUnit {
         ctx.samples = Some(samples);
         Ok(())
     }
-    fn checks(&self, _ctx: &Ctx<'_>, reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+    fn checks(
+        &self,
+        _ctx: &Ctx<'_>,
+        reports: &[StageReport],
+    ) -> Vec<(Stage, crate::checks::Check)> {
         crate::checks::derender_checks(reports)
     }
 }
@@ -1141,7 +1153,11 @@ impl StageUnit for FitUnit {
     fn load(&self, _ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
         Ok(())
     }
-    fn checks(&self, _ctx: &Ctx<'_>, reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+    fn checks(
+        &self,
+        _ctx: &Ctx<'_>,
+        reports: &[StageReport],
+    ) -> Vec<(Stage, crate::checks::Check)> {
         crate::checks::fit_checks(reports)
     }
 }

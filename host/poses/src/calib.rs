@@ -357,16 +357,16 @@ mod tests {
             let inv = pose.inverse();
             for t in 0..24 {
                 let a = (t as f64 * 15.0).to_radians();
-                let centre = DVec3::new(0.12 * a.sin(), 0.12 * a.cos(), 0.05 * (t % 3) as f64 - 0.05);
+                let centre =
+                    DVec3::new(0.12 * a.sin(), 0.12 * a.cos(), 0.05 * (t % 3) as f64 - 0.05);
                 // Each tag leans: its normal between the outward direction and the camera's.
                 let normal = (DVec3::new(a.sin(), a.cos(), 0.3 * ((t % 5) as f64 - 2.0))
                     + 0.5 * eye.normalize())
                 .normalize();
                 let u = normal.cross(DVec3::Z).normalize();
                 let w = normal.cross(u);
-                let corners = [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)].map(|(x, y)| {
-                    centre + 0.0175 * (x * u + y * w)
-                });
+                let corners = [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)]
+                    .map(|(x, y)| centre + 0.0175 * (x * u + y * w));
                 let px: Option<Vec<DVec2>> = corners
                     .iter()
                     .map(|c| {
@@ -402,7 +402,11 @@ mod tests {
             let rel = f / truth.fx_px - 1.0;
             // The survey's adjustment converges from a start within 15 % (a 4x error does
             // not); the pooled estimate is asked for a third of that.
-            assert!(rel.abs() < 0.05, "hfov {hfov_deg}: f {f:.0} px vs {:.0} px", truth.fx_px);
+            assert!(
+                rel.abs() < 0.05,
+                "hfov {hfov_deg}: f {f:.0} px vs {:.0} px",
+                truth.fx_px
+            );
         }
     }
 

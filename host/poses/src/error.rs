@@ -71,8 +71,22 @@ pub enum PoseError {
         targets: usize,
     },
     /// The survey's adjustment had nothing to adjust or a singular normal matrix.
-    #[error("the placement survey's adjustment is singular (too few images see the targets)")]
-    SurveySingular,
+    #[error(
+        "the placement survey's adjustment is singular: {}",
+        match start_focal_px {
+            Some(f) => format!(
+                "the camera is to be calibrated and, from the starting focal length {f:.0} px, \
+                 the images do not agree on the targets' places; state the lens's focal length \
+                 (`focal_guess_px` under [camera], or `--camera` at ingest), or check the one \
+                 stated"
+            ),
+            None => "too few images see the targets".to_string(),
+        }
+    )]
+    SurveySingular {
+        /// The starting focal length, px, when the camera is to be calibrated.
+        start_focal_px: Option<f64>,
+    },
     /// An image could not be read.
     #[error("image {file}: {problem}")]
     Image {

@@ -494,11 +494,11 @@ fn estimate_session_stages_with(
                     fy_px: *f,
                     ..CameraModel::from_fov(w, h, 1.0)
                 },
-                CameraSpec::ToBeCalibrated { .. } => guess_camera(w, h, &views).ok_or(
-                    PoseError::NoFocalStart {
+                CameraSpec::ToBeCalibrated { .. } => {
+                    guess_camera(w, h, &views).ok_or(PoseError::NoFocalStart {
                         why: "no image sees 16 or more reference target corners",
-                    },
-                )?,
+                    })?
+                }
             };
             let cal = calibrate(&init, &views, &cfg.calib)?;
             (cal.camera, Some(cal))

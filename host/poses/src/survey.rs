@@ -1239,7 +1239,9 @@ pub fn survey_detected(
                     }
                 }
                 if split.len() == before {
-                    return Err(PoseError::SurveySingular);
+                    return Err(PoseError::SurveySingular {
+                        start_focal_px: None,
+                    });
                 }
             }
         }
@@ -1260,11 +1262,10 @@ fn squares_start(
         .filter(|t| !t.occluded_corners.contains(&true))
         .map(|t| t.corners_px)
         .collect();
-    let f_px = focal_from_squares(width_px, height_px, &squares).ok_or(
-        PoseError::NoFocalStart {
+    let f_px =
+        focal_from_squares(width_px, height_px, &squares).ok_or(PoseError::NoFocalStart {
             why: "the tags seen do not determine a focal length",
-        },
-    )?;
+        })?;
     Ok(CameraModel {
         fx_px: f_px,
         fy_px: f_px,
@@ -1548,7 +1549,11 @@ fn survey_with(
         ..cfg.bundle
     };
     let (p1, index1) = build(&left_out);
-    let r1 = bundle_adjust(&p1, &pass1_cfg).ok_or(PoseError::SurveySingular)?;
+    let singular = PoseError::SurveySingular {
+        start_focal_px: matches!(file.camera, CameraSpec::ToBeCalibrated { .. })
+            .then_some(camera.fx_px),
+    };
+    let r1 = bundle_adjust(&p1, &pass1_cfg).ok_or_else(|| singular.clone())?;
     // A sheet whose corners fit its layout much worse than the session's bodies fit theirs is
     // bent (the single-view test sees only strong bends).
     let mut bent = Vec::new();
@@ -1700,7 +1705,7 @@ fn survey_with(
         refine_intrinsics,
         ..cfg.bundle
     };
-    let r2 = bundle_adjust(&p2, &pass2_cfg).ok_or(PoseError::SurveySingular)?;
+    let r2 = bundle_adjust(&p2, &pass2_cfg).ok_or(singular)?;
     let bundle_ms = t_ba.elapsed().as_secs_f64() * 1e3;
     // A moved body's displacement, measured again with the cameras it no longer pulls.
     for &(b, issue, first_after) in &change_points {
