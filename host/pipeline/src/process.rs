@@ -518,7 +518,14 @@ fn input_findings(session: &Session) -> (Metric, Vec<String>) {
     let mut notes: Vec<String> = session
         .skipped_images
         .iter()
-        .map(|s| format!("skipped image `{}` ({:?}): {}", s.file, s.role, s.cause))
+        .map(|s| {
+            format!(
+                "skipped image `{}` ({}): {}",
+                s.file,
+                s.role.name(),
+                s.cause
+            )
+        })
         .collect();
     notes.extend(session.linearization_source.note().map(str::to_string));
     (metric, notes)

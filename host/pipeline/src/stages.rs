@@ -201,7 +201,7 @@ impl StageUnit for SurveyUnit {
         if let Some(reg) = &registration {
             let a = &reg.alignment;
             report.notes.push(format!(
-                "scan registration ({:?}): {} targets, rms {:.3} mm, rotation sd {:.4} deg, {} left out",
+                "scan registration ({}): {} targets, rms {:.3} mm, rotation sd {:.4} deg, {} left out",
                 reg.method,
                 a.residuals.len(),
                 a.rms_mm,
@@ -370,7 +370,7 @@ pub fn survey_report(
                 .and_then(|t| survey_rms_error_mm(survey, t, TargetGroup::Reference, true)),
         }),
     );
-    r.notes.push(format!("head frame: {:?}", survey.head_gauge));
+    r.notes.push(format!("head frame: {}", survey.head_gauge));
     if survey.intrinsics_restart {
         r.notes.push(
             "camera to be calibrated: surveyed twice, the second time starting from the \

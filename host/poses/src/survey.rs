@@ -295,6 +295,27 @@ pub enum HeadGauge {
     None,
 }
 
+impl std::fmt::Display for HeadGauge {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Declared { targets } => {
+                let ids: Vec<String> = targets.iter().map(u32::to_string).collect();
+                write!(
+                    f,
+                    "fixed by the headdress targets the rig places ({})",
+                    ids.join(", ")
+                )
+            }
+            Self::Provisional { anchor } => write!(
+                f,
+                "provisional: the frame of headdress target {anchor}, not yet related to the scan"
+            ),
+            Self::Registered { method } => write!(f, "registered to the head scan ({method})"),
+            Self::None => f.write_str("no headdress target to survey"),
+        }
+    }
+}
+
 /// One surveyed target.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SurveyedTarget {

@@ -114,6 +114,15 @@ pub enum RegistrationMethod {
     Points,
 }
 
+impl std::fmt::Display for RegistrationMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Texture => "targets found in its texture",
+            Self::Points => "picked points",
+        })
+    }
+}
+
 /// A registration: the method, the alignment and what was found on the scan.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RegistrationReport {

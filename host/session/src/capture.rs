@@ -33,6 +33,18 @@ pub enum ImageRole {
 }
 
 impl ImageRole {
+    /// The role's name in files (`measurement`, `light-position`, `reference-standard`,
+    /// `standard-position`, `survey`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Measurement => "measurement",
+            Self::LightPosition => "light-position",
+            Self::ReferenceStandard => "reference-standard",
+            Self::StandardPosition => "standard-position",
+            Self::Survey => "survey",
+        }
+    }
+
     /// Whether the trigger controller fires images of this role (every role but
     /// [`ImageRole::Survey`]: survey images are taken by hand, without the flash).
     pub const fn fired_by_controller(self) -> bool {
@@ -184,4 +196,23 @@ pub struct CaptureRecord {
     pub exposures: Vec<Exposure>,
     /// True once the plan ran to its end (false for an interrupted session).
     pub complete: bool,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ImageRole;
+
+    #[test]
+    fn a_role_is_named_as_files_name_it() {
+        for role in [
+            ImageRole::Measurement,
+            ImageRole::LightPosition,
+            ImageRole::ReferenceStandard,
+            ImageRole::StandardPosition,
+            ImageRole::Survey,
+        ] {
+            let json = serde_json::to_string(&role).expect("serialises");
+            assert_eq!(json, format!("\"{}\"", role.name()));
+        }
+    }
 }

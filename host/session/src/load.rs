@@ -694,7 +694,11 @@ fn validate(
                 Some(e) if e.role != im.role => errs.push(
                     file,
                     format!("{field}.role"),
-                    format!("is {:?} but exposure {x} was shot as {:?}", im.role, e.role),
+                    format!(
+                        "is {} but exposure {x} was shot as {}",
+                        im.role.name(),
+                        e.role.name()
+                    ),
                 ),
                 Some(_) => {}
             },

@@ -98,7 +98,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for i in &sv.issues {
         println!("{}: {i}", i.label());
     }
-    println!("head frame: {:?}", sv.head_gauge);
+    println!("head frame: {}", sv.head_gauge);
     if sv.intrinsics_restart {
         println!(
             "camera to be calibrated: surveyed twice, the second time from the intrinsics the \
