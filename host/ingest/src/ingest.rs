@@ -24,7 +24,10 @@
 //!    [`ExposurePolicy::Normalise`], the image's `V` is scaled by
 //!    `(t ISO / N²)_standard / (t ISO / N²)_image` (`exposure_scale` in `session.toml`).
 //! 7. **Decode every matched photograph once** (a truncated file is refused here, not half-way
-//!    through `process`); the loaded size sets the camera's image size.
+//!    through `process`); the loaded size sets the camera's image size. Without a calibration
+//!    the camera is to be calibrated, starting from the focal length the metadata give in the
+//!    loaded image's pixels ([`crate::focal`]; `focal_guess_px`, and in the report with its
+//!    source, or why there is none).
 //! 8. **Write** the session into a temporary directory beside the output, load it with
 //!    `Session::load`, and only then move it into place (an existing session is replaced only
 //!    with `overwrite`, and kept until the new one is in place). On any error nothing is
@@ -58,6 +61,7 @@ use skinbrdf_session::{
     RegistrationSpec, Rig, Session, SessionErrors, SessionFile, SESSION_FORMAT_VERSION,
 };
 
+use crate::focal::{focal_guess_px, FocalGuess};
 use crate::matching::{
     self, CameraShot, CameraTime, ExposureInput, ExtraReason, MatchError, MatchOptions, Matching,
 };
@@ -246,6 +250,14 @@ pub struct IngestReport {
     pub camera: CameraSource,
     /// The loaded image size (superpixels for raw files).
     pub image_size_px: (u32, u32),
+    /// Without a calibration file: the focal length written as the session's
+    /// `focal_guess_px`, from the first matched photograph's metadata, with its source.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub focal_guess: Option<FocalGuess>,
+    /// Without a calibration file and without a guess: why the metadata give none (one reason
+    /// per source); the calibration then starts from its own guess.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub focal_guess_refused: Vec<String>,
     /// Targets with a placement / without one (the survey fills those in).
     pub placed_targets: usize,
     /// Targets without a placement.
@@ -526,7 +538,7 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     }
 
     // 8. The session, written beside the output and moved into place.
-    let (camera, camera_source) = match camera_file {
+    let (camera, camera_source, focal) = match camera_file {
         Some((path, spec)) => {
             if spec.size_px() != image_size_px {
                 return Err(IngestError::Input {
@@ -545,16 +557,38 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
                     ),
                 });
             }
-            (spec, CameraSource::File { path })
+            (spec, CameraSource::File { path }, Ok(None))
         }
-        None => (
-            CameraSpec::ToBeCalibrated {
-                width_px: image_size_px.0,
-                height_px: image_size_px.1,
-                focal_guess_px: None,
-            },
-            CameraSource::ToBeCalibrated,
-        ),
+        None => {
+            // A camera to be calibrated starts where the lens is (the files share one lens
+            // and focal length: checked above).
+            let guess = match matched.first() {
+                Some((_, photo)) => {
+                    // The pixels the focal-plane resolution counts: a raw file's photosites,
+                    // two per superpixel across and down; another image's own pixels.
+                    let per = if sniff_raw(&photo.path) { 2 } else { 1 };
+                    let sensor = (
+                        image_size_px.0.saturating_mul(per),
+                        image_size_px.1.saturating_mul(per),
+                    );
+                    focal_guess_px(&photo.meta, image_size_px, sensor).map_err(|e| e.reasons)
+                }
+                None => Err(vec!["no matched photograph".to_string()]),
+            };
+            (
+                CameraSpec::ToBeCalibrated {
+                    width_px: image_size_px.0,
+                    height_px: image_size_px.1,
+                    focal_guess_px: guess.as_ref().ok().map(|g| g.focal_px),
+                },
+                CameraSource::ToBeCalibrated,
+                guess.map(Some),
+            )
+        }
+    };
+    let (focal_guess, focal_guess_refused) = match focal {
+        Ok(g) => (g, Vec::new()),
+        Err(reasons) => (None, reasons),
     };
     let staging = staging_dir(&cfg.out_dir)?;
     let result = write_session(
@@ -595,6 +629,8 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
             .unwrap_or_default(),
         camera: camera_source,
         image_size_px,
+        focal_guess,
+        focal_guess_refused,
         placed_targets: 0,
         unplaced_targets: 0,
         reference_settings: reference,

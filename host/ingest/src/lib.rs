@@ -5,7 +5,10 @@
 //!   duplicates and other bodies reported by name and ambiguous cases refused.
 //! * [`mod@ingest`]: the card, the capture record, the rig file and the scan to a session
 //!   directory (`skinbrdf ingest`); see `docs/ingest.md`.
+//! * [`focal`]: a camera to be calibrated starts where the lens is: the focal length in the
+//!   session's pixels from the photographs' metadata.
 
+pub mod focal;
 pub mod ingest;
 pub mod matching;
 

@@ -10,6 +10,11 @@
 //! `AsShotNeutral` are written unless given, since common readers need a colour matrix; this
 //! project never applies them.
 //!
+//! The EXIF directory carries what a camera's does to turn the focal length into pixels when
+//! given: `FocalPlaneXResolution`, `FocalPlaneYResolution` and `FocalPlaneResolutionUnit`
+//! (0xA20E-0xA210, photosites per unit on the focal plane) and `FocalLengthIn35mmFilm`
+//! (0xA405).
+//!
 //! Writing is atomic ([`skinbrdf_core::fsio::write_atomic`]).
 
 use std::path::Path;
@@ -59,6 +64,10 @@ pub struct DngImage {
     pub iso: Option<u32>,
     /// `FocalLength`, millimetres.
     pub focal_length_mm: Option<f64>,
+    /// `FocalPlaneXResolution`, `FocalPlaneYResolution` and `FocalPlaneResolutionUnit`.
+    pub focal_plane_resolution: Option<FocalPlaneResolution>,
+    /// `FocalLengthIn35mmFilm`, whole millimetres (EXIF stores a SHORT; 0 means unknown).
+    pub focal_length_35mm_mm: Option<u16>,
     /// `DateTimeOriginal`, `SubSecTimeOriginal`, `OffsetTimeOriginal`.
     pub capture_time: Option<CaptureTime>,
     /// EXIF `ImageNumber`.
@@ -67,6 +76,66 @@ pub struct DngImage {
     pub as_shot_neutral: [f64; 3],
     /// DNG `ColorMatrix1` (XYZ to camera, row-major, D65).
     pub color_matrix: [f64; 9],
+}
+
+/// The unit of EXIF's focal-plane resolution (`FocalPlaneResolutionUnit`): 2 and 3 are
+/// standard EXIF, 4 and 5 the extension exiftool documents.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FocalPlaneUnit {
+    /// 2: inch (EXIF's default).
+    Inch,
+    /// 3: centimetre.
+    Centimetre,
+    /// 4: millimetre.
+    Millimetre,
+    /// 5: micrometre.
+    Micrometre,
+}
+
+impl FocalPlaneUnit {
+    /// The tag's value.
+    pub const fn code(self) -> u16 {
+        match self {
+            Self::Inch => 2,
+            Self::Centimetre => 3,
+            Self::Millimetre => 4,
+            Self::Micrometre => 5,
+        }
+    }
+
+    /// Millimetres per unit.
+    pub const fn mm(self) -> f64 {
+        match self {
+            Self::Inch => 25.4,
+            Self::Centimetre => 10.0,
+            Self::Millimetre => 1.0,
+            Self::Micrometre => 0.001,
+        }
+    }
+}
+
+/// How many pixels (photosites, for a raw file) a unit of the focal plane holds, across and
+/// down: EXIF's `FocalPlaneXResolution`, `FocalPlaneYResolution`, `FocalPlaneResolutionUnit`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FocalPlaneResolution {
+    /// Pixels per unit across (`FocalPlaneXResolution`).
+    pub x_px_per_unit: f64,
+    /// Pixels per unit down (`FocalPlaneYResolution`).
+    pub y_px_per_unit: f64,
+    /// The unit.
+    pub unit: FocalPlaneUnit,
+}
+
+impl FocalPlaneResolution {
+    /// The resolution of photosites of `pitch_mm` (square) stated in `unit`.
+    pub fn from_pitch_mm(pitch_mm: f64, unit: FocalPlaneUnit) -> Self {
+        let per_unit = unit.mm() / pitch_mm;
+        Self {
+            x_px_per_unit: per_unit,
+            y_px_per_unit: per_unit,
+            unit,
+        }
+    }
 }
 
 impl DngImage {
@@ -106,6 +175,8 @@ impl DngImage {
             f_number: None,
             iso: None,
             focal_length_mm: None,
+            focal_plane_resolution: None,
+            focal_length_35mm_mm: None,
             capture_time: None,
             image_number: None,
             as_shot_neutral: Self::DEFAULT_AS_SHOT_NEUTRAL,
@@ -180,6 +251,21 @@ fn problems(img: &DngImage) -> Vec<String> {
                 out.push(format!("{name} must be positive and finite, got {v}"));
             }
         }
+    }
+    if let Some(r) = &img.focal_plane_resolution {
+        for (name, v) in [
+            ("focal_plane_resolution.x_px_per_unit", r.x_px_per_unit),
+            ("focal_plane_resolution.y_px_per_unit", r.y_px_per_unit),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                out.push(format!("{name} must be positive and finite, got {v}"));
+            }
+        }
+    }
+    if img.focal_length_35mm_mm == Some(0) {
+        out.push(
+            "focal_length_35mm_mm must be positive (EXIF's 0 means unknown: write None)".into(),
+        );
     }
     if img
         .as_shot_neutral
@@ -295,6 +381,20 @@ pub fn directory(path: &Path, img: &DngImage) -> Result<Directory, RawError> {
     }
     if let Some(f) = img.focal_length_mm {
         exif.set(0x920a, TagValue::Rational(vec![to_rational(f)]));
+    }
+    if let Some(r) = &img.focal_plane_resolution {
+        exif.set(
+            0xa20e,
+            TagValue::Rational(vec![to_rational(r.x_px_per_unit)]),
+        );
+        exif.set(
+            0xa20f,
+            TagValue::Rational(vec![to_rational(r.y_px_per_unit)]),
+        );
+        exif.set(0xa210, TagValue::Short(vec![r.unit.code()]));
+    }
+    if let Some(f) = img.focal_length_35mm_mm {
+        exif.set(0xa405, TagValue::Short(vec![f]));
     }
     if let Some(t) = &img.capture_time {
         let d = t.local;

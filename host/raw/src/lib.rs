@@ -51,4 +51,7 @@ pub use decode::{
 };
 pub use error::RawError;
 pub use kind::{check_extension, sniff, FileKind};
-pub use meta::{read_metadata, CaptureTime, ExposureMeta, LocalDateTime};
+pub use meta::{
+    focal_plane_unit_mm, read_metadata, CaptureTime, ExposureMeta, LocalDateTime,
+    FULL_FRAME_DIAGONAL_MM,
+};

@@ -10,6 +10,30 @@
 //! ISO is `PhotographicSensitivity` (0x8827), or where that is absent or saturated at 65535,
 //! `RecommendedExposureIndex`, then `ISOSpeed`. The body serial is EXIF `BodySerialNumber`
 //! (0xA431), else DNG `CameraSerialNumber`. The shutter count is EXIF `ImageNumber` (0x9211).
+//!
+//! # What turns millimetres into pixels
+//!
+//! The focal length alone (`FocalLength`, mm) says nothing about pixels; a camera states the
+//! scale beside it, and these fields carry it so a focal length in pixels can be guessed
+//! before any calibration (`skinbrdf ingest`):
+//!
+//! * `FocalPlaneXResolution` / `FocalPlaneYResolution` (EXIF 0xA20E / 0xA20F; the TIFF/EP
+//!   tags 0x920E / 0x920F where the EXIF ones are absent): pixels of the camera's image per
+//!   `FocalPlaneResolutionUnit` (0xA210 / 0x9210) on the focal plane. The unit is, as written:
+//!   2 inch (also the EXIF default when the tag is absent), 3 centimetre, and the values
+//!   exiftool documents beyond the standard, 4 millimetre and 5 micrometre; 1 ("no absolute
+//!   unit") is read as inch, as exiftool reads it. Any other unit leaves the resolution
+//!   `None` (the unit as written stays in [`ExposureMeta::focal_plane_resolution_unit`]).
+//!   They are stored converted to pixels per millimetre: `px_per_mm = value / mm_per_unit`
+//!   (25.4, 10, 1 or 0.001 mm). A rational with a zero denominator is stored as the division
+//!   gives it (infinite or NaN): these tags only feed a guess, which refuses such values with
+//!   its reason, instead of refusing the file.
+//! * `FocalLengthIn35mmFilm` (EXIF 0xA405): the focal length of the same field of view on a
+//!   36 x 24 mm frame (0, "unknown", is `None`).
+//! * For a DNG, the raw image's full size in photosites (`ImageWidth` x `ImageLength` of the
+//!   raw directory, masked border included) and its `DefaultCropSize`.
+//!
+//! Formats without a TIFF structure rawler exposes (CR3, RAF, ...) give none of these.
 
 use std::path::Path;
 
@@ -17,9 +41,9 @@ use rawler::decoders::{RawDecodeParams, WellKnownIFD};
 use rawler::exif::Exif;
 use rawler::formats::jfif::Jfif;
 use rawler::formats::tiff::reader::TiffReader;
-use rawler::formats::tiff::{GenericTiffReader, Rational, IFD};
+use rawler::formats::tiff::{GenericTiffReader, Rational, Value, IFD};
 use rawler::rawsource::RawSource;
-use rawler::tags::{DngTag, TiffCommonTag};
+use rawler::tags::{DngTag, ExifTag, TiffCommonTag};
 
 use crate::decode::loader;
 use crate::error::RawError;
@@ -202,6 +226,21 @@ pub struct ExposureMeta {
     pub capture_time: Option<CaptureTime>,
     /// `ImageNumber` (0x9211): the shutter count or image number where the camera writes one.
     pub image_number: Option<u32>,
+    /// `FocalPlaneXResolution` in pixels (of the camera's image, photosites for a raw file) per
+    /// millimetre of the focal plane, converted by its unit (see the module docs). As written:
+    /// may be non-finite or not positive.
+    pub focal_plane_px_per_mm_x: Option<f64>,
+    /// `FocalPlaneYResolution` in pixels per millimetre, as `focal_plane_px_per_mm_x`.
+    pub focal_plane_px_per_mm_y: Option<f64>,
+    /// `FocalPlaneResolutionUnit` as written (2 inch, 3 cm, 4 mm, 5 um; see the module docs).
+    pub focal_plane_resolution_unit: Option<u16>,
+    /// `FocalLengthIn35mmFilm` (0xA405), millimetres: the focal length giving the same field
+    /// of view on a 36 x 24 mm frame.
+    pub focal_length_35mm_mm: Option<f64>,
+    /// A DNG's raw image in photosites, `(width, height)`, masked border included.
+    pub sensor_size_px: Option<(u32, u32)>,
+    /// A DNG's `DefaultCropSize`, `(width, height)` in photosites: the size of its final image.
+    pub default_crop_size_px: Option<(f64, f64)>,
 }
 
 /// Reads a raw, TIFF or JPEG file's exposure metadata (see the module docs).
@@ -216,6 +255,8 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
         path: path.to_path_buf(),
         what: format!("metadata unreadable ({e})"),
     };
+    // The raw image's directory (DNG only): its size and default crop.
+    let mut raw_ifd: Option<IFD> = None;
     let (exif, root): (Exif, Option<IFD>) = match kind {
         FileKind::Jpeg => {
             let jfif = Jfif::new(&src).map_err(|e| structure(format!("{e:?}")))?;
@@ -252,6 +293,13 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
                 .ok()
                 .flatten()
                 .map(|r| (*r).clone());
+            if kind == FileKind::Dng {
+                raw_ifd = decoder
+                    .ifd(WellKnownIFD::Raw)
+                    .ok()
+                    .flatten()
+                    .map(|r| (*r).clone());
+            }
             let mut exif = md.exif;
             if root.is_none() {
                 // Formats without a TIFF root (CR3, RAF...): rawler's names are all there is.
@@ -289,7 +337,97 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
             .as_ref()
             .and_then(|r| tag_str(r, DngTag::CameraSerialNumber.into()));
     }
+    if let Some(root) = &root {
+        focal_plane_tags(&mut extra, root, raw_ifd.as_ref());
+    }
     finish(path, extra, &exif, make, model)
+}
+
+/// The diagonal of the 36 x 24 mm frame `FocalLengthIn35mmFilm` refers to, millimetres:
+/// `sqrt(36² + 24²)`. The equivalent focal length keeps the diagonal field of view, so
+/// `f_35 / 43.27 mm = f / sensor diagonal`.
+pub const FULL_FRAME_DIAGONAL_MM: f64 = 43.266_615_305_567_87;
+
+/// Millimetres per `FocalPlaneResolutionUnit` (see the module docs): `None` for a unit EXIF
+/// does not define. An absent unit is EXIF's default, the inch.
+pub fn focal_plane_unit_mm(unit: Option<u16>) -> Option<f64> {
+    match unit {
+        None | Some(1 | 2) => Some(25.4),
+        Some(3) => Some(10.0),
+        Some(4) => Some(1.0),
+        Some(5) => Some(0.001),
+        Some(_) => None,
+    }
+}
+
+/// The `idx`-th number of a tag's value whatever its numeric type; a rational is divided as
+/// written (a zero denominator gives an infinite or NaN value, for the caller to judge).
+fn number(value: &Value, idx: usize) -> Option<f64> {
+    match value {
+        Value::Byte(v) => v.get(idx).map(|&x| f64::from(x)),
+        Value::Short(v) => v.get(idx).map(|&x| f64::from(x)),
+        Value::Long(v) => v.get(idx).map(|&x| f64::from(x)),
+        Value::SShort(v) => v.get(idx).map(|&x| f64::from(x)),
+        Value::SLong(v) => v.get(idx).map(|&x| f64::from(x)),
+        Value::Float(v) => v.get(idx).map(|&x| f64::from(x)),
+        Value::Double(v) => v.get(idx).copied(),
+        Value::Rational(v) => v.get(idx).map(|r| f64::from(r.n) / f64::from(r.d)),
+        Value::SRational(v) => v.get(idx).map(|r| f64::from(r.n) / f64::from(r.d)),
+        _ => None,
+    }
+}
+
+/// The focal-plane resolution, the 35 mm equivalent focal length and a DNG's sizes (see the
+/// module docs), from the root directory, its EXIF directory and a DNG's raw directory.
+fn focal_plane_tags(meta: &mut ExposureMeta, root: &IFD, raw: Option<&IFD>) {
+    let exif = root.get_sub_ifd(ExifTag::ExifOffset);
+    // A tag from the EXIF directory, else from the root (TIFF/EP and some DNGs keep them there).
+    let find = |tag: ExifTag| {
+        exif.and_then(|e| e.get_entry(tag))
+            .or_else(|| root.get_entry(tag))
+    };
+    // EXIF's tags first, TIFF/EP's where EXIF's are absent; the unit of the same family.
+    let family = [
+        (
+            ExifTag::FocalPlaneXResolution2,
+            ExifTag::FocalPlaneYResolution2,
+            ExifTag::FocalPlaneResolutionUnit2,
+        ),
+        (
+            ExifTag::FocalPlaneXResolution,
+            ExifTag::FocalPlaneYResolution,
+            ExifTag::FocalPlaneResolutionUnit,
+        ),
+    ]
+    .into_iter()
+    .find(|(x, _, _)| find(*x).is_some());
+    if let Some((x, y, unit)) = family {
+        let unit = find(unit)
+            .and_then(|e| number(&e.value, 0))
+            .map(|u| u16::try_from(u as i64).unwrap_or(u16::MAX));
+        meta.focal_plane_resolution_unit = unit;
+        if let Some(mm) = focal_plane_unit_mm(unit) {
+            meta.focal_plane_px_per_mm_x =
+                find(x).and_then(|e| number(&e.value, 0)).map(|v| v / mm);
+            meta.focal_plane_px_per_mm_y =
+                find(y).and_then(|e| number(&e.value, 0)).map(|v| v / mm);
+        }
+    }
+    meta.focal_length_35mm_mm = find(ExifTag::FocalLengthIn35mmFormat)
+        .and_then(|e| number(&e.value, 0))
+        .filter(|&f| f != 0.0);
+    if let Some(raw) = raw {
+        let dim = |tag: TiffCommonTag| raw.get_entry(tag).and_then(|e| number(&e.value, 0));
+        if let (Some(w), Some(h)) = (
+            dim(TiffCommonTag::ImageWidth),
+            dim(TiffCommonTag::ImageLength),
+        ) {
+            meta.sensor_size_px = Some((w as u32, h as u32));
+        }
+        meta.default_crop_size_px = raw
+            .get_entry(DngTag::DefaultCropSize)
+            .and_then(|e| Some((number(&e.value, 0)?, number(&e.value, 1)?)));
+    }
 }
 
 /// The fields that need no validation, moved out of rawler's EXIF record.

@@ -76,7 +76,7 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use skinbrdf_core::Pose;
-use skinbrdf_raw::dng::{write_dng, DngImage};
+use skinbrdf_raw::dng::{write_dng, DngImage, FocalPlaneResolution, FocalPlaneUnit};
 use skinbrdf_raw::{BayerPhase, CaptureTime, LocalDateTime};
 use skinbrdf_session::capture::{
     CapturePlan, CaptureRecord, ClockModel, DeviceIdentity, Exposure, FlashMode, ImageRole,
@@ -185,7 +185,8 @@ pub struct StudioScene {
     pub body_serial: String,
     /// Lens model.
     pub lens_model: String,
-    /// Width of the sensor's active area, millimetres (sets the focal length in EXIF).
+    /// Width of the sensor's active area, millimetres (sets the focal length, the focal-plane
+    /// resolution and the 35 mm equivalent focal length in EXIF).
     pub sensor_width_mm: f64,
     /// Exposure time, seconds (the flash's X-sync speed).
     pub exposure_time_s: f64,
@@ -753,6 +754,12 @@ pub fn mosaic(
     img.f_number = Some(st.f_number);
     img.iso = Some(card.iso);
     img.focal_length_mm = Some(focal_length_mm(scene));
+    let pitch_mm = photosite_pitch_mm(scene);
+    img.focal_plane_resolution = Some(FocalPlaneResolution::from_pitch_mm(
+        pitch_mm,
+        FocalPlaneUnit::Inch,
+    ));
+    img.focal_length_35mm_mm = Some(focal_length_35mm_mm(scene).round().clamp(1.0, 65535.0) as u16);
     img.capture_time = Some(card.time.clone());
     img.image_number = Some(card.shutter_count);
     Ok(img)
@@ -761,6 +768,24 @@ pub fn mosaic(
 /// The lens's focal length for the scene's field of view on the studio's sensor width.
 pub fn focal_length_mm(scene: &Scene) -> f64 {
     0.5 * scene.studio.sensor_width_mm / (0.5 * scene.camera.hfov_deg.to_radians()).tan()
+}
+
+/// The photosites' pitch, millimetres: the sensor's active area (`sensor_width_mm`) holds two
+/// photosites per pixel of the scene's image (a superpixel is a 2x2 quad). The DNG's
+/// focal-plane resolution states it, so `focal_length_mm / pitch / 2` is the scene camera's
+/// focal length in pixels, as a real camera's tags give it.
+pub fn photosite_pitch_mm(scene: &Scene) -> f64 {
+    scene.studio.sensor_width_mm / (2.0 * f64::from(scene.camera.width_px))
+}
+
+/// The 35 mm equivalent focal length of the scene's lens on the studio's sensor, millimetres
+/// (before EXIF rounds it to whole millimetres): the focal length scaled by the 36 x 24 mm
+/// frame's diagonal over the active area's (square photosites, the image's aspect).
+pub fn focal_length_35mm_mm(scene: &Scene) -> f64 {
+    let c = &scene.camera;
+    let diagonal_mm =
+        photosite_pitch_mm(scene) * 2.0 * f64::from(c.width_px).hypot(f64::from(c.height_px));
+    focal_length_mm(scene) * skinbrdf_raw::FULL_FRAME_DIAGONAL_MM / diagonal_mm
 }
 
 /// Where the studio keeps its sheets' layout files, relative to the studio directory (and so
