@@ -74,9 +74,11 @@ impl CaptureWriter {
                 source,
             }
         };
-        let json = serde_json::to_vec_pretty(record).map_err(|e| StoreError::Json {
-            path: self.path.clone(),
-            message: e.to_string(),
+        let json = skinbrdf_core::json::to_vec_pretty(&self.path, record).map_err(|e| {
+            StoreError::Json {
+                path: self.path.clone(),
+                message: e.problem(),
+            }
         })?;
         let mut tmp = tempfile::Builder::new()
             .prefix(".capture.json.")
@@ -84,7 +86,6 @@ impl CaptureWriter {
             .tempfile_in(&self.dir)
             .map_err(io("create a temporary file", &self.dir))?;
         tmp.write_all(&json)
-            .and_then(|()| tmp.write_all(b"\n"))
             .and_then(|()| tmp.as_file().sync_all())
             .map_err(io("write a temporary file", tmp.path()))?;
         tmp.persist(&self.path)

@@ -67,6 +67,21 @@ impl JsonError {
             Self::Write(e) => &e.path,
         }
     }
+
+    /// What went wrong, without the file and with its causes: for an error type of the form
+    /// `{path}: {problem}` that names the file itself.
+    pub fn problem(&self) -> String {
+        match self {
+            Self::NonFinite { field, value, .. } => {
+                format!("field {field} is {value}, which JSON cannot hold")
+            }
+            Self::Unserializable { field, problem, .. } => {
+                format!("field {field} cannot be serialised: {problem}")
+            }
+            Self::Json { source, .. } => format!("cannot be written as JSON: {source}"),
+            Self::Write(e) => crate::error_text(&e.source),
+        }
+    }
 }
 
 /// Checks that every number in `value` is finite, without writing anything. `file` only names
@@ -504,6 +519,10 @@ mod tests {
             err.to_string(),
             "out/poses.json: field images[0].world_from_camera.sigma[0] is NaN, \
              which JSON cannot hold"
+        );
+        assert_eq!(
+            err.problem(),
+            "field images[0].world_from_camera.sigma[0] is NaN, which JSON cannot hold"
         );
     }
 

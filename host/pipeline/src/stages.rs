@@ -141,10 +141,7 @@ pub fn skipped(plan: &Plan, stage: Stage) -> StageReport {
 }
 
 fn json_bytes<T: serde::Serialize>(path: &Path, v: &T) -> Result<Vec<u8>, ProcessError> {
-    serde_json::to_vec_pretty(v).map_err(|source| ProcessError::Json {
-        path: path.to_path_buf(),
-        source,
-    })
+    Ok(skinbrdf_core::json::to_vec_pretty(path, v)?)
 }
 
 // --- placement survey ------------------------------------------------------------------------
@@ -834,11 +831,7 @@ pub fn derender_chosen(
         )?;
     }
     let report_file = out_dir.join("derender.json");
-    let json = serde_json::to_vec_pretty(&run).map_err(|source| ProcessError::Json {
-        path: report_file.clone(),
-        source,
-    })?;
-    write_atomic(&report_file, &json)?;
+    write_atomic(&report_file, &json_bytes(&report_file, &run)?)?;
     Ok(DerenderOutput {
         run,
         samples_file,

@@ -131,7 +131,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "false_detections": e.false_detections,
             })),
         });
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        super::print_json(&summary)?;
         return Ok(());
     }
     println!(
@@ -186,9 +186,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if let Some(c) = &est.calibration {
+        // A sigma that was not estimated (held fixed) is said so, not printed as a number.
+        let pm = |s: Option<f64>, digits: usize| {
+            s.map_or_else(
+                || "(sd not estimated)".to_string(),
+                |s| format!("± {s:.digits$}"),
+            )
+        };
         println!(
-            "calibration: fx {:.2} ± {:.2} px, k1 {:.4} ± {:.4}, rms {:.3} px over {} points",
-            c.camera.fx_px, c.sigma[0], c.camera.distortion.k1, c.sigma[4], c.rms_px, c.points
+            "calibration: fx {:.2} {} px, k1 {:.4} {}, rms {:.3} px over {} points",
+            c.camera.fx_px,
+            pm(c.sigma[0], 2),
+            c.camera.distortion.k1,
+            pm(c.sigma[4], 4),
+            c.rms_px,
+            c.points
         );
     }
     if let Some(l) = est.light_position_m {
@@ -270,7 +282,7 @@ fn bench_scenes(list: &str, args: &Args) -> anyhow::Result<()> {
         }
     })?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        super::print_json(&rows)?;
     } else {
         print!("{}", skinbrdf_pipeline::scenes::markdown(&rows));
     }
