@@ -185,6 +185,19 @@ mod tests {
     }
 
     #[test]
+    fn a_nan_time_is_refused_with_its_field_and_the_record_stays() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let w = CaptureWriter::create(&dir.path().join("s1")).expect("create");
+        w.write(&record(3)).expect("write");
+        let mut bad = record(3);
+        bad.exposures[2].host_time_us = f64::NAN;
+        let err = w.write(&bad).expect_err("NaN").to_string();
+        assert!(err.contains("exposures[2].host_time_us"), "{err}");
+        assert!(err.contains(CAPTURE_FILE_NAME), "{err}");
+        assert_eq!(read_capture(w.path()).expect("the old record"), record(3));
+    }
+
+    #[test]
     fn unwritable_dir_is_named() {
         let err = CaptureWriter::create(Path::new("/proc/no-such/s"))
             .expect_err("cannot create")

@@ -5,9 +5,14 @@
 //! `Option<f64>` reads it back as "not estimated", which is not what the writer meant either.
 //! So every value is first walked by a serializer that writes nothing and fails at the first
 //! non-finite `f32` or `f64`; the error names the file and the JSON path of the field
-//! (`images[3].world_from_camera.sigma[2]`, the notation of `serde_path_to_error`, which tracks
-//! the path). Only a value that passes is written by `serde_json`. A quantity that could not be
-//! estimated is stated as such by its type (`Option`, written as `null`), never as a NaN.
+//! (`images[3].world_from_camera.sigma[2]`: fields and map keys after dots, indices in
+//! brackets, an enum variant as the key JSON writes for it). Only a value that passes is written
+//! by `serde_json`. A quantity that could not be estimated is stated as such by its type
+//! (`Option`, written as `null`), never as a NaN.
+//!
+//! The walk is this module's own serializer: `serde_path_to_error` tracks paths too, but loses
+//! them inside an `Option` (it does not follow `serialize_some`), which is where most of the
+//! pose stage's numbers are.
 //!
 //! [`write_pretty`] adds the atomic, durable write of [`crate::fsio`].
 
@@ -27,7 +32,7 @@ pub enum JsonError {
         /// The file (or stream) the JSON was for.
         file: PathBuf,
         /// The field's JSON path, e.g. `images[3].world_from_camera.sigma[2]` (`.` for the
-        /// value itself; an enum variant's name is not part of it).
+        /// value itself).
         field: String,
         /// The number (an `f32` is widened).
         value: f64,
@@ -87,9 +92,10 @@ impl JsonError {
 /// Checks that every number in `value` is finite, without writing anything. `file` only names
 /// the destination in the error.
 pub fn check_finite<T: Serialize + ?Sized>(file: &Path, value: &T) -> Result<(), JsonError> {
-    serde_path_to_error::serialize(value, FiniteCheck).map_err(|e| {
-        let field = e.path().to_string();
-        match e.into_inner() {
+    let mut checker = Checker::default();
+    value.serialize(&mut checker).map_err(|e| {
+        let field = path_text(&checker.path);
+        match e {
             CheckError::NonFinite(value) => JsonError::NonFinite {
                 file: file.to_path_buf(),
                 field,
@@ -155,7 +161,7 @@ pub fn write_pretty<T: Serialize + ?Sized>(path: &Path, value: &T) -> Result<(),
     Ok(())
 }
 
-/// What stopped [`FiniteCheck`].
+/// What stopped [`Checker`].
 #[derive(Debug)]
 enum CheckError {
     /// A NaN or infinite number (an `f32` widened).
@@ -181,23 +187,126 @@ impl ser::Error for CheckError {
     }
 }
 
-/// A serializer that writes nothing and fails at the first non-finite number. Wrapped in
-/// `serde_path_to_error`, which records the path of the value that failed.
-#[derive(Debug, Clone, Copy)]
-struct FiniteCheck;
+/// One step of a JSON path.
+#[derive(Debug)]
+enum Segment {
+    /// A struct field, or an enum variant (JSON writes `{"Variant": ...}`).
+    Field(&'static str),
+    /// A map key, as JSON writes it.
+    Key(String),
+    /// An element of a sequence or tuple.
+    Index(usize),
+}
+
+/// A JSON path: `images[3].world_from_camera.sigma[2]`, `.` for the root.
+fn path_text(path: &[Segment]) -> String {
+    let mut text = String::new();
+    for seg in path {
+        match seg {
+            Segment::Field(name) => {
+                if !text.is_empty() {
+                    text.push('.');
+                }
+                text.push_str(name);
+            }
+            Segment::Key(key) => {
+                if !text.is_empty() {
+                    text.push('.');
+                }
+                text.push_str(key);
+            }
+            Segment::Index(i) => text.push_str(&format!("[{i}]")),
+        }
+    }
+    if text.is_empty() {
+        text.push('.');
+    }
+    text
+}
+
+/// A serializer that writes nothing and fails at the first non-finite number, keeping the path
+/// to the value it is in. On an error the path is left as it was at the failure (nothing is
+/// popped on the way out), so it names the failing value.
+#[derive(Debug, Default)]
+struct Checker {
+    path: Vec<Segment>,
+}
+
+impl Checker {
+    /// Checks `value` one step down the path.
+    fn child<T: Serialize + ?Sized>(&mut self, seg: Segment, value: &T) -> Checked {
+        self.path.push(seg);
+        value.serialize(&mut *self)?;
+        self.path.pop();
+        Ok(())
+    }
+}
 
 type Checked = Result<(), CheckError>;
 
-impl ser::Serializer for FiniteCheck {
+/// A struct, sequence, tuple or map being checked: the index of its next element, and the key
+/// of the map entry whose value comes next.
+#[derive(Debug)]
+struct Compound<'a> {
+    checker: &'a mut Checker,
+    /// Whether an enum variant's name was pushed for it (popped at its end).
+    variant: bool,
+    next_index: usize,
+    key: Option<String>,
+}
+
+impl<'a> Compound<'a> {
+    fn new(checker: &'a mut Checker) -> Self {
+        Self {
+            checker,
+            variant: false,
+            next_index: 0,
+            key: None,
+        }
+    }
+
+    fn of_variant(checker: &'a mut Checker, variant: &'static str) -> Self {
+        checker.path.push(Segment::Field(variant));
+        Self {
+            variant: true,
+            ..Self::new(checker)
+        }
+    }
+
+    fn element<T: Serialize + ?Sized>(&mut self, value: &T) -> Checked {
+        let i = self.next_index;
+        self.next_index += 1;
+        self.checker.child(Segment::Index(i), value)
+    }
+
+    fn end(self) -> Checked {
+        if self.variant {
+            self.checker.path.pop();
+        }
+        Ok(())
+    }
+}
+
+/// How JSON writes a map key: a string as itself, anything else (a number, a unit variant) as
+/// its JSON text.
+fn key_text<T: Serialize + ?Sized>(key: &T) -> String {
+    match serde_json::to_value(key) {
+        Ok(serde_json::Value::String(s)) => s,
+        Ok(v) => v.to_string(),
+        Err(_) => "?".to_string(),
+    }
+}
+
+impl<'a> ser::Serializer for &'a mut Checker {
     type Ok = ();
     type Error = CheckError;
-    type SerializeSeq = Self;
-    type SerializeTuple = Self;
-    type SerializeTupleStruct = Self;
-    type SerializeTupleVariant = Self;
-    type SerializeMap = Self;
-    type SerializeStruct = Self;
-    type SerializeStructVariant = Self;
+    type SerializeSeq = Compound<'a>;
+    type SerializeTuple = Compound<'a>;
+    type SerializeTupleStruct = Compound<'a>;
+    type SerializeTupleVariant = Compound<'a>;
+    type SerializeMap = Compound<'a>;
+    type SerializeStruct = Compound<'a>;
+    type SerializeStructVariant = Compound<'a>;
 
     fn serialize_bool(self, _: bool) -> Checked {
         Ok(())
@@ -277,123 +386,128 @@ impl ser::Serializer for FiniteCheck {
         self,
         _: &'static str,
         _: u32,
-        _: &'static str,
+        variant: &'static str,
         value: &T,
     ) -> Checked {
-        value.serialize(self)
+        self.child(Segment::Field(variant), value)
     }
-    fn serialize_seq(self, _: Option<usize>) -> Result<Self, CheckError> {
-        Ok(self)
+    fn serialize_seq(self, _: Option<usize>) -> Result<Compound<'a>, CheckError> {
+        Ok(Compound::new(self))
     }
-    fn serialize_tuple(self, _: usize) -> Result<Self, CheckError> {
-        Ok(self)
+    fn serialize_tuple(self, _: usize) -> Result<Compound<'a>, CheckError> {
+        Ok(Compound::new(self))
     }
-    fn serialize_tuple_struct(self, _: &'static str, _: usize) -> Result<Self, CheckError> {
-        Ok(self)
+    fn serialize_tuple_struct(self, _: &'static str, _: usize) -> Result<Compound<'a>, CheckError> {
+        Ok(Compound::new(self))
     }
     fn serialize_tuple_variant(
         self,
         _: &'static str,
         _: u32,
-        _: &'static str,
+        variant: &'static str,
         _: usize,
-    ) -> Result<Self, CheckError> {
-        Ok(self)
+    ) -> Result<Compound<'a>, CheckError> {
+        Ok(Compound::of_variant(self, variant))
     }
-    fn serialize_map(self, _: Option<usize>) -> Result<Self, CheckError> {
-        Ok(self)
+    fn serialize_map(self, _: Option<usize>) -> Result<Compound<'a>, CheckError> {
+        Ok(Compound::new(self))
     }
-    fn serialize_struct(self, _: &'static str, _: usize) -> Result<Self, CheckError> {
-        Ok(self)
+    fn serialize_struct(self, _: &'static str, _: usize) -> Result<Compound<'a>, CheckError> {
+        Ok(Compound::new(self))
     }
     fn serialize_struct_variant(
         self,
         _: &'static str,
         _: u32,
-        _: &'static str,
+        variant: &'static str,
         _: usize,
-    ) -> Result<Self, CheckError> {
-        Ok(self)
+    ) -> Result<Compound<'a>, CheckError> {
+        Ok(Compound::of_variant(self, variant))
     }
 }
 
-impl ser::SerializeSeq for FiniteCheck {
+impl ser::SerializeSeq for Compound<'_> {
     type Ok = ();
     type Error = CheckError;
     fn serialize_element<T: Serialize + ?Sized>(&mut self, value: &T) -> Checked {
-        value.serialize(*self)
+        self.element(value)
     }
     fn end(self) -> Checked {
-        Ok(())
+        Compound::end(self)
     }
 }
 
-impl ser::SerializeTuple for FiniteCheck {
+impl ser::SerializeTuple for Compound<'_> {
     type Ok = ();
     type Error = CheckError;
     fn serialize_element<T: Serialize + ?Sized>(&mut self, value: &T) -> Checked {
-        value.serialize(*self)
+        self.element(value)
     }
     fn end(self) -> Checked {
-        Ok(())
+        Compound::end(self)
     }
 }
 
-impl ser::SerializeTupleStruct for FiniteCheck {
+impl ser::SerializeTupleStruct for Compound<'_> {
     type Ok = ();
     type Error = CheckError;
     fn serialize_field<T: Serialize + ?Sized>(&mut self, value: &T) -> Checked {
-        value.serialize(*self)
+        self.element(value)
     }
     fn end(self) -> Checked {
-        Ok(())
+        Compound::end(self)
     }
 }
 
-impl ser::SerializeTupleVariant for FiniteCheck {
+impl ser::SerializeTupleVariant for Compound<'_> {
     type Ok = ();
     type Error = CheckError;
     fn serialize_field<T: Serialize + ?Sized>(&mut self, value: &T) -> Checked {
-        value.serialize(*self)
+        self.element(value)
     }
     fn end(self) -> Checked {
-        Ok(())
+        Compound::end(self)
     }
 }
 
-impl ser::SerializeMap for FiniteCheck {
+impl ser::SerializeMap for Compound<'_> {
     type Ok = ();
     type Error = CheckError;
     fn serialize_key<T: Serialize + ?Sized>(&mut self, key: &T) -> Checked {
-        key.serialize(*self)
+        let text = key_text(key);
+        // A key is checked too (a float key must be finite), at its own path.
+        self.checker.child(Segment::Key(text.clone()), key)?;
+        self.key = Some(text);
+        Ok(())
     }
     fn serialize_value<T: Serialize + ?Sized>(&mut self, value: &T) -> Checked {
-        value.serialize(*self)
+        let key = self.key.take().unwrap_or_else(|| "?".to_string());
+        self.checker.child(Segment::Key(key), value)
     }
     fn end(self) -> Checked {
-        Ok(())
+        Compound::end(self)
     }
 }
 
-impl ser::SerializeStruct for FiniteCheck {
+impl ser::SerializeStruct for Compound<'_> {
     type Ok = ();
     type Error = CheckError;
-    fn serialize_field<T: Serialize + ?Sized>(&mut self, _: &'static str, value: &T) -> Checked {
-        value.serialize(*self)
+    fn serialize_field<T: Serialize + ?Sized>(&mut self, name: &'static str, value: &T) -> Checked {
+        self.checker.child(Segment::Field(name), value)
     }
     fn end(self) -> Checked {
-        Ok(())
+        Compound::end(self)
     }
 }
 
-impl ser::SerializeStructVariant for FiniteCheck {
+impl ser::SerializeStructVariant for Compound<'_> {
     type Ok = ();
     type Error = CheckError;
-    fn serialize_field<T: Serialize + ?Sized>(&mut self, _: &'static str, value: &T) -> Checked {
-        value.serialize(*self)
+    fn serialize_field<T: Serialize + ?Sized>(&mut self, name: &'static str, value: &T) -> Checked {
+        self.checker.child(Segment::Field(name), value)
     }
     fn end(self) -> Checked {
-        Ok(())
+        Compound::end(self)
     }
 }
 
@@ -494,11 +608,46 @@ mod tests {
         assert_eq!(refused(&d), ("by_name.b".into(), f64::INFINITY));
         let mut d = doc();
         d.kind = Kind::Fitted { rms: f64::INFINITY };
-        // An enum variant's name is not part of the path.
-        assert_eq!(refused(&d), ("kind.rms".into(), f64::INFINITY));
+        // An enum variant is the key JSON writes for it.
+        assert_eq!(refused(&d), ("kind.Fitted.rms".into(), f64::INFINITY));
         let mut d = doc();
         d.kind = Kind::Scale(f64::NAN);
-        assert_eq!(refused(&d).0, "kind");
+        assert_eq!(refused(&d).0, "kind.Scale");
+    }
+
+    #[test]
+    fn the_path_goes_through_options_newtypes_tuples_and_number_keys() {
+        #[derive(serde::Serialize)]
+        struct Cov {
+            rms_px: f64,
+        }
+        #[derive(serde::Serialize)]
+        struct Wrapped(Vec<(u32, f64)>);
+        #[derive(serde::Serialize)]
+        struct Outer {
+            world_from_head: Option<Cov>,
+            pairs: Option<Wrapped>,
+            by_id: BTreeMap<u32, Vec<f32>>,
+        }
+        let ok = || Outer {
+            world_from_head: Some(Cov { rms_px: 0.2 }),
+            pairs: Some(Wrapped(vec![(1, 1.0), (2, 2.0)])),
+            by_id: BTreeMap::from([(7, vec![1.0, 2.0])]),
+        };
+        let field = |o: &Outer| match check_finite(Path::new("f.json"), o) {
+            Err(JsonError::NonFinite { field, .. }) => field,
+            other => panic!("expected a refusal, got {other:?}"),
+        };
+        assert!(check_finite(Path::new("f.json"), &ok()).is_ok());
+        let mut o = ok();
+        o.world_from_head = Some(Cov { rms_px: f64::NAN });
+        assert_eq!(field(&o), "world_from_head.rms_px");
+        let mut o = ok();
+        o.pairs = Some(Wrapped(vec![(1, 1.0), (2, f64::NAN)]));
+        assert_eq!(field(&o), "pairs[1][1]");
+        let mut o = ok();
+        o.by_id.insert(9, vec![0.0, 0.0, f32::INFINITY]);
+        assert_eq!(field(&o), "by_id.9[2]");
     }
 
     #[test]
@@ -546,7 +695,7 @@ mod tests {
     }
 
     #[test]
-    fn unserializable_values_name_their_field() {
+    fn values_serde_json_refuses_are_errors_naming_the_file() {
         #[derive(serde::Serialize)]
         struct Bad {
             keys: BTreeMap<Vec<u8>, f64>,
@@ -555,9 +704,8 @@ mod tests {
             keys: BTreeMap::from([(vec![1u8], 1.0)]),
         };
         // The check writes nothing and so accepts any key; serde_json refuses a sequence key.
-        assert!(matches!(
-            to_vec_pretty(Path::new("k.json"), &bad),
-            Err(JsonError::Json { .. })
-        ));
+        let err = to_vec_pretty(Path::new("k.json"), &bad).expect_err("a sequence key");
+        assert!(matches!(err, JsonError::Json { .. }), "{err:?}");
+        assert_eq!(err.file(), Path::new("k.json"));
     }
 }
