@@ -482,7 +482,7 @@ pub fn pose_stage_reports(
         .as_ref()
         .map(|e| e.corner_summary())
         .unwrap_or_default();
-    let corner = |layout: &str| corners.get(layout).map(|c| c.corner_error_median_px);
+    let corner = |layout: &str| corners.get(layout).and_then(|c| c.corner_error_median_px);
     let mk = |stage: Stage, time: f64, figures: StageMetrics| -> StageReport {
         if !plan.runs(stage) {
             return skipped(plan, stage);

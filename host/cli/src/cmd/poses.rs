@@ -239,14 +239,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let Some(s) = e.standard_position_error_m {
             println!("vs truth: standard position error {:.3} mm", s * 1e3);
         }
+        // A statistic of no corners (every target of the layout missed) is "-".
+        let stat = |v: Option<f64>, digits: usize| {
+            v.map_or_else(|| "-".to_string(), |v| format!("{v:.digits$}"))
+        };
         for (layout, c) in e.corner_summary() {
             println!(
-                "vs truth: {layout} corners: {} compared, error median {:.3} px, p90 {:.3}, max {:.3}, error/sigma median {:.2} (1.18 if the sigmas are honest); {} fully visible targets missed",
+                "vs truth: {layout} corners: {} compared, error median {} px, p90 {}, max {}, error/sigma median {} (1.18 if the sigmas are honest); {} fully visible targets missed",
                 c.corners,
-                c.corner_error_median_px,
-                c.corner_error_p90_px,
-                c.corner_error_max_px,
-                c.error_over_sigma_median,
+                stat(c.corner_error_median_px, 3),
+                stat(c.corner_error_p90_px, 3),
+                stat(c.corner_error_max_px, 3),
+                stat(c.error_over_sigma_median, 2),
                 c.missed_targets
             );
         }
