@@ -89,6 +89,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let truth = session.load_truth().transpose()?;
     let errs = truth.as_ref().map(|t| compare_truth(&est, t));
     if args.json {
+        // An error the truth cannot give (an image without a pose: NaN in `compare_truth`'s
+        // per-image lists, a median of nothing) is `null`, stated here rather than left to
+        // serde_json's silent NaN-to-null.
+        let finite = |v: f64| Some(v).filter(|v| v.is_finite());
         let images: Vec<_> = est
             .images
             .iter()
@@ -102,9 +106,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     "camera_position_sigma_m": im.world_from_camera.as_ref().map(|p| p.position_sigma_m()),
                     "detect_ms": im.detect_ms,
                     "pose_ms": im.pose_ms,
-                    "camera_position_error_m": errs.as_ref().map(|e| e.camera_position_error_m[i]),
-                    "camera_orientation_error_deg": errs.as_ref().map(|e| e.camera_orientation_error_deg[i]),
-                    "head_position_error_m": errs.as_ref().map(|e| e.head_position_error_m[i]),
+                    "camera_position_error_m": errs.as_ref().and_then(|e| finite(e.camera_position_error_m[i])),
+                    "camera_orientation_error_deg": errs.as_ref().and_then(|e| finite(e.camera_orientation_error_deg[i])),
+                    "head_position_error_m": errs.as_ref().and_then(|e| finite(e.head_position_error_m[i])),
                     "diagnostics": im.diagnostics,
                     "errors": im.errors,
                 })
@@ -120,10 +124,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "calibration": est.calibration.as_ref().map(|c| serde_json::json!({
                 "camera": c.camera, "sigma": c.sigma, "rms_px": c.rms_px})),
             "errors_vs_truth": errs.as_ref().map(|e| serde_json::json!({
-                "camera_position_error_median_m": median(&e.camera_position_error_m),
-                "camera_orientation_error_median_deg": median(&e.camera_orientation_error_deg),
-                "head_position_error_median_m": median(&e.head_position_error_m),
-                "head_orientation_error_median_deg": median(&e.head_orientation_error_deg),
+                "camera_position_error_median_m": finite(median(&e.camera_position_error_m)),
+                "camera_orientation_error_median_deg": finite(median(&e.camera_orientation_error_deg)),
+                "head_position_error_median_m": finite(median(&e.head_position_error_m)),
+                "head_orientation_error_median_deg": finite(median(&e.head_orientation_error_deg)),
                 "light_position_error_m": e.light_position_error_m,
                 "standard_position_error_m": e.standard_position_error_m,
                 "focal_error_px": e.focal_error_px,
