@@ -74,9 +74,11 @@ impl CaptureWriter {
                 source,
             }
         };
-        let json = serde_json::to_vec_pretty(record).map_err(|e| StoreError::Json {
-            path: self.path.clone(),
-            message: e.to_string(),
+        let json = skinbrdf_core::json::to_vec_pretty(&self.path, record).map_err(|e| {
+            StoreError::Json {
+                path: self.path.clone(),
+                message: e.problem(),
+            }
         })?;
         let mut tmp = tempfile::Builder::new()
             .prefix(".capture.json.")
@@ -84,7 +86,6 @@ impl CaptureWriter {
             .tempfile_in(&self.dir)
             .map_err(io("create a temporary file", &self.dir))?;
         tmp.write_all(&json)
-            .and_then(|()| tmp.write_all(b"\n"))
             .and_then(|()| tmp.as_file().sync_all())
             .map_err(io("write a temporary file", tmp.path()))?;
         tmp.persist(&self.path)
@@ -181,6 +182,19 @@ mod tests {
             .map(|e| e.expect("entry").file_name())
             .collect();
         assert_eq!(names, vec![std::ffi::OsString::from(CAPTURE_FILE_NAME)]);
+    }
+
+    #[test]
+    fn a_nan_time_is_refused_with_its_field_and_the_record_stays() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let w = CaptureWriter::create(&dir.path().join("s1")).expect("create");
+        w.write(&record(3)).expect("write");
+        let mut bad = record(3);
+        bad.exposures[2].host_time_us = f64::NAN;
+        let err = w.write(&bad).expect_err("NaN").to_string();
+        assert!(err.contains("exposures[2].host_time_us"), "{err}");
+        assert!(err.contains(CAPTURE_FILE_NAME), "{err}");
+        assert_eq!(read_capture(w.path()).expect("the old record"), record(3));
     }
 
     #[test]

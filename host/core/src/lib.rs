@@ -14,6 +14,7 @@
 pub mod angles;
 pub mod camera;
 pub mod fsio;
+pub mod json;
 pub mod mesh;
 pub mod pose;
 pub mod sample;

@@ -329,7 +329,12 @@ pub fn write_samples(
     );
     header.image_count = Some(session.file.images.len() as u32);
     header.calibration_c = Some(run.report.c);
-    header.extra = serde_json::to_value(&run.report).unwrap_or(serde_json::Value::Null);
+    header.extra = skinbrdf_core::json::to_value(path, &run.report).map_err(|e| {
+        skinbrdf_samples::SamplesError::BadHeader {
+            path: path.to_path_buf(),
+            problem: format!("cannot serialise the provenance header: {}", e.problem()),
+        }
+    })?;
     skinbrdf_samples::write_samples(path, &header, &run.report.samples)?;
     if let Some(c) = csv {
         skinbrdf_samples::write_csv(c, &run.report.samples)?;

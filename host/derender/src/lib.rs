@@ -305,8 +305,9 @@ pub struct TruthError {
     pub p90_rel_error: f64,
     /// Median signed relative error (bias).
     pub median_signed_rel_error: f64,
-    /// Median relative error per channel.
-    pub median_rel_error_rgb: [f64; 3],
+    /// Median relative error per channel; `None` for a channel the true BRDF is zero in
+    /// everywhere (no sample has a relative error there).
+    pub median_rel_error_rgb: [Option<f64>; 3],
 }
 
 /// Compares samples with the true BRDF evaluated at each sample's angles.
@@ -330,18 +331,22 @@ pub fn truth_error(samples: &[BrdfSample], truth: &BrdfModel) -> Option<TruthErr
             }
         }
     }
-    let all: Vec<f64> = per.iter().flatten().copied().collect();
-    let st = RobustStats::of(&all)?;
-    let mut sorted = all.clone();
+    let mut sorted: Vec<f64> = per
+        .iter()
+        .flatten()
+        .copied()
+        .filter(|e| e.is_finite())
+        .collect();
+    let st = RobustStats::of(&sorted)?;
     sorted.sort_by(f64::total_cmp);
+    // `signed` holds the same errors with their signs, so it has a finite value too.
+    let signed = RobustStats::of(&signed)?;
     Some(TruthError {
         samples: samples.len(),
         median_rel_error: st.median,
         p90_rel_error: stats::percentile_sorted(&sorted, 0.9),
-        median_signed_rel_error: RobustStats::of(&signed).map_or(f64::NAN, |s| s.median),
-        median_rel_error_rgb: std::array::from_fn(|c| {
-            RobustStats::of(&per[c]).map_or(f64::NAN, |s| s.median)
-        }),
+        median_signed_rel_error: signed.median,
+        median_rel_error_rgb: std::array::from_fn(|c| RobustStats::of(&per[c]).map(|s| s.median)),
     })
 }
 

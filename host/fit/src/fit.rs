@@ -206,8 +206,9 @@ pub struct ChannelFit {
     pub iterations: usize,
     /// Why the final solve stopped.
     pub status: LmStatus,
-    /// Condition number of the diagonally scaled `J^T J`.
-    pub condition_number: f64,
+    /// Condition number of the diagonally scaled `J^T J`; `None` when the matrix is singular
+    /// (the condition number is infinite: see `unidentified`).
+    pub condition_number: Option<f64>,
     /// Parameters the data do not determine.
     pub unidentified: Vec<String>,
     /// The multi-start outcomes.
@@ -403,6 +404,11 @@ pub fn error_metrics(f: impl Fn(usize) -> f64 + Sync, y: &[f64], floor: f64) -> 
         median_rel_err: quantile(&rels, 0.5),
         count: y.len(),
     }
+}
+
+/// A [`ChannelFit::condition_number`] as text: `1.23e4`, or `infinite` for a singular matrix.
+pub fn condition_text(condition_number: Option<f64>) -> String {
+    condition_number.map_or_else(|| "infinite".to_string(), |c| format!("{c:.2e}"))
 }
 
 /// Standard errors and identifiability from `J^T J`.
@@ -750,7 +756,7 @@ fn fit_channel_with_floor(
             rms_residual: (2.0 * fin.cost / m as f64).sqrt(),
             iterations: fin.iterations,
             status: fin.status,
-            condition_number,
+            condition_number: Some(condition_number).filter(|c| c.is_finite()),
             unidentified,
             starts: outcomes,
             stages,
@@ -817,8 +823,9 @@ pub fn fit_data(
     for (c, (fit, res)) in fits.into_iter().enumerate() {
         if !fit.unidentified.is_empty() {
             warnings.push(format!(
-                "channel {c}: the samples do not determine {:?} (condition number {:.2e}); their values are arbitrary within a valley of equal cost",
-                fit.unidentified, fit.condition_number
+                "channel {c}: the samples do not determine {:?} (condition number {}); their values are arbitrary within a valley of equal cost",
+                fit.unidentified,
+                condition_text(fit.condition_number)
             ));
         }
         channels.push(fit);

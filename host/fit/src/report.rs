@@ -91,15 +91,10 @@ pub enum ReportError {
         #[source]
         source: std::io::Error,
     },
-    /// A report could not be serialised.
-    #[error("{path}: cannot serialise the report", path = path.display())]
-    Serialize {
-        /// The output.
-        path: PathBuf,
-        /// The cause.
-        #[source]
-        source: serde_json::Error,
-    },
+    /// A report could not be serialised: a NaN or infinity (named by its field's path), or a
+    /// value serde_json refuses. The message names the output.
+    #[error(transparent)]
+    Serialize(#[from] skinbrdf_core::json::JsonError),
 }
 
 /// Seconds per stage of a fit run.
@@ -207,13 +202,13 @@ pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
     })?)
 }
 
-/// Serialises `value` as pretty JSON to `path` atomically.
+/// Serialises `value` as pretty JSON to `path` atomically, through the checked writer
+/// ([`skinbrdf_core::json`]: a NaN or infinity is refused with its field's path).
 pub(crate) fn write_json(path: &Path, value: &impl Serialize) -> Result<(), ReportError> {
-    let json = serde_json::to_string_pretty(value).map_err(|source| ReportError::Serialize {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    write_text(path, &json)
+    let json = skinbrdf_core::json::to_vec_pretty(path, value)?;
+    Ok(skinbrdf_samples::write_atomic(path, |w| {
+        w.write_all(&json)
+    })?)
 }
 
 /// Creates `dir` (and its parents) if needed.
@@ -313,13 +308,13 @@ pub fn markdown(r: &FitReport) -> String {
     for (c, ch) in f.channels.iter().enumerate() {
         let _ = writeln!(
             s,
-            "| {} | {:.4} | {:.4} | {} | {:?} | {:.2e} |",
+            "| {} | {:.4} | {:.4} | {} | {:?} | {} |",
             ["R", "G", "B"][c],
             ch.error.log_rmse,
             ch.error.median_rel_err,
             ch.iterations,
             ch.status,
-            ch.condition_number
+            crate::fit::condition_text(ch.condition_number)
         );
     }
     if let Some(t) = &r.truth {

@@ -666,9 +666,12 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
             .map_or(0, |s| s.targets.len());
     report.unplaced_targets = t.unplaced.len();
     report.total_s = t0.elapsed().as_secs_f64();
-    let json = serde_json::to_vec_pretty(&report).map_err(|e| IngestError::Input {
-        path: staging.join(INGEST_REPORT_FILE),
-        problem: format!("cannot serialise the report: {e}"),
+    let report_file = staging.join(INGEST_REPORT_FILE);
+    let json = skinbrdf_core::json::to_vec_pretty(&report_file, &report).map_err(|e| {
+        IngestError::Input {
+            path: report_file.clone(),
+            problem: format!("cannot serialise the report: {}", e.problem()),
+        }
     })?;
     write_file(&staging.join(INGEST_REPORT_FILE), &json)?;
     move_into_place(&staging, &cfg.out_dir)?;
@@ -1335,10 +1338,11 @@ fn write_session(
             .find(|i| i.exposure_index == e.index)
             .map(|i| i.file.clone());
     }
-    let json = serde_json::to_vec_pretty(&rec).map_err(|e| IngestError::Input {
-        path: cfg.capture.clone(),
-        problem: format!("cannot serialise the record: {e}"),
-    })?;
+    let json =
+        skinbrdf_core::json::to_vec_pretty(&cfg.capture, &rec).map_err(|e| IngestError::Input {
+            path: cfg.capture.clone(),
+            problem: format!("cannot serialise the record: {}", e.problem()),
+        })?;
     write_file(&staging.join("capture.json"), &json)?;
     let session = SessionFile {
         format_version: SESSION_FORMAT_VERSION,

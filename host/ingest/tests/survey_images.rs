@@ -106,6 +106,9 @@ fn survey_images_are_ingested_with_their_role_before_the_session() {
     }
     let json = std::fs::read_to_string(out.join("ingest.json")).expect("ingest.json");
     assert!(json.contains("survey_images"), "{json}");
+    // The report reads back as what the ingest returned.
+    let back: skinbrdf_ingest::IngestReport = serde_json::from_str(&json).expect("a report");
+    assert_eq!(back, r);
 
     // Copied: into images/survey/ (a survey file may share a card file's name).
     let mut copied = config(&studio, Some(survey_dir.clone()), dir.path().join("copied"));

@@ -133,8 +133,9 @@ pub struct BenchRow {
     pub value: String,
     /// Error figure's name.
     pub error_name: &'static str,
-    /// Error, percent.
-    pub error_pct: f64,
+    /// Error, percent; `None` where the row has none: the setting made the stage fail, its
+    /// hits differ from the reference build, or nothing was compared.
+    pub error_pct: Option<f64>,
     /// Run time of the stage, seconds.
     pub time_s: f64,
     /// Samples produced (derender) or used (smoothing, fit).
@@ -150,8 +151,9 @@ pub struct BenchRow {
 pub struct BenchOutput {
     /// All rows.
     pub rows: Vec<BenchRow>,
-    /// Photogrammetry, run once: (time s, camera position error median mm).
-    pub poses: (f64, f64),
+    /// Photogrammetry, run once: (time s, camera position error median mm; `None` when no
+    /// camera was posed).
+    pub poses: (f64, Option<f64>),
     /// The Markdown table.
     pub table_md: String,
     /// Files written.
@@ -180,19 +182,25 @@ pub fn model_error_pct(model: &BrdfModel, truth: &BrdfModel, samples: &[BrdfSamp
     median(&errs) * 100.0
 }
 
+/// An error figure that is a number, or `None` (a median of nothing is NaN).
+fn measured(error_pct: f64) -> Option<f64> {
+    Some(error_pct).filter(|e| e.is_finite())
+}
+
 fn mark_pareto(rows: &mut [BenchRow]) {
     let snapshot: Vec<(BenchStage, f64, f64)> = rows
         .iter()
-        .map(|r| (r.stage, r.time_s, r.error_pct))
+        .filter_map(|r| Some((r.stage, r.time_s, r.error_pct?)))
         .collect();
     for r in rows.iter_mut() {
-        r.pareto = r.error_pct.is_finite()
-            && !snapshot.iter().any(|(st, t, e)| {
+        r.pareto = r.error_pct.is_some_and(|error_pct| {
+            !snapshot.iter().any(|(st, t, e)| {
                 *st == r.stage
                     && *t <= r.time_s
-                    && *e <= r.error_pct
-                    && (*t < r.time_s || *e < r.error_pct)
-            });
+                    && *e <= error_pct
+                    && (*t < r.time_s || *e < error_pct)
+            })
+        });
     }
 }
 
@@ -329,18 +337,18 @@ fn write_outputs(
     cfg: &BenchConfig,
     dir: &std::path::Path,
     images: usize,
-    poses: (f64, f64),
+    poses: (f64, Option<f64>),
     rows: &[BenchRow],
 ) -> Result<(String, Vec<PathBuf>), BenchError> {
     let mut files = Vec::new();
     let mut md = format!(
-        "Session: `{}` ({} images). Photogrammetry (run once): {:.2} s, camera position error median {:.3} mm. \
+        "Session: `{}` ({} images). Photogrammetry (run once): {:.2} s, camera position error median {} mm. \
          Each row changes one setting from the defaults (the row marked `default` has them all).\n\n\
          | stage | setting | value | error (%) | time (s) | samples | Pareto |\n|---|---|---|---:|---:|---:|:-:|\n",
         dir.display(),
         images,
         poses.0,
-        poses.1
+        poses.1.map_or_else(|| "-".to_string(), |e| format!("{e:.3}"))
     );
     let mut csv =
         String::from("stage,setting,value,error_name,error_pct,time_s,samples,default,pareto\n");
@@ -354,12 +362,13 @@ fn write_outputs(
             last_stage = Some(r.stage);
         }
         md.push_str(&format!(
-            "| {} | {} | {}{} | {:.3} | {:.3} | {} | {} |\n",
+            "| {} | {} | {}{} | {} | {:.3} | {} | {} |\n",
             r.stage,
             r.setting,
             r.value,
             if r.default { " (default)" } else { "" },
-            r.error_pct,
+            r.error_pct
+                .map_or_else(|| "-".to_string(), |e| format!("{e:.3}")),
             r.time_s,
             r.samples,
             if r.pareto { "★" } else { "" }
@@ -370,7 +379,7 @@ fn write_outputs(
             r.setting,
             r.value.replace(',', ";"),
             r.error_name,
-            r.error_pct,
+            r.error_pct.map_or_else(String::new, |e| e.to_string()),
             r.time_s,
             r.samples,
             r.default,
@@ -399,8 +408,7 @@ fn write_outputs(
                 kind: SeriesKind::Points(
                     rows.iter()
                         .filter(|r| r.stage == stage && r.setting == *setting)
-                        .filter(|r| r.error_pct.is_finite())
-                        .map(|r| (r.time_s, r.error_pct))
+                        .filter_map(|r| Some((r.time_s, r.error_pct?)))
                         .collect(),
                 ),
             })
@@ -408,7 +416,7 @@ fn write_outputs(
         let mut front: Vec<(f64, f64)> = rows
             .iter()
             .filter(|r| r.stage == stage && r.pareto)
-            .map(|r| (r.time_s, r.error_pct))
+            .filter_map(|r| Some((r.time_s, r.error_pct?)))
             .collect();
         front.sort_by(|a, b| a.0.total_cmp(&b.0));
         series.push(Series {
@@ -480,9 +488,10 @@ pub fn run_bench(cfg: &BenchConfig, log: &mut dyn FnMut(&str)) -> Result<BenchOu
     let t = Instant::now();
     let poses: SessionPoses = skinbrdf_poses::estimate_session(&session, &PoseConfig::DEFAULT)?;
     let poses_s = t.elapsed().as_secs_f64();
-    let cam_err_mm =
+    let cam_err_mm = measured(
         median(&skinbrdf_poses::session::compare_truth(&poses, &truth).camera_position_error_m)
-            * 1e3;
+            * 1e3,
+    );
 
     let mut rows = Vec::new();
     let base_samples = sweep_derender(cfg, &session, &poses, &mut rows, log)?;
@@ -542,7 +551,7 @@ fn sweep_derender(
             .report
             .truth_error
             .as_ref()
-            .map_or(f64::NAN, |e| e.median_rel_error * 100.0);
+            .map(|e| e.median_rel_error * 100.0);
         rows.push(BenchRow {
             stage: BenchStage::Derender,
             setting,
@@ -676,7 +685,7 @@ fn sweep_derender(
     let base_err = rows
         .iter()
         .find(|r| r.default && r.stage == BenchStage::Derender)
-        .map_or(f64::NAN, |r| r.error_pct);
+        .and_then(|r| r.error_pct);
 
     // BVH build quality: build over the session's geometry, then cast the primary rays of
     // every measurement image (stride 2). Traversal is exact, so every quality must return the
@@ -724,7 +733,7 @@ fn sweep_derender(
                 }
             ),
             error_name: "derender sample error (identical hits)",
-            error_pct: if mismatches == 0 { base_err } else { f64::NAN },
+            error_pct: if mismatches == 0 { base_err } else { None },
             time_s: build_s + trace_s,
             samples: rays.len(),
             default: q == BuildQuality::Medium,
@@ -776,7 +785,12 @@ fn sweep_smoothing(
                 value
             },
             error_name: "smoothed BRDF median rel. error at held-out samples",
-            error_pct: smoother_error_pct(&sm.loess, sm.metrics.floor_rho, &truth.brdf, &held_out),
+            error_pct: measured(smoother_error_pct(
+                &sm.loess,
+                sm.metrics.floor_rho,
+                &truth.brdf,
+                &held_out,
+            )),
             time_s: sm.metrics.run_time_s,
             samples: sm.metrics.samples_used,
             default,
@@ -823,9 +837,12 @@ fn sweep_fit(
         // A setting that makes the fit fail loudly (e.g. too few iterations) is a row with
         // its failure, not the end of the sweep.
         let (error_pct, value) = match fit_rgb(model, samples, &c) {
-            Ok(f) => (model_error_pct(&f.model, &truth.brdf, samples), value),
+            Ok(f) => (
+                measured(model_error_pct(&f.model, &truth.brdf, samples)),
+                value,
+            ),
             Err(e) => (
-                f64::NAN,
+                None,
                 format!("{value} (failed: {})", skinbrdf_core::error_text(&e)),
             ),
         };
@@ -919,7 +936,7 @@ mod tests {
             setting: "s",
             value: String::new(),
             error_name: "e",
-            error_pct: e,
+            error_pct: measured(e),
             time_s: t,
             samples: 0,
             default: false,

@@ -322,33 +322,51 @@ pub fn capture_metrics(c: &CaptureRecord, capture_s: f64) -> Vec<Metric> {
         .iter()
         .filter_map(|e| e.recycle_us.map(|r| r as f64 / 1e6))
         .collect();
-    let mean = |v: &[f64]| {
-        if v.is_empty() {
-            f64::NAN
-        } else {
-            v.iter().sum::<f64>() / v.len() as f64
-        }
-    };
+    // A mean of no values is no figure: the row is left out (never a NaN).
+    let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
     let span_s = match (c.exposures.first(), c.exposures.last()) {
         (Some(a), Some(b)) => {
             b.shutter_command_us.saturating_sub(a.shutter_command_us) as f64 / 1e6
         }
         _ => 0.0,
     };
-    vec![
-        Metric::new("exposures", c.exposures.len() as f64, "", MetricKind::Count),
-        Metric::new("exposures_ok", ok as f64, "", MetricKind::Count),
-        Metric::new("shutter_lag_mean", mean(&lags), "ms", MetricKind::Quality),
-        Metric::new("recycle_mean", mean(&recycles), "s", MetricKind::Quality),
-        Metric::new("session_device_time", span_s, "s", MetricKind::Quality),
-        Metric::new(
+    [
+        Some(Metric::new(
+            "exposures",
+            c.exposures.len() as f64,
+            "",
+            MetricKind::Count,
+        )),
+        Some(Metric::new(
+            "exposures_ok",
+            ok as f64,
+            "",
+            MetricKind::Count,
+        )),
+        mean(&lags).map(|v| Metric::new("shutter_lag_mean", v, "ms", MetricKind::Quality)),
+        mean(&recycles).map(|v| Metric::new("recycle_mean", v, "s", MetricKind::Quality)),
+        Some(Metric::new(
+            "session_device_time",
+            span_s,
+            "s",
+            MetricKind::Quality,
+        )),
+        Some(Metric::new(
             "clock_model_residual_rms",
             c.clock.residual_rms_us,
             "us",
             MetricKind::Quality,
-        ),
-        Metric::new("capture_wall_time", capture_s, "s", MetricKind::Cost),
+        )),
+        Some(Metric::new(
+            "capture_wall_time",
+            capture_s,
+            "s",
+            MetricKind::Cost,
+        )),
     ]
+    .into_iter()
+    .flatten()
+    .collect()
 }
 
 /// What the demo did, in one sentence.

@@ -42,6 +42,10 @@ pub enum LedgerError {
         #[source]
         source: serde_json::Error,
     },
+    /// The ledger could not be written as JSON (a NaN or infinity in a recorded figure, named by
+    /// its field's path). The message names the file.
+    #[error(transparent)]
+    Json(#[from] skinbrdf_core::json::JsonError),
 }
 
 /// A BLAKE3 digest (hex) of a stage's inputs.
@@ -216,10 +220,7 @@ impl Ledger {
     /// Saves atomically (temp file + rename, both synced).
     pub fn save(&self, out_dir: &Path) -> Result<(), LedgerError> {
         let path = Self::path(out_dir);
-        let json = serde_json::to_vec_pretty(self).map_err(|source| LedgerError::Corrupt {
-            path: path.clone(),
-            source,
-        })?;
+        let json = skinbrdf_core::json::to_vec_pretty(&path, self)?;
         write_atomic(&path, &json)
     }
 

@@ -96,7 +96,7 @@ pub enum ProcessError {
         /// The I/O error.
         source: std::io::Error,
     },
-    /// A JSON output could not be written or a stage file not parsed.
+    /// A stage file could not be parsed.
     #[error("{path}")]
     Json {
         /// The file.
@@ -104,6 +104,10 @@ pub enum ProcessError {
         /// The serde error.
         source: serde_json::Error,
     },
+    /// An output could not be written as JSON: a NaN or infinity (named by its field's path),
+    /// or a value serde_json refuses. The message names the file.
+    #[error(transparent)]
+    JsonOut(#[from] skinbrdf_core::json::JsonError),
     /// A stage needs poses that no earlier stage produced.
     #[error("{dir}: no poses: the session gives none and {poses} does not exist; run `skinbrdf poses {dir}` (or `skinbrdf process {dir}`) first")]
     NoPoses {
@@ -620,11 +624,7 @@ fn write_reports(
     );
     write_atomic(&out_dir.join("report.html"), html.as_bytes())?;
     let path = out_dir.join("report.json");
-    let json = serde_json::to_vec_pretty(report).map_err(|source| ProcessError::Json {
-        path: path.clone(),
-        source,
-    })?;
-    write_atomic(&path, &json)?;
+    write_atomic(&path, &skinbrdf_core::json::to_vec_pretty(&path, report)?)?;
     Ok(())
 }
 

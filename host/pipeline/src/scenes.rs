@@ -76,25 +76,26 @@ pub struct ScenesConfig {
     pub keep: bool,
 }
 
-/// One scene's pose figures.
+/// One scene's pose figures. An error statistic is `None` when no image had the pose it
+/// compares (a statistic of nothing).
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct SceneRow {
     pub scene: String,
     pub measurement_images: usize,
     pub images_with_camera_pose: usize,
     pub measurement_images_with_head_pose: usize,
-    pub camera_position_error_median_mm: f64,
-    pub camera_orientation_error_median_deg: f64,
-    pub head_position_error_median_mm: f64,
-    pub head_position_error_max_mm: f64,
-    pub head_position_error_median_before_bundle_mm: f64,
+    pub camera_position_error_median_mm: Option<f64>,
+    pub camera_orientation_error_median_deg: Option<f64>,
+    pub head_position_error_median_mm: Option<f64>,
+    pub head_position_error_max_mm: Option<f64>,
+    pub head_position_error_median_before_bundle_mm: Option<f64>,
     pub bundle_cost_before: Option<f64>,
     pub bundle_cost_after: Option<f64>,
     pub bundle_ms: Option<f64>,
-    pub head_orientation_error_median_deg: f64,
+    pub head_orientation_error_median_deg: Option<f64>,
     pub flash_position_error_mm: Option<f64>,
     pub standard_position_error_mm: Option<f64>,
-    pub detect_plus_pose_per_image_median_ms: f64,
+    pub detect_plus_pose_per_image_median_ms: Option<f64>,
     pub poses_total_s: f64,
 }
 
@@ -156,6 +157,8 @@ pub fn pose_scenes(
             .iter()
             .map(|im| im.detect_ms + im.pose_ms)
             .collect();
+        // The median of no finite values is NaN: no figure.
+        let stat = |v: f64| Some(v).filter(|v| v.is_finite());
         let row = SceneRow {
             scene: name.clone(),
             measurement_images: meas.len(),
@@ -168,27 +171,27 @@ pub fn pose_scenes(
                 .iter()
                 .filter(|&&i| est.images[i].world_from_head.is_some())
                 .count(),
-            camera_position_error_median_mm: median(&e.camera_position_error_m) * 1e3,
-            camera_orientation_error_median_deg: median(&e.camera_orientation_error_deg),
-            head_position_error_median_mm: median(&head_mm),
+            camera_position_error_median_mm: stat(median(&e.camera_position_error_m) * 1e3),
+            camera_orientation_error_median_deg: stat(median(&e.camera_orientation_error_deg)),
+            head_position_error_median_mm: stat(median(&head_mm)),
             head_position_error_max_mm: head_mm
                 .iter()
                 .copied()
                 .filter(|v| v.is_finite())
-                .fold(f64::NAN, f64::max),
-            head_position_error_median_before_bundle_mm: median(
+                .reduce(f64::max),
+            head_position_error_median_before_bundle_mm: stat(median(
                 &meas
                     .iter()
                     .map(|&i| e0.head_position_error_m[i] * 1e3)
                     .collect::<Vec<_>>(),
-            ),
+            )),
             bundle_cost_before: est.bundle.as_ref().map(|b| b.initial_cost),
             bundle_cost_after: est.bundle.as_ref().map(|b| b.final_cost),
             bundle_ms: est.bundle.as_ref().map(|b| b.time_ms),
-            head_orientation_error_median_deg: median(&e.head_orientation_error_deg),
+            head_orientation_error_median_deg: stat(median(&e.head_orientation_error_deg)),
             flash_position_error_mm: e.light_position_error_m.map(|v| v * 1e3),
             standard_position_error_mm: e.standard_position_error_m.map(|v| v * 1e3),
-            detect_plus_pose_per_image_median_ms: median(&per_image),
+            detect_plus_pose_per_image_median_ms: stat(median(&per_image)),
             poses_total_s: est.total_ms * 1e-3,
         };
         log(name);
@@ -207,27 +210,30 @@ pub fn pose_scenes(
 pub fn markdown(rows: &[SceneRow]) -> String {
     let mut md = String::from("| scene | camera pos. (mm) | camera orient. (deg) | head pos. median / max (mm) | head pos. before BA (mm) | head posed | head orient. (deg) | flash (mm) | standard (mm) | BA cost before -> after | BA (ms) | detect+pose per image (ms) | poses total (s) |\n");
     md.push_str("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
-    let opt = |v: Option<f64>| v.map_or_else(|| "-".to_string(), |x| format!("{x:.3}"));
+    let digits =
+        |v: Option<f64>, d: usize| v.map_or_else(|| "-".to_string(), |x| format!("{x:.d$}"));
+    let opt = |v: Option<f64>| digits(v, 3);
     for r in rows {
         md.push_str(&format!(
-            "| {} | {:.3} | {:.4} | {:.3} / {:.3} | {:.3} | {}/{} | {:.4} | {} | {} | {} | {} | {:.0} | {:.1} |\n",
+            "| {} | {} | {} | {} / {} | {} | {}/{} | {} | {} | {} | {} | {} | {} | {:.1} |\n",
             r.scene,
-            r.camera_position_error_median_mm,
-            r.camera_orientation_error_median_deg,
-            r.head_position_error_median_mm,
-            r.head_position_error_max_mm,
-            r.head_position_error_median_before_bundle_mm,
+            opt(r.camera_position_error_median_mm),
+            digits(r.camera_orientation_error_median_deg, 4),
+            opt(r.head_position_error_median_mm),
+            opt(r.head_position_error_max_mm),
+            opt(r.head_position_error_median_before_bundle_mm),
             r.measurement_images_with_head_pose,
             r.measurement_images,
-            r.head_orientation_error_median_deg,
+            digits(r.head_orientation_error_median_deg, 4),
             opt(r.flash_position_error_mm),
             opt(r.standard_position_error_mm),
             match (r.bundle_cost_before, r.bundle_cost_after) {
                 (Some(a), Some(b)) => format!("{a:.0} -> {b:.0}"),
                 _ => "-".into(),
             },
-            r.bundle_ms.map_or_else(|| "-".into(), |v| format!("{v:.0}")),
-            r.detect_plus_pose_per_image_median_ms,
+            r.bundle_ms
+                .map_or_else(|| "-".into(), |v| format!("{v:.0}")),
+            digits(r.detect_plus_pose_per_image_median_ms, 0),
             r.poses_total_s
         ));
     }

@@ -152,10 +152,7 @@ pub fn skipped(plan: &Plan, stage: Stage) -> StageReport {
 }
 
 fn json_bytes<T: serde::Serialize>(path: &Path, v: &T) -> Result<Vec<u8>, ProcessError> {
-    serde_json::to_vec_pretty(v).map_err(|source| ProcessError::Json {
-        path: path.to_path_buf(),
-        source,
-    })
+    Ok(skinbrdf_core::json::to_vec_pretty(path, v)?)
 }
 
 // --- placement survey ------------------------------------------------------------------------
@@ -511,7 +508,7 @@ pub fn pose_stage_reports(
         .as_ref()
         .map(|e| e.corner_summary())
         .unwrap_or_default();
-    let corner = |layout: &str| corners.get(layout).map(|c| c.corner_error_median_px);
+    let corner = |layout: &str| corners.get(layout).and_then(|c| c.corner_error_median_px);
     let mk = |stage: Stage, time: f64, figures: StageMetrics| -> StageReport {
         if !plan.runs(stage) {
             return skipped(plan, stage);
@@ -860,11 +857,7 @@ pub fn derender_chosen(
         )?;
     }
     let report_file = out_dir.join("derender.json");
-    let json = serde_json::to_vec_pretty(&run).map_err(|source| ProcessError::Json {
-        path: report_file.clone(),
-        source,
-    })?;
-    write_atomic(&report_file, &json)?;
+    write_atomic(&report_file, &json_bytes(&report_file, &run)?)?;
     Ok(DerenderOutput {
         run,
         samples_file,

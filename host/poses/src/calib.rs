@@ -74,9 +74,10 @@ impl Default for CalibConfig {
 pub struct Calibration {
     /// The calibrated camera.
     pub camera: CameraModel,
-    /// Standard deviation of each intrinsic parameter (NaN where held fixed), order
-    /// [`PARAM_NAMES`].
-    pub sigma: [f64; 9],
+    /// Standard deviation of each intrinsic parameter, order [`PARAM_NAMES`]; `None` where it
+    /// was not estimated: the parameter was held fixed, or the normal matrix was too
+    /// ill-conditioned to invert (written as `null` in JSON).
+    pub sigma: [Option<f64>; 9],
     /// RMS reprojection error over all views, pixels.
     pub rms_px: f64,
     /// Per view `frame_from_camera`.
@@ -302,13 +303,13 @@ pub fn calibrate(
     let xs = res.x.as_slice();
     let params = unpack(xs);
     let camera = camera_from(init, &params);
-    let mut sigma = [f64::NAN; 9];
+    let mut sigma = [None; 9];
     if let Some(cov) = &res.covariance {
         for (k, &i) in free.iter().enumerate() {
-            sigma[i] = cov[(k, k)].max(0.0).sqrt();
+            sigma[i] = Some(cov[(k, k)].max(0.0).sqrt()).filter(|s| s.is_finite());
         }
         if cfg.equal_focal {
-            sigma[1] = sigma[0] * (init.fy_px / init.fx_px);
+            sigma[1] = sigma[0].map(|s| s * (init.fy_px / init.fx_px));
         }
     }
     let views_out: Vec<Pose> = (0..used_views.len())
@@ -479,15 +480,24 @@ mod tests {
         let cal = calibrate(&init, &views, &CalibConfig::DEFAULT).expect("calibrates");
         // Errors within 4 stated standard deviations, and the deviations small.
         let c = &cal.camera;
+        let sigma = |i: usize| cal.sigma[i].expect("estimated");
         assert!(
-            (c.fx_px - truth.fx_px).abs() < 4.0 * cal.sigma[0],
+            (c.fx_px - truth.fx_px).abs() < 4.0 * sigma(0),
             "{} vs {}",
             c.fx_px,
             truth.fx_px
         );
-        assert!((c.cx_px - truth.cx_px).abs() < 4.0 * cal.sigma[2]);
-        assert!((c.distortion.k1 - truth.distortion.k1).abs() < 4.0 * cal.sigma[4]);
-        assert!(cal.sigma[0] < 5.0 && cal.sigma[4] < 0.02);
+        assert!((c.cx_px - truth.cx_px).abs() < 4.0 * sigma(2));
+        assert!((c.distortion.k1 - truth.distortion.k1).abs() < 4.0 * sigma(4));
+        assert!(sigma(0) < 5.0 && sigma(4) < 0.02);
         assert!(cal.rms_px < 0.1);
+        // fy follows fx (square pixels); k3 is held fixed by the default and has no sigma.
+        assert!(cal.sigma[1].is_some());
+        assert_eq!(cal.sigma[8], None);
+        // A held-fixed parameter's sigma is written as null and read back as not estimated.
+        let json = skinbrdf_core::json::to_vec_pretty(std::path::Path::new("c.json"), &cal)
+            .expect("finite");
+        let back: Calibration = serde_json::from_slice(&json).expect("reads back");
+        assert_eq!(back.sigma, cal.sigma);
     }
 }

@@ -854,22 +854,23 @@ pub struct TruthErrors {
     pub missed_targets: std::collections::BTreeMap<String, usize>,
 }
 
-/// Detection accuracy of one layout against the truth.
+/// Detection accuracy of one layout against the truth. Each statistic is `None` when no corner
+/// of the layout was compared (every target missed): a statistic of nothing.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CornerErrorSummary {
     /// Corners compared.
     pub corners: usize,
     /// Median distance from the true corner, pixels.
-    pub corner_error_median_px: f64,
+    pub corner_error_median_px: Option<f64>,
     /// 90th percentile, pixels.
-    pub corner_error_p90_px: f64,
+    pub corner_error_p90_px: Option<f64>,
     /// Largest, pixels.
-    pub corner_error_max_px: f64,
+    pub corner_error_max_px: Option<f64>,
     /// Fully visible targets of the layout not detected.
     pub missed_targets: usize,
     /// Median of the corner errors over their stated sigmas (about 1.18 when the sigmas are
     /// honest, larger when they are optimistic).
-    pub error_over_sigma_median: f64,
+    pub error_over_sigma_median: Option<f64>,
 }
 
 impl TruthErrors {
@@ -888,11 +889,7 @@ impl TruthErrors {
                     .unwrap_or_default();
                 v.sort_by(f64::total_cmp);
                 let at = |q: f64| {
-                    if v.is_empty() {
-                        f64::NAN
-                    } else {
-                        v[((v.len() - 1) as f64 * q).round() as usize]
-                    }
+                    (!v.is_empty()).then(|| v[((v.len() - 1) as f64 * q).round() as usize])
                 };
                 (
                     l.clone(),
@@ -902,12 +899,13 @@ impl TruthErrors {
                         corner_error_p90_px: at(0.9),
                         corner_error_max_px: at(1.0),
                         missed_targets: self.missed_targets.get(l).copied().unwrap_or(0),
-                        error_over_sigma_median: median(
+                        error_over_sigma_median: Some(median(
                             self.corner_error_over_sigma
                                 .get(l)
                                 .map(Vec::as_slice)
                                 .unwrap_or(&[]),
-                        ),
+                        ))
+                        .filter(|m| m.is_finite()),
                     },
                 )
             })

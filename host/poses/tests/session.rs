@@ -98,11 +98,11 @@ fn default_scene_poses_meet_the_bounds_and_the_bundle_adjustment_helps() {
             .unwrap_or_else(|| panic!("{layout} not compared"));
         assert!(d.corners >= 16, "{layout}: {d:?}");
         assert!(
-            d.corner_error_median_px < CORNER_MEDIAN_MAX_PX,
+            d.corner_error_median_px.expect("corners compared") < CORNER_MEDIAN_MAX_PX,
             "{layout}: {d:?}"
         );
         assert!(
-            d.error_over_sigma_median < ERROR_OVER_SIGMA_MAX,
+            d.error_over_sigma_median.expect("corners compared") < ERROR_OVER_SIGMA_MAX,
             "{layout}: stated sigmas optimistic: {d:?}"
         );
     }

@@ -315,13 +315,26 @@ pub fn fit_correspondences(
                 kept.retain(|p| p.id != w.id);
             }
             _ => {
-                let mut a = finish(&kept, kind, r, t, s, res, dropped);
-                a.threshold_mm = threshold_mm;
-                a.robust_median_mm = robust_median_mm;
-                return Ok(a);
+                let rejection = Rejection {
+                    dropped,
+                    threshold_mm,
+                    robust_median_mm,
+                };
+                return Ok(finish(&kept, kind, r, t, s, res, rejection));
             }
         }
     }
+}
+
+/// What the rejection loop of [`align`] decided, carried into the [`Alignment`].
+#[derive(Debug)]
+struct Rejection {
+    /// Targets left out, in the order they were dropped.
+    dropped: Vec<DroppedTarget>,
+    /// The rejection threshold, millimetres.
+    threshold_mm: f64,
+    /// The least median target residual over the pair fits, millimetres.
+    robust_median_mm: f64,
 }
 
 /// Pairs of targets tried at most for the robust scale (all pairs of up to 25 targets).
@@ -383,7 +396,7 @@ fn finish(
     t: DVec3,
     s: f64,
     residuals: Vec<TargetResidual>,
-    dropped: Vec<DroppedTarget>,
+    rejection: Rejection,
 ) -> Alignment {
     let n = pairs.len();
     let mut sse = 0.0;
@@ -448,9 +461,9 @@ fn finish(
         scale: s,
         rms_mm: (sse / n.max(1) as f64).sqrt() * 1e3,
         residuals,
-        dropped,
-        threshold_mm: f64::NAN,
-        robust_median_mm: f64::NAN,
+        dropped: rejection.dropped,
+        threshold_mm: rejection.threshold_mm,
+        robust_median_mm: rejection.robust_median_mm,
         unmatched: Vec::new(),
         points_used: n,
         rotation_sd_deg: rot_var.max(0.0).sqrt().to_degrees(),

@@ -139,10 +139,11 @@ impl SampleWriter {
             source: e.source,
         })?;
         let mut out = BufWriter::with_capacity(1 << 20, tmp);
-        let json = serde_json::to_vec(header).map_err(|e| SamplesError::BadHeader {
-            path: path.clone(),
-            problem: format!("cannot serialise the provenance header: {e}"),
-        })?;
+        let json =
+            skinbrdf_core::json::to_vec(&path, header).map_err(|e| SamplesError::BadHeader {
+                path: path.clone(),
+                problem: format!("cannot serialise the provenance header: {}", e.problem()),
+            })?;
         let header_len = u32::try_from(json.len())
             .ok()
             .filter(|&n| n <= MAX_HEADER_BYTES)

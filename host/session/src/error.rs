@@ -134,4 +134,8 @@ pub enum FileError {
         /// The serde_json error (with line and column).
         source: serde_json::Error,
     },
+    /// A value could not be written as JSON: a NaN or infinity (named by its field's path), or
+    /// a value serde_json refuses. The message names the file.
+    #[error(transparent)]
+    JsonOut(#[from] skinbrdf_core::json::JsonError),
 }

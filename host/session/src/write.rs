@@ -18,13 +18,11 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
     })
 }
 
-/// Writes a value as pretty JSON, atomically.
+/// Writes a value as pretty JSON, atomically, through the checked writer
+/// ([`skinbrdf_core::json`]): a NaN or infinity is refused with its field's path, and nothing is
+/// written.
 pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), FileError> {
-    let mut bytes = serde_json::to_vec_pretty(value).map_err(|source| FileError::Json {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    bytes.push(b'\n');
+    let bytes = skinbrdf_core::json::to_vec_pretty(path, value)?;
     write_atomic(path, &bytes)
 }
 

@@ -49,7 +49,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     .context("skinbrdf bench")?;
     progress.finish();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        super::print_json(&out)?;
     } else {
         print!("{}", out.table_md);
         for f in &out.files {

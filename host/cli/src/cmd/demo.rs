@@ -109,7 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             })),
             "process": out.process.report,
         });
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        super::print_json(&summary)?;
     } else {
         println!("\n{}", out.process.report.to_text());
         println!("demo finished in {:.1} s", out.total_s);

@@ -194,7 +194,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let run = written.run;
     if args.json {
-        println!("{}", std::fs::read_to_string(&written.report_file)?);
+        print!("{}", std::fs::read_to_string(&written.report_file)?);
         return Ok(());
     }
     let r = &run.report;
@@ -267,14 +267,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     if let Some(e) = &r.truth_error {
+        // A channel the true BRDF is zero in has no relative error: "-".
+        let rgb = e
+            .median_rel_error_rgb
+            .map(|m| m.map_or_else(|| "-".to_string(), |m| format!("{:.3}%", m * 100.0)));
         println!(
-            "  vs truth: median relative error {:.3}% (p90 {:.3}%, bias {:+.3}%, RGB [{:.3}%, {:.3}%, {:.3}%]) over {} samples",
+            "  vs truth: median relative error {:.3}% (p90 {:.3}%, bias {:+.3}%, RGB [{}, {}, {}]) over {} samples",
             e.median_rel_error * 100.0,
             e.p90_rel_error * 100.0,
             e.median_signed_rel_error * 100.0,
-            e.median_rel_error_rgb[0] * 100.0,
-            e.median_rel_error_rgb[1] * 100.0,
-            e.median_rel_error_rgb[2] * 100.0,
+            rgb[0],
+            rgb[1],
+            rgb[2],
             e.samples
         );
     }

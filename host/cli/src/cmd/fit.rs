@@ -85,7 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let report = fit_and_report(&input, &out, &opts)?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        super::print_json(&report)?;
         return Ok(());
     }
     let f = &report.fit;
@@ -95,13 +95,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     for (c, ch) in f.channels.iter().enumerate() {
         println!(
-            "  {}: log-RMSE {:.4}, median rel. error {:.4}, {} iterations ({:?}), condition {:.2e}",
+            "  {}: log-RMSE {:.4}, median rel. error {:.4}, {} iterations ({:?}), condition {}",
             ["R", "G", "B"][c],
             ch.error.log_rmse,
             ch.error.median_rel_err,
             ch.iterations,
             ch.status,
-            ch.condition_number
+            skinbrdf_fit::fit::condition_text(ch.condition_number)
         );
     }
     if let Some(t) = &report.truth {

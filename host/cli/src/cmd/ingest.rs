@@ -126,7 +126,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let cfg = config(&args);
     let r = ingest(&cfg).with_context(|| format!("skinbrdf ingest {}", args.card.display()))?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
+        super::print_json(&r)?;
         return Ok(());
     }
     let c = &r.matching.clock;

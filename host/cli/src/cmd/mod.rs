@@ -16,6 +16,14 @@ pub mod survey;
 pub mod synth;
 pub mod targets;
 
+/// Prints `value` as pretty JSON on stdout (the commands' `--json`), through the checked writer
+/// ([`skinbrdf_core::json`]): a NaN or infinity is an error naming its field, never a `null`.
+pub(crate) fn print_json<T: serde::Serialize + ?Sized>(value: &T) -> anyhow::Result<()> {
+    let text = skinbrdf_core::json::to_string_pretty(std::path::Path::new("stdout"), value)?;
+    println!("{text}");
+    Ok(())
+}
+
 /// Parses an image size `WxH` (e.g. `1524x1012`).
 pub(crate) fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
     use anyhow::Context;

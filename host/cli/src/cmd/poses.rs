@@ -89,6 +89,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let truth = session.load_truth().transpose()?;
     let errs = truth.as_ref().map(|t| compare_truth(&est, t));
     if args.json {
+        // An error the truth cannot give (an image without a pose: NaN in `compare_truth`'s
+        // per-image lists, a median of nothing) is `null`, stated here rather than left to
+        // serde_json's silent NaN-to-null.
+        let finite = |v: f64| Some(v).filter(|v| v.is_finite());
         let images: Vec<_> = est
             .images
             .iter()
@@ -102,9 +106,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     "camera_position_sigma_m": im.world_from_camera.as_ref().map(|p| p.position_sigma_m()),
                     "detect_ms": im.detect_ms,
                     "pose_ms": im.pose_ms,
-                    "camera_position_error_m": errs.as_ref().map(|e| e.camera_position_error_m[i]),
-                    "camera_orientation_error_deg": errs.as_ref().map(|e| e.camera_orientation_error_deg[i]),
-                    "head_position_error_m": errs.as_ref().map(|e| e.head_position_error_m[i]),
+                    "camera_position_error_m": errs.as_ref().and_then(|e| finite(e.camera_position_error_m[i])),
+                    "camera_orientation_error_deg": errs.as_ref().and_then(|e| finite(e.camera_orientation_error_deg[i])),
+                    "head_position_error_m": errs.as_ref().and_then(|e| finite(e.head_position_error_m[i])),
                     "diagnostics": im.diagnostics,
                     "errors": im.errors,
                 })
@@ -120,10 +124,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             "calibration": est.calibration.as_ref().map(|c| serde_json::json!({
                 "camera": c.camera, "sigma": c.sigma, "rms_px": c.rms_px})),
             "errors_vs_truth": errs.as_ref().map(|e| serde_json::json!({
-                "camera_position_error_median_m": median(&e.camera_position_error_m),
-                "camera_orientation_error_median_deg": median(&e.camera_orientation_error_deg),
-                "head_position_error_median_m": median(&e.head_position_error_m),
-                "head_orientation_error_median_deg": median(&e.head_orientation_error_deg),
+                "camera_position_error_median_m": finite(median(&e.camera_position_error_m)),
+                "camera_orientation_error_median_deg": finite(median(&e.camera_orientation_error_deg)),
+                "head_position_error_median_m": finite(median(&e.head_position_error_m)),
+                "head_orientation_error_median_deg": finite(median(&e.head_orientation_error_deg)),
                 "light_position_error_m": e.light_position_error_m,
                 "standard_position_error_m": e.standard_position_error_m,
                 "focal_error_px": e.focal_error_px,
@@ -131,7 +135,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "false_detections": e.false_detections,
             })),
         });
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        super::print_json(&summary)?;
         return Ok(());
     }
     println!(
@@ -186,9 +190,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if let Some(c) = &est.calibration {
+        // A sigma that was not estimated (held fixed) is said so, not printed as a number.
+        let pm = |s: Option<f64>, digits: usize| {
+            s.map_or_else(
+                || "(sd not estimated)".to_string(),
+                |s| format!("± {s:.digits$}"),
+            )
+        };
         println!(
-            "calibration: fx {:.2} ± {:.2} px, k1 {:.4} ± {:.4}, rms {:.3} px over {} points",
-            c.camera.fx_px, c.sigma[0], c.camera.distortion.k1, c.sigma[4], c.rms_px, c.points
+            "calibration: fx {:.2} {} px, k1 {:.4} {}, rms {:.3} px over {} points",
+            c.camera.fx_px,
+            pm(c.sigma[0], 2),
+            c.camera.distortion.k1,
+            pm(c.sigma[4], 4),
+            c.rms_px,
+            c.points
         );
     }
     if let Some(l) = est.light_position_m {
@@ -227,14 +243,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let Some(s) = e.standard_position_error_m {
             println!("vs truth: standard position error {:.3} mm", s * 1e3);
         }
+        // A statistic of no corners (every target of the layout missed) is "-".
+        let stat = |v: Option<f64>, digits: usize| {
+            v.map_or_else(|| "-".to_string(), |v| format!("{v:.digits$}"))
+        };
         for (layout, c) in e.corner_summary() {
             println!(
-                "vs truth: {layout} corners: {} compared, error median {:.3} px, p90 {:.3}, max {:.3}, error/sigma median {:.2} (1.18 if the sigmas are honest); {} fully visible targets missed",
+                "vs truth: {layout} corners: {} compared, error median {} px, p90 {}, max {}, error/sigma median {} (1.18 if the sigmas are honest); {} fully visible targets missed",
                 c.corners,
-                c.corner_error_median_px,
-                c.corner_error_p90_px,
-                c.corner_error_max_px,
-                c.error_over_sigma_median,
+                stat(c.corner_error_median_px, 3),
+                stat(c.corner_error_p90_px, 3),
+                stat(c.corner_error_max_px, 3),
+                stat(c.error_over_sigma_median, 2),
                 c.missed_targets
             );
         }
@@ -270,7 +290,7 @@ fn bench_scenes(list: &str, args: &Args) -> anyhow::Result<()> {
         }
     })?;
     if json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        super::print_json(&rows)?;
     } else {
         print!("{}", skinbrdf_pipeline::scenes::markdown(&rows));
     }

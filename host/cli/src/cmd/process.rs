@@ -114,7 +114,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // The errors name the session directory or the file at fault themselves.
     let out = process(&args.session, &cfg, &mut |e| print_event(&mut progress, e))?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&out.report)?);
+        super::print_json(&out.report)?;
     } else {
         print!("{}", out.report.to_text());
         println!(

@@ -66,7 +66,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let sv = &s.survey;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(sv)?);
+        super::print_json(sv)?;
         return Ok(());
     }
     println!(
