@@ -99,18 +99,27 @@ fn a_focal_length_four_times_off_fails_its_check_and_stops_the_run() {
     let ProcessError::ChecksFailed { failed, report, .. } = &err else {
         panic!("expected failed checks, got {err}");
     };
-    assert!(failed.iter().any(|c| c.name == "focal_vs_files"), "{failed:?}");
+    assert!(
+        failed.iter().any(|c| c.name == "focal_vs_files"),
+        "{failed:?}"
+    );
     assert!(err.to_string().contains("likely cause"), "{err}");
     let md = std::fs::read_to_string(report).expect("the report is written");
     assert!(md.contains("**FAILED**"), "{md}");
-    assert!(md.contains("not run: camera calibration FAILED its checks"), "{md}");
+    assert!(
+        md.contains("not run: camera calibration FAILED its checks"),
+        "{md}"
+    );
     let out_wrong = dir.path().join("out-wrong");
     assert!(out_wrong.join("poses.json").is_file());
     assert!(!out_wrong.join("samples.skbs").exists(), "derender ran");
 
     // Run again: the pose unit is reused and checked again, with the same outcome.
     let again = process(&s2, &cfg, &mut |_| {}).expect_err("reused, still failed");
-    assert!(matches!(again, ProcessError::ChecksFailed { .. }), "{again}");
+    assert!(
+        matches!(again, ProcessError::ChecksFailed { .. }),
+        "{again}"
+    );
 
     // An expert goes on: the run ends, and the report still says FAILED.
     cfg.accept_failed_checks = true;
