@@ -14,8 +14,15 @@ use skinbrdf_pipeline::report::StageStatus;
 use skinbrdf_pipeline::Stage;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
+/// `process` going on after failed self-checks: these sessions are a few images at a quarter
+/// of the pixels, and one case masks out every skin pixel of ten images; what is tested here
+/// is the ledger, not the measurement (the checks have their own test, `tests/checks.rs`).
 fn run(session: &Path) -> ProcessOutput {
-    process(session, &ProcessConfig::new(), &mut |_| {}).expect("process")
+    let cfg = ProcessConfig {
+        accept_failed_checks: true,
+        ..ProcessConfig::new()
+    };
+    process(session, &cfg, &mut |_| {}).expect("process")
 }
 
 fn status(out: &ProcessOutput, stage: Stage) -> StageStatus {
@@ -100,7 +107,10 @@ fn resume_reuses_only_what_is_intact() {
     );
 
     // The fit's input changed (another derender setting): the fit runs again.
-    let mut cfg = ProcessConfig::new();
+    let mut cfg = ProcessConfig {
+        accept_failed_checks: true,
+        ..ProcessConfig::new()
+    };
     cfg.derender.stride = 2;
     let strided = process(&session, &cfg, &mut |_| {}).expect("process --stride 2");
     assert_eq!(status(&strided, Stage::Derender), StageStatus::Ran);
