@@ -255,7 +255,8 @@ fn wrong_extensions_are_refused_naming_the_file() {
     );
 }
 
-/// TIFF bytes: an 8-bit RGB image with `Make`, `Model` and an EXIF directory.
+/// TIFF bytes: an 8-bit RGB image with `Make`, `Model` and an EXIF directory (with the
+/// focal-plane resolution in centimetres and the 35 mm equivalent focal length).
 fn exif_tiff(with_image: bool) -> Vec<u8> {
     use skinbrdf_raw::tiff::{encode, Directory, TagValue};
     let mut exif = Directory::default();
@@ -267,7 +268,11 @@ fn exif_tiff(with_image: bool) -> Vec<u8> {
         .set(0x920a, TagValue::Rational(vec![(85, 1)]))
         .set(0x9211, TagValue::Long(vec![42]))
         .set(0xa431, TagValue::Ascii("BODY-1".into()))
-        .set(0xa434, TagValue::Ascii("Portrait 85".into()));
+        .set(0xa434, TagValue::Ascii("Portrait 85".into()))
+        .set(0xa20e, TagValue::Rational(vec![(16807, 10)]))
+        .set(0xa20f, TagValue::Rational(vec![(16807, 10)]))
+        .set(0xa210, TagValue::Short(vec![3]))
+        .set(0xa405, TagValue::Short(vec![128]));
     let mut ifd = Directory::default();
     ifd.set(271, TagValue::Ascii("Maker".into()))
         .set(272, TagValue::Ascii("Body X".into()));
@@ -296,6 +301,13 @@ fn check_exif_fields(path: &Path) {
     assert_eq!(m.image_number, Some(42));
     assert_eq!(m.body_serial.as_deref(), Some("BODY-1"));
     assert_eq!(m.lens_model.as_deref(), Some("Portrait 85"));
+    // 1680.7 px/cm.
+    assert_eq!(m.focal_plane_resolution_unit, Some(3));
+    assert!((m.focal_plane_px_per_mm_x.unwrap() - 168.07).abs() < 1e-9);
+    assert!((m.focal_plane_px_per_mm_y.unwrap() - 168.07).abs() < 1e-9);
+    assert_eq!(m.focal_length_35mm_mm, Some(128.0));
+    // Not a DNG: no raw directory's sizes.
+    assert_eq!(m.sensor_size_px, None);
     let t = m.capture_time.unwrap();
     assert_eq!(t, capture_time("2024:12:31 23:59:59", Some("5"), None));
     // No offset: the naive clock.
