@@ -195,10 +195,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         skinbrdf_ingest::ingest::CameraSource::File { path } => {
             println!("intrinsics: {}", path.display())
         }
-        skinbrdf_ingest::ingest::CameraSource::ToBeCalibrated => println!(
-            "intrinsics: to be calibrated from the reference targets ({}x{} images as loaded)",
-            r.image_size_px.0, r.image_size_px.1
-        ),
+        skinbrdf_ingest::ingest::CameraSource::ToBeCalibrated => {
+            println!(
+                "intrinsics: to be calibrated from the reference targets ({}x{} images as loaded)",
+                r.image_size_px.0, r.image_size_px.1
+            );
+            match &r.focal_guess {
+                Some(g) => println!("focal length to start from: {g}"),
+                None => println!(
+                    "focal length to start from: none in the files ({}); the calibration searches",
+                    r.focal_guess_refused.join("; ")
+                ),
+            }
+        }
     }
     if r.unplaced_targets > 0 {
         println!(
