@@ -14,25 +14,16 @@ use skinbrdf_pipeline::process::{process, ProcessConfig, ProcessError};
 use skinbrdf_pipeline::Stage;
 use skinbrdf_session::{CameraSpec, Session};
 use skinbrdf_synth::studio::STUDIO_DIR;
-use skinbrdf_synth::{generate, Scene, SynthOptions};
+use skinbrdf_synth::Scene;
+
+mod common;
 
 /// The studio at half resolution with few measurement images, ingested with the measured rig
 /// (no survey) and no camera file: the camera is to be calibrated. Returns the session.
 fn to_be_calibrated_session(dir: &Path) -> PathBuf {
     let mut scene = Scene::load("default").expect("default scene");
     scene.session.measurement_images = 12;
-    let s = dir.join("S");
-    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
-    generate(
-        &scene,
-        &SynthOptions {
-            resolution: Some(half),
-            studio: true,
-            ..SynthOptions::default()
-        },
-        &s,
-    )
-    .expect("synthesis");
+    let s = common::half_resolution_studio(dir, &scene);
     let studio = s.join(STUDIO_DIR);
     let s2 = dir.join("S2");
     ingest(&IngestConfig::new(

@@ -401,8 +401,8 @@ mod tests {
             assert!(squares.len() > 100, "{} tags seen", squares.len());
             let f = focal_from_squares(1524, 1012, &squares).expect("a focal length");
             let rel = f / truth.fx_px - 1.0;
-            // The survey's adjustment converges from a start within 15 % (a 4x error does
-            // not); the pooled estimate is asked for a third of that.
+            // The start must sit well inside the survey adjustment's basin of convergence
+            // (docs/photogrammetry.md), which a start off by a factor is not.
             assert!(
                 rel.abs() < 0.05,
                 "hfov {hfov_deg}: f {f:.0} px vs {:.0} px",
