@@ -252,6 +252,7 @@ fn hides(eye: DVec3, c: DVec3, r: f64, protected: &[Protected]) -> bool {
 /// * a reference target of `studio.duplicate_id` printed with the other target's code
 ///   ([`Rig::prints`]).
 pub fn build_rig(scene: &Scene) -> Rig {
+    let camera = camera_model(scene);
     let shape = Shape::from_scene(&scene.geometry);
     let g = &scene.geometry;
     let t = &scene.targets;
@@ -292,6 +293,8 @@ pub fn build_rig(scene: &Scene) -> Rig {
     let off = half + 0.75 * t.standard_size_m + 0.006;
     let standard_radius_m =
         off * std::f64::consts::SQRT_2 + paper_half_diagonal_m(t.standard_size_m);
+    // Half-edge of the standard with its targets' papers, as a square plate.
+    let standard_half_m = off + 0.5 * t.standard_size_m * PAPER_HALF_EXTENT;
 
     // Reference cage around the head.
     let mut protected = vec![
@@ -315,14 +318,36 @@ pub fn build_rig(scene: &Scene) -> Rig {
     let cams = nominal_cameras(scene, roi_centre_head, flash_pos, std_pos);
     let mut cage = Vec::new();
     let mut id = REFERENCE_ID0;
-    let ref_r = paper_half_diagonal_m(t.reference_size_m) + 0.005;
+    let ref_size = crate::framing::reference_size_m(scene);
+    let ref_r = paper_half_diagonal_m(ref_size) + 0.005;
     let safe = |centre: DVec3| {
         centre.distance(std_pos) >= standard_radius_m + ref_r
             && !cams
                 .iter()
                 .any(|eye| hides(*eye, centre, ref_r, &protected))
     };
-    for (row, dz) in REFERENCE_ROWS_M.into_iter().enumerate() {
+    let framing_cams = framing_cameras(scene, &camera, roi_centre_head, std_pos);
+    if crate::framing::follows_lens(scene) {
+        let inputs = crate::framing::CageInputs {
+            scene,
+            camera: &camera,
+            shape: &shape,
+            roi_centre: roi_centre_head,
+            facing,
+            headdress: &headdress,
+            standard: (world_from_standard, standard_half_m),
+            cameras: &framing_cams,
+            safe: &safe,
+        };
+        cage = crate::framing::plan_cage(&inputs, id);
+        id += cage.len() as u32;
+    }
+    let design_rows = if crate::framing::follows_lens(scene) {
+        &[][..]
+    } else {
+        &REFERENCE_ROWS_M[..]
+    };
+    for (row, &dz) in design_rows.iter().enumerate() {
         let zc = roi_centre_head.z + dz;
         let mut b_deg = -180.0
             + if dz.abs() < 0.1 {
@@ -341,7 +366,7 @@ pub fn build_rig(scene: &Scene) -> Rig {
             }
             // Lean towards the arc's height at 2 m.
             let out = (facing + DVec3::Z * ((s.camera_height_m - zc) / 2.0)).normalize();
-            if let Some(tg) = Target::square(id, t.reference_size_m, centre, out, DVec3::Z) {
+            if let Some(tg) = Target::square(id, ref_size, centre, out, DVec3::Z) {
                 cage.push(CageTarget {
                     target: tg,
                     row,
@@ -370,28 +395,75 @@ pub fn build_rig(scene: &Scene) -> Rig {
     let mut reference = printed.targets;
     let mut sheets = printed.sheets;
     let mut prints = printed.prints;
+    // Flash targets: a ring of eight around the diffuser, in the flash frame (+z out).
+    let flash_targets: Vec<Target> = (0..8)
+        .filter_map(|k| {
+            let a = k as f64 * std::f64::consts::FRAC_PI_4;
+            let r = 0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01;
+            let centre = DVec3::new(r * a.cos(), r * a.sin(), 0.0);
+            Target::square(
+                FLASH_ID0 + k,
+                t.flash_size_m,
+                centre,
+                DVec3::Z,
+                DVec3::NEG_Y,
+            )
+        })
+        .collect();
+
     // Reference panel around the flash, for the light-position images: two columns each side
     // of the flash's target ring, the outer ones on 4 cm stand-offs (not coplanar).
-    // Smaller than the head cage's: the light-position cameras are closer.
+    // Smaller than the head cage's: the light-position cameras are closer. A lens that frames
+    // less takes smaller ones where its frame leaves room (crate::framing).
     let flash_ref_size = (0.7 * t.flash_size_m).min(t.reference_size_m);
-    let ring_outer = 0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01 + 0.75 * t.flash_size_m;
-    let col_in = ring_outer + 0.75 * flash_ref_size + TARGET_GAP_M;
-    let col_out = col_in + target_pitch_m(flash_ref_size);
-    let toward_head = world_from_flash.transform_vector(DVec3::Z);
-    let right = world_from_flash.transform_vector(DVec3::X);
-    let up = world_from_flash.transform_vector(DVec3::NEG_Y);
-    let dz_row = 0.5 * target_pitch_m(flash_ref_size);
-    for (dx, standoff) in [
-        (-col_out, 0.04),
-        (-col_in, 0.0),
-        (col_in, 0.0),
-        (col_out, 0.04),
-    ] {
-        for dz in [-dz_row, dz_row] {
-            let centre = flash_pos + right * dx + up * dz + toward_head * standoff;
-            if let Some(tg) = Target::square(id, flash_ref_size, centre, toward_head, DVec3::Z) {
-                reference.push(tg);
-                id += 1;
+    if crate::framing::follows_lens(scene) {
+        let light_cams: Vec<crate::framing::FramingCamera> = (0..3)
+            .filter_map(|k| {
+                crate::framing::FramingCamera::aimed(
+                    &camera,
+                    light_camera_eye(scene, flash_pos, roi_centre_head, k),
+                    flash_pos,
+                    LIGHT_CAMERA_AIM_JITTER_M,
+                    false,
+                )
+            })
+            .collect();
+        let panel = crate::framing::framed_panel(
+            &crate::framing::PanelInputs {
+                camera: &camera,
+                world_from_flash,
+                ring: &flash_targets,
+                diffuser_radius_m: 0.5 * s.flash_diameter_m,
+                cameras: &light_cams,
+                size_m: flash_ref_size * crate::framing::framing_scale(scene),
+            },
+            id,
+            FLASH_PANEL_TARGETS,
+        );
+        id += panel.len() as u32;
+        reference.extend(panel);
+    } else {
+        let ring_outer =
+            0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01 + 0.75 * t.flash_size_m;
+        let col_in = ring_outer + 0.75 * flash_ref_size + TARGET_GAP_M;
+        let col_out = col_in + target_pitch_m(flash_ref_size);
+        let toward_head = world_from_flash.transform_vector(DVec3::Z);
+        let right = world_from_flash.transform_vector(DVec3::X);
+        let up = world_from_flash.transform_vector(DVec3::NEG_Y);
+        let dz_row = 0.5 * target_pitch_m(flash_ref_size);
+        for (dx, standoff) in [
+            (-col_out, 0.04),
+            (-col_in, 0.0),
+            (col_in, 0.0),
+            (col_out, 0.04),
+        ] {
+            for dz in [-dz_row, dz_row] {
+                let centre = flash_pos + right * dx + up * dz + toward_head * standoff;
+                if let Some(tg) = Target::square(id, flash_ref_size, centre, toward_head, DVec3::Z)
+                {
+                    reference.push(tg);
+                    id += 1;
+                }
             }
         }
     }
@@ -406,22 +478,6 @@ pub fn build_rig(scene: &Scene) -> Rig {
     );
     let relay_ids: Vec<u32> = relay.iter().map(|t| t.id).collect();
     reference.extend(relay);
-
-    // Flash targets: a ring of eight around the diffuser, in the flash frame (+z out).
-    let flash_targets = (0..8)
-        .filter_map(|k| {
-            let a = k as f64 * std::f64::consts::FRAC_PI_4;
-            let r = 0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01;
-            let centre = DVec3::new(r * a.cos(), r * a.sin(), 0.0);
-            Target::square(
-                FLASH_ID0 + k,
-                t.flash_size_m,
-                centre,
-                DVec3::Z,
-                DVec3::NEG_Y,
-            )
-        })
-        .collect();
 
     let standard_targets = [
         (-1.0, -1.0),
@@ -461,7 +517,7 @@ pub fn build_rig(scene: &Scene) -> Rig {
     }
 
     Rig {
-        camera: camera_model(scene),
+        camera,
         shape,
         roi_centre_head,
         reference,
@@ -517,7 +573,7 @@ fn relay_targets(
     lit: &[DVec3],
 ) -> Vec<Target> {
     let n = scene.studio.flash_relay_targets;
-    let size = scene.targets.reference_size_m;
+    let size = crate::framing::reference_size_m(scene);
     let pitch = RELAY_SPACING_M.max(target_pitch_m(size));
     let u = (flash_pos - roi)
         .truncate()
@@ -663,6 +719,56 @@ pub(crate) fn nominal_cameras(
     cams
 }
 
+/// The cameras the rig's targets must be framed by when the rig follows the lens
+/// ([`crate::framing`]): every measurement image's nominal camera (no jitter) aimed at the
+/// forehead, and the standard images' cameras.
+fn framing_cameras(
+    scene: &Scene,
+    camera: &CameraModel,
+    roi: DVec3,
+    std_pos: DVec3,
+) -> Vec<crate::framing::FramingCamera> {
+    let s = &scene.session;
+    let n = s.measurement_images.max(1) as usize;
+    let mut out: Vec<crate::framing::FramingCamera> = (0..n)
+        .filter_map(|k| {
+            let f = if n > 1 {
+                k as f64 / (n - 1) as f64
+            } else {
+                0.5
+            };
+            let az = (s.arc_start_deg + (s.arc_end_deg - s.arc_start_deg) * f).to_radians();
+            let eye =
+                crate::shape::direction(az, 0.0) * s.camera_radius_m + DVec3::Z * s.camera_height_m;
+            crate::framing::FramingCamera::aimed(camera, eye, roi, s.aim_jitter_m, false)
+        })
+        .collect();
+    out.extend(
+        standard_camera_offsets()
+            .into_iter()
+            .filter_map(|(az, dz)| {
+                crate::framing::FramingCamera::aimed(
+                    camera,
+                    standard_camera_eye(std_pos, az, dz),
+                    standard_aim(std_pos),
+                    STANDARD_CAMERA_JITTER_M,
+                    true,
+                )
+            }),
+    );
+    out
+}
+
+/// How far a light-position camera's aim wanders from the flash, metres (per axis).
+pub const LIGHT_CAMERA_AIM_JITTER_M: f64 = 0.005;
+/// How far a light-position camera stands from its nominal place, metres (per axis).
+pub const LIGHT_CAMERA_JITTER_M: f64 = 0.01;
+/// How far a standard image's camera stands from its nominal place, metres (per axis); its aim
+/// is exact.
+pub const STANDARD_CAMERA_JITTER_M: f64 = 0.005;
+/// Reference targets of the flash stand's panel: two columns of two each side of the ring.
+pub const FLASH_PANEL_TARGETS: usize = 8;
+
 /// The light-position cameras' azimuth offsets and heights.
 fn light_camera_eye(scene: &Scene, flash_pos: DVec3, roi: DVec3, k: usize) -> DVec3 {
     let _ = scene;
@@ -786,8 +892,13 @@ fn camera_for(
         }
         ImageRole::LightPosition => {
             let flash = rig.world_from_flash.translation_m;
-            let eye = light_camera_eye(scene, flash, roi, k) + jitter(rng, 0.01);
-            Pose::look_at(eye, flash + jitter(rng, 0.005), DVec3::Z).unwrap_or(fallback)
+            let eye = light_camera_eye(scene, flash, roi, k) + jitter(rng, LIGHT_CAMERA_JITTER_M);
+            Pose::look_at(
+                eye,
+                flash + jitter(rng, LIGHT_CAMERA_AIM_JITTER_M),
+                DVec3::Z,
+            )
+            .unwrap_or(fallback)
         }
         ImageRole::ReferenceStandard | ImageRole::StandardPosition => {
             let offsets = standard_camera_offsets();
@@ -797,7 +908,8 @@ fn camera_for(
                 _ => offsets[2],
             };
             let std_pos = rig.world_from_standard.translation_m;
-            let eye = standard_camera_eye(std_pos, az_deg, dz) + jitter(rng, 0.005);
+            let eye =
+                standard_camera_eye(std_pos, az_deg, dz) + jitter(rng, STANDARD_CAMERA_JITTER_M);
             Pose::look_at(eye, standard_aim(std_pos), DVec3::Z).unwrap_or(fallback)
         }
         // Never reached: no exposure has this role (`shots_from` skips them); survey shots are
