@@ -15,41 +15,52 @@
 //! the head or outside the frame, and one that hugs the head hides the forehead or the
 //! headdress from some camera of the arc.
 //!
+//! # Smaller reference targets ([`reference_size_m`])
+//!
+//! The reference targets (the cage's and the relay's) are printed at the scene's
+//! `targets.reference_size_m` times the framing scale: they keep the pixel size they have at
+//! the design lens (the detector reads them as well), and more of them fit the narrower frame
+//! beside the head. The headdress, the flash ring and the standard keep their sizes: they stay
+//! in their frames as they are.
+//!
 //! # A cage planned for the frames ([`plan_cage`])
 //!
 //! A studio with such a lens puts each target on its own stand where the cameras frame it. The
-//! planner does the same: the candidates are points on cylinders about the head's axis (radii
-//! and heights half a target pitch apart, azimuths half a pitch apart along each cylinder), at
-//! heights the frame holds around the forehead and out to twice the frame's half-width; each
-//! leans as the design cage's targets do. A candidate is kept when it clears the head and the
-//! headdress ([`HEAD_CLEARANCE_M`]) and passes the design cage's own occlusion rule (it hides
-//! neither the forehead region, the headdress, the flash nor the standard from any nominal
-//! camera, nor collides with the standard). Each is then tested against the nominal cameras
-//! that must see the cage (every measurement image's, without jitter, and the standard
-//! images'): facing within [`crate::visibility::USABLE_VIEW_MAX_DEG`] less [`FACING_MARGIN_DEG`],
-//! all four corners inside the frame less the aim jitter's reach, and not behind the head
-//! (a ray through an ellipsoid enclosing it), a headdress target or, in the standard images,
-//! the standard. The cage is then chosen greedily: each next target is the admissible
-//! candidate seen by the most cameras still short of [`CAGE_TARGETS_PER_FRAME`] (the earlier
-//! candidate on ties), admissible when it keeps a target pitch from every chosen one and
-//! neither hides nor is hidden by one from any of those cameras; it stops when no candidate
-//! adds anything or at [`MAX_PLANNED_CAGE_TARGETS`]. Everything is a function of the scene.
+//! planner does the same. The candidates are points on cylinders about the head's axis, radii
+//! half a target pitch apart out to twice the frame's half-width, azimuths half a pitch apart
+//! along each, at heights a quarter pitch apart within the frame's half-height of the
+//! forehead; each leans as the design cage's targets do. Each candidate is tested against the
+//! nominal cameras that must see the cage (every measurement image's, without jitter, and the
+//! standard images'): facing within [`crate::visibility::USABLE_VIEW_MAX_DEG`] less
+//! [`FACING_MARGIN_DEG`], all four corners inside the frame less the aim jitter's reach, and
+//! no corner behind the head (sight lines stepped through it, [`SIGHT_LINE_STEP_M`]), behind a
+//! headdress target's paper or, in the standard images, behind the standard. A candidate is
+//! kept when at least [`MIN_PLANNED_VIEWS`] cameras see it, its paper clears the head and the
+//! headdress by [`HEAD_CLEARANCE_M`], and it passes the design cage's own occlusion rule (it
+//! hides neither the forehead region, the headdress, the flash nor the standard from any
+//! nominal camera, nor collides with the standard). The cage is then chosen greedily: each
+//! next target is the admissible candidate seen by the most cameras still short of
+//! [`CAGE_TARGETS_PER_FRAME`] (the earlier candidate on ties), admissible when it keeps a
+//! target pitch from every chosen one and neither hides a corner of one nor has one hidden by
+//! it from a camera that counts either; it stops when no candidate adds anything or at
+//! [`MAX_PLANNED_CAGE_TARGETS`]. Everything is a function of the scene.
 //!
 //! A planned cage has no rows of neighbours, so it is never printed on sheets (every target is
-//! a cut-out).
+//! a cut-out, whatever `targets.reference_sheet_targets` says).
 //!
 //! # The flash stand's panel ([`framed_panel`])
 //!
 //! The light-position cameras stand at the head, [`crate::layout::LIGHT_CAMERA_DISTANCE_M`] from
 //! the flash (they cannot step back: the head is behind them). At the design lens their frame
 //! holds the flash's target ring and two columns of panel targets each side; at a narrower one
-//! the ring alone nearly fills it. The panel's targets then shrink with the framing (so they
-//! keep the pixel size they have at the design lens) and take the places in the frame the ring
-//! leaves free: a grid one panel pitch apart in the flash's plane, kept where the paper clears
-//! the ring's papers and the diffuser and the tag lies inside every nominal light-position
-//! frame less the aim jitter's reach, nearest the flash first, at most
-//! [`crate::layout::FLASH_PANEL_TARGETS`]; alternate columns stand off towards the head (not
-//! coplanar, as the design panel's outer columns).
+//! the ring alone nearly fills it. The panel's targets then shrink with the framing (the design
+//! panel's size times the framing scale) and take the places the ring leaves in the frame:
+//! places on a half-pitch grid in the flash's plane where the paper clears the ring's papers
+//! and the diffuser, nearest the flash first, each taken when it keeps a pitch from those
+//! already taken and the tag lies inside every nominal light-position frame less the aim
+//! jitter's reach, at most [`crate::layout::FLASH_PANEL_TARGETS`]; every other one taken
+//! stands off towards the head by [`PANEL_STANDOFF_M`] (not coplanar, as the design panel's
+//! outer columns).
 
 use glam::{DVec2, DVec3};
 use skinbrdf_core::{CameraModel, Pose};
@@ -76,7 +87,14 @@ pub const DESIGN_CAMERA_RADIUS_M: f64 = 2.0;
 pub const CAGE_TARGETS_PER_FRAME: usize = 12;
 /// Most targets of a planned cage: with the flash stand's panel and the largest relay, the
 /// reference ids stay below the headdress's ([`crate::layout::HEADDRESS_ID0`]).
-pub const MAX_PLANNED_CAGE_TARGETS: usize = 64;
+pub const MAX_PLANNED_CAGE_TARGETS: usize = (crate::layout::HEADDRESS_ID0
+    - crate::layout::REFERENCE_ID0
+    - crate::studio::MAX_RELAY_TARGETS) as usize
+    - crate::layout::FLASH_PANEL_TARGETS;
+/// Fewest nominal cameras that must see a candidate of the planned cage: the survey places a
+/// target from two views at least, and to its accuracy target only from a few (it names one
+/// seen in fewer not seen, or uncertain), so a target fewer would see is not worth its place.
+pub const MIN_PLANNED_VIEWS: usize = 3;
 /// Least gap between a planned cage target's paper and the head's surface or a headdress
 /// target's paper, metres: the head sways by a few millimetres, and a stand needs room.
 pub const HEAD_CLEARANCE_M: f64 = 0.01;
@@ -394,7 +412,7 @@ pub fn plan_cage(inp: &CageInputs<'_>, first_id: u32) -> Vec<CageTarget> {
                     .map(|(i, _)| i)
                     .collect();
                 // The design cage's occlusion rule last: it is the dearest test.
-                if !seen_by.is_empty() && (inp.safe)(centre) {
+                if seen_by.len() >= MIN_PLANNED_VIEWS && (inp.safe)(centre) {
                     cands.push(Candidate {
                         target,
                         ball,

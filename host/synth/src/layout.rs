@@ -19,6 +19,23 @@
 //! (standard position), from 2 m. The cage's neighbours can be printed on shared sheets
 //! ([`crate::sheets`]). [`crate::visibility::usable_targets`] says which targets a shot can use; the
 //! tests check every shot of every built-in scene sees enough of them.
+//!
+//! **The layout follows the lens.** The constants above are laid out for the default lens;
+//! every lens that frames as much at the head or more (the default's 16 degrees at 2 m, the
+//! wide lens of `strong-distortion` from 0.9 m) gets them exactly. The method's own optics see
+//! about 10 degrees across at 2 m: a frame about 0.35 x 0.23 m at the head, little wider than
+//! the head with its headdress, which the cylinder of radius 0.22 m mostly misses (and one
+//! shrunk to fit hides the forehead or the headdress from part of the arc). For a lens that
+//! frames less ([`crate::framing::follows_lens`], scene `long-lens`) a studio puts each
+//! reference target where the cameras frame it: the cage is planned for the nominal
+//! measurement and standard images' frames ([`crate::framing::plan_cage`]: candidates around
+//! the head that pass the same occlusion rule, chosen greedily until every frame holds a dozen
+//! or no more fit); the reference targets (cage and relay) shrink with the framing
+//! ([`crate::framing::reference_size_m`]), so that they keep their pixel size and more of them
+//! fit beside the head; and the flash stand's panel, smaller in the same ratio, takes the room
+//! the flash's target ring leaves in the light-position frames
+//! ([`crate::framing::framed_panel`]). The headdress, the flash ring, the standard and the
+//! cameras' places do not change (their targets stay in frame).
 
 use std::collections::BTreeMap;
 
@@ -170,7 +187,8 @@ fn camera_model(scene: &Scene) -> CameraModel {
 
 /// Distance of the reference structure's targets from the head's vertical axis, metres: outside
 /// the head and the headdress, inside the field of view of the measurement images on both sides
-/// of the head.
+/// of the head at the design lens (a lens that frames less gets a planned cage,
+/// [`crate::framing`]).
 pub const REFERENCE_RADIUS_M: f64 = 0.22;
 /// Heights of the reference structure's rows relative to the forehead's centre, metres (two
 /// rows above/below the face, two beside it).
@@ -244,7 +262,9 @@ fn hides(eye: DVec3, c: DVec3, r: f64, protected: &[Protected]) -> bool {
 ///   targets pass the same occlusion checks, and no paper touches another), each sheet tilted,
 ///   scaled or folded as the scene's `[studio]` says. Plus a small panel of reference targets
 ///   around the flash (at two depths, so not coplanar, always cut-outs) for the light-position
-///   images.
+///   images. A lens that frames less than the design lens gets a cage planned for its frames,
+///   smaller reference targets and a panel where the flash ring leaves room
+///   ([`crate::framing`]; the module docs).
 /// * the **headdress**: rows of targets on the head above and beside the forehead region, one
 ///   pitch ([`target_pitch_m`]) apart, leaning towards the cameras and the flash, none within
 ///   the region of interest; with `studio.headdress_band`, stated as one printed band whose
