@@ -39,10 +39,12 @@
 //! headdress by [`HEAD_CLEARANCE_M`], and it passes the design cage's own occlusion rule (it
 //! hides neither the forehead region, the headdress, the flash nor the standard from any
 //! nominal camera, nor collides with the standard). The cage is then chosen greedily: each
-//! next target is the admissible candidate seen by the most cameras still short of
-//! [`CAGE_TARGETS_PER_FRAME`] (the earlier candidate on ties), admissible when it keeps a
-//! target pitch from every chosen one and neither hides a corner of one nor has one hidden by
-//! it from a camera that counts either; it stops when no candidate adds anything or at
+//! next target is the admissible candidate that fills the most of what the cameras seeing it
+//! still lack of [`CAGE_TARGETS_PER_FRAME`] (summed over them, so that the frames with the
+//! fewest targets, the standard images' among them, come first; the earlier candidate on
+//! ties), admissible when it keeps a target pitch from every chosen one and neither hides a
+//! corner of one nor has one hidden by it from a camera that counts either; it stops when no
+//! candidate adds anything or at
 //! [`MAX_PLANNED_CAGE_TARGETS`]. Everything is a function of the scene.
 //!
 //! A planned cage has no rows of neighbours, so it is never printed on sheets (every target is
@@ -53,14 +55,15 @@
 //! The light-position cameras stand at the head, [`crate::layout::LIGHT_CAMERA_DISTANCE_M`] from
 //! the flash (they cannot step back: the head is behind them). At the design lens their frame
 //! holds the flash's target ring and two columns of panel targets each side; at a narrower one
-//! the ring alone nearly fills it. The panel's targets then shrink with the framing (the design
-//! panel's size times the framing scale) and take the places the ring leaves in the frame:
-//! places on a half-pitch grid in the flash's plane where the paper clears the ring's papers
-//! and the diffuser, nearest the flash first, each taken when it keeps a pitch from those
-//! already taken and the tag lies inside every nominal light-position frame less the aim
-//! jitter's reach, at most [`crate::layout::FLASH_PANEL_TARGETS`]; every other one taken
-//! stands off towards the head by [`PANEL_STANDOFF_M`] (not coplanar, as the design panel's
-//! outer columns).
+//! the ring alone nearly fills it. The panel's targets then take the places the ring leaves
+//! in the frame: places on a half-pitch grid in the flash's plane where the paper clears the
+//! ring's papers and the diffuser, nearest the flash first, each taken when it keeps a pitch
+//! from those already taken and the tag lies inside every nominal light-position frame less
+//! the aim jitter's reach; every other one taken stands off towards the head by
+//! [`PANEL_STANDOFF_M`] (not coplanar, as the design panel's outer columns), at most
+//! [`crate::layout::FLASH_PANEL_TARGETS`]. They are printed at the design panel's size times
+//! the framing scale (the pixel size the design panel's targets have in the design lens's
+//! light-position images): the ring leaves too little room for as many larger ones.
 
 use glam::{DVec2, DVec3};
 use skinbrdf_core::{CameraModel, Pose};
@@ -101,9 +104,10 @@ pub const HEAD_CLEARANCE_M: f64 = 0.01;
 /// How much more squarely than the usable limit a planned target must face a nominal camera,
 /// degrees: the jittered cameras look from a little further round.
 pub const FACING_MARGIN_DEG: f64 = 5.0;
-/// Pixels kept free at the frame's edge beyond the aim jitter's reach (the tag's corner must be
-/// inside the image with its edge's gradient window).
-pub const FRAME_EDGE_MARGIN_PX: f64 = 4.0;
+/// Share of the frame's width kept free at its edge beyond the aim jitter's reach (the tag's
+/// corner must be inside the image with its edge's gradient window): a few pixels at the
+/// scenes' resolutions.
+pub const FRAME_EDGE_MARGIN: f64 = 0.003;
 /// How far alternate columns of a framed panel stand off towards the head, metres: as the
 /// design panel's outer columns, so that the panel is not one plane.
 pub const PANEL_STANDOFF_M: f64 = 0.04;
@@ -136,6 +140,22 @@ pub fn reference_size_m(scene: &Scene) -> f64 {
 /// Whether the scene's lens frames less than the design lens, so that the rig follows it.
 pub fn follows_lens(scene: &Scene) -> bool {
     framing_scale(scene) < 1.0
+}
+
+/// Width of the model camera the framing tests project through, pixels: they compare places
+/// with the frame, not pixel sizes, so any width serves, and a fixed one gives a scene the same
+/// rig at every rendering resolution (`synth --resolution`).
+pub const FRAMING_WIDTH_PX: u32 = 1000;
+
+/// The scene's lens (field of view, aspect, distortion) as a camera of
+/// [`FRAMING_WIDTH_PX`] pixels across: what the framing tests project through.
+pub fn framing_camera(scene: &Scene) -> CameraModel {
+    let c = &scene.camera;
+    let aspect = f64::from(c.height_px) / f64::from(c.width_px.max(1));
+    let height_px = (f64::from(FRAMING_WIDTH_PX) * aspect).round().max(1.0) as u32;
+    let mut m = CameraModel::from_fov(FRAMING_WIDTH_PX, height_px, c.hfov_deg.to_radians());
+    m.distortion = c.distortion;
+    m
 }
 
 /// The frame's half-width and half-height at the camera circle's radius, metres.
@@ -172,7 +192,8 @@ impl FramingCamera {
         Some(Self {
             pose,
             camera_from_world: pose.inverse(),
-            margin_px: camera.fx_px * aim_jitter_m / range_m + FRAME_EDGE_MARGIN_PX,
+            margin_px: camera.fx_px * aim_jitter_m / range_m
+                + FRAME_EDGE_MARGIN * f64::from(camera.width_px),
             sees_standard,
         })
     }
@@ -291,7 +312,7 @@ fn segment_meets_shape(shape: &Shape, axes: DVec3, a: DVec3, b: DVec3) -> bool {
 pub struct CageInputs<'a> {
     /// The scene.
     pub scene: &'a Scene,
-    /// The true camera.
+    /// The lens the framing tests project through ([`framing_camera`]).
     pub camera: &'a CameraModel,
     /// The sample's surface (head frame, the nominal head pose being the identity).
     pub shape: &'a Shape,
@@ -449,8 +470,8 @@ pub fn plan_cage(inp: &CageInputs<'_>, first_id: u32) -> Vec<CageTarget> {
         let gain = |c: &Candidate| {
             c.seen_by
                 .iter()
-                .filter(|&&k| count[k] < CAGE_TARGETS_PER_FRAME)
-                .count()
+                .map(|&k| CAGE_TARGETS_PER_FRAME.saturating_sub(count[k]))
+                .sum::<usize>()
         };
         let mut order: Vec<(usize, usize)> = (0..cands.len())
             .filter(|&i| !dead[i])
@@ -490,7 +511,7 @@ pub fn plan_cage(inp: &CageInputs<'_>, first_id: u32) -> Vec<CageTarget> {
 /// What the framed panel needs of the rig built so far.
 #[derive(Debug, Clone, Copy)]
 pub struct PanelInputs<'a> {
-    /// The true camera.
+    /// The lens the framing tests project through ([`framing_camera`]).
     pub camera: &'a CameraModel,
     /// World from flash (+z towards the head, x right, -y up).
     pub world_from_flash: Pose,

@@ -34,8 +34,10 @@
 //! ([`crate::framing::reference_size_m`]), so that they keep their pixel size and more of them
 //! fit beside the head; and the flash stand's panel, smaller in the same ratio, takes the room
 //! the flash's target ring leaves in the light-position frames
-//! ([`crate::framing::framed_panel`]). The headdress, the flash ring, the standard and the
-//! cameras' places do not change (their targets stay in frame).
+//! ([`crate::framing::framed_panel`]); the standard images are taken from further back
+//! ([`standard_camera_distance_m`]), so that they frame the standard with as much of the cage as
+//! at the design lens. The headdress, the flash ring, the standard and the other cameras' places
+//! do not change (their targets stay in frame).
 
 use std::collections::BTreeMap;
 
@@ -199,7 +201,8 @@ pub const REFERENCE_STEP_DEG: f64 = 15.0;
 pub const TARGET_GAP_M: f64 = 0.006;
 /// Distance of the light-position cameras from the flash, metres.
 pub const LIGHT_CAMERA_DISTANCE_M: f64 = 1.4;
-/// Distance of the standard cameras from the standard, metres.
+/// Distance of the standard cameras from the standard at the design lens, metres
+/// ([`standard_camera_distance_m`]).
 pub const STANDARD_CAMERA_DISTANCE_M: f64 = 2.0;
 
 /// Paper half-diagonal of a printed target of edge `size_m` (the paper is
@@ -300,7 +303,7 @@ pub fn build_rig(scene: &Scene) -> Rig {
         .extend(0.0)
         .normalize_or(DVec3::Y);
     let std_pos = roi_world + to_flash_h * 0.15 + DVec3::Y * 0.05;
-    let cam_rs = reference_standard_camera_position(std_pos);
+    let cam_rs = reference_standard_camera_position(scene, std_pos);
     let normal = ((flash_pos - std_pos).normalize() + (cam_rs - std_pos).normalize()).normalize();
     let z = normal;
     let x = DVec3::Z.cross(z).normalize_or(DVec3::X);
@@ -346,11 +349,12 @@ pub fn build_rig(scene: &Scene) -> Rig {
                 .iter()
                 .any(|eye| hides(*eye, centre, ref_r, &protected))
     };
-    let framing_cams = framing_cameras(scene, &camera, roi_centre_head, std_pos);
+    let framing_camera = crate::framing::framing_camera(scene);
+    let framing_cams = framing_cameras(scene, &framing_camera, roi_centre_head, std_pos);
     if crate::framing::follows_lens(scene) {
         let inputs = crate::framing::CageInputs {
             scene,
-            camera: &camera,
+            camera: &framing_camera,
             shape: &shape,
             roi_centre: roi_centre_head,
             facing,
@@ -440,7 +444,7 @@ pub fn build_rig(scene: &Scene) -> Rig {
         let light_cams: Vec<crate::framing::FramingCamera> = (0..3)
             .filter_map(|k| {
                 crate::framing::FramingCamera::aimed(
-                    &camera,
+                    &framing_camera,
                     light_camera_eye(scene, flash_pos, roi_centre_head, k),
                     flash_pos,
                     LIGHT_CAMERA_AIM_JITTER_M,
@@ -450,7 +454,7 @@ pub fn build_rig(scene: &Scene) -> Rig {
             .collect();
         let panel = crate::framing::framed_panel(
             &crate::framing::PanelInputs {
-                camera: &camera,
+                camera: &framing_camera,
                 world_from_flash,
                 ring: &flash_targets,
                 diffuser_radius_m: 0.5 * s.flash_diameter_m,
@@ -734,7 +738,7 @@ pub(crate) fn nominal_cameras(
         cams.push(light_camera_eye(scene, flash_pos, roi, k));
     }
     for (az, dz) in standard_camera_offsets() {
-        cams.push(standard_camera_eye(std_pos, az, dz));
+        cams.push(standard_camera_eye(scene, std_pos, az, dz));
     }
     cams
 }
@@ -769,7 +773,7 @@ fn framing_cameras(
             .filter_map(|(az, dz)| {
                 crate::framing::FramingCamera::aimed(
                     camera,
-                    standard_camera_eye(std_pos, az, dz),
+                    standard_camera_eye(scene, std_pos, az, dz),
                     standard_aim(std_pos),
                     STANDARD_CAMERA_JITTER_M,
                     true,
@@ -815,15 +819,27 @@ fn standard_aim(std_pos: DVec3) -> DVec3 {
 /// the arc's height: the reference cage behind the head stays in view).
 pub const STANDARD_CAMERA_HEIGHT_M: f64 = 0.10;
 
-fn standard_camera_eye(std_pos: DVec3, az_deg: f64, dz: f64) -> DVec3 {
+/// Distance of the standard cameras from the standard, metres: [`STANDARD_CAMERA_DISTANCE_M`]
+/// at the design lens; a lens that frames less steps back in proportion
+/// ([`crate::framing::framing_scale`]), so that its frame holds the standard with as much of
+/// the cage around the head as the design lens's does.
+pub fn standard_camera_distance_m(scene: &Scene) -> f64 {
+    if crate::framing::follows_lens(scene) {
+        STANDARD_CAMERA_DISTANCE_M / crate::framing::framing_scale(scene)
+    } else {
+        STANDARD_CAMERA_DISTANCE_M
+    }
+}
+
+fn standard_camera_eye(scene: &Scene, std_pos: DVec3, az_deg: f64, dz: f64) -> DVec3 {
     std_pos
-        + crate::shape::direction(az_deg.to_radians(), 0.0) * STANDARD_CAMERA_DISTANCE_M
+        + crate::shape::direction(az_deg.to_radians(), 0.0) * standard_camera_distance_m(scene)
         + DVec3::Z * (STANDARD_CAMERA_HEIGHT_M + dz)
 }
 
-fn reference_standard_camera_position(std_pos: DVec3) -> DVec3 {
+fn reference_standard_camera_position(scene: &Scene, std_pos: DVec3) -> DVec3 {
     let (az, dz) = standard_camera_offsets()[0];
-    standard_camera_eye(std_pos, az, dz)
+    standard_camera_eye(scene, std_pos, az, dz)
 }
 
 /// Smooth pseudo-random head sway: a sum of slow sinusoids per axis, amplitude-normalised.
@@ -928,8 +944,8 @@ fn camera_for(
                 _ => offsets[2],
             };
             let std_pos = rig.world_from_standard.translation_m;
-            let eye =
-                standard_camera_eye(std_pos, az_deg, dz) + jitter(rng, STANDARD_CAMERA_JITTER_M);
+            let eye = standard_camera_eye(scene, std_pos, az_deg, dz)
+                + jitter(rng, STANDARD_CAMERA_JITTER_M);
             Pose::look_at(eye, standard_aim(std_pos), DVec3::Z).unwrap_or(fallback)
         }
         // Never reached: no exposure has this role (`shots_from` skips them); survey shots are
