@@ -8,8 +8,8 @@
 //! stand's panel are laid out for the default scene's lens: [`DESIGN_HFOV_DEG`] across a
 //! [`DESIGN_ASPECT`] frame from the [`DESIGN_CAMERA_RADIUS_M`] circle. [`framing_scale`] compares a
 //! scene's framing at the head (the frame's half-width and half-height at the camera circle's
-//! radius) with that one. A lens that frames as much or more keeps the constants exactly (the
-//! built-in scenes' rigs do not change); a narrower one (the method's own optics see about 10
+//! radius) with that one. A lens that frames as much or more (within [`FRAMING_TOLERANCE`])
+//! keeps the constants exactly (the built-in scenes' rigs do not change); a narrower one (the method's own optics see about 10
 //! degrees across at 2 m) cannot hold the cage in its frame: at 2 m the frame is then little
 //! wider than the head with its headdress, a cylinder about the head's axis lies mostly behind
 //! the head or outside the frame, and one that hugs the head hides the forehead or the
@@ -137,9 +137,15 @@ pub fn reference_size_m(scene: &Scene) -> f64 {
     }
 }
 
-/// Whether the scene's lens frames less than the design lens, so that the rig follows it.
+/// How much less than the design lens a lens may frame and keep the design rig: a rendering
+/// resolution whose height rounds down (`synth --resolution 1000x664` is 0.006 % shorter than
+/// the design's aspect) or a sensor a little wider than the design's is the same studio.
+pub const FRAMING_TOLERANCE: f64 = 0.02;
+
+/// Whether the scene's lens frames less than the design lens (by more than
+/// [`FRAMING_TOLERANCE`]), so that the rig follows it.
 pub fn follows_lens(scene: &Scene) -> bool {
-    framing_scale(scene) < 1.0
+    framing_scale(scene) < 1.0 - FRAMING_TOLERANCE
 }
 
 /// Width of the model camera the framing tests project through, pixels: they compare places
@@ -617,4 +623,44 @@ pub fn framed_panel(inp: &PanelInputs<'_>, first_id: u32, max_targets: usize) ->
         .zip(first_id..)
         .filter_map(|((_, centre), id)| Target::square(id, size_m, centre, toward_head, DVec3::Z))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::layout::build_rig;
+
+    #[test]
+    fn only_a_lens_that_frames_less_moves_the_rig() {
+        let default = Scene::load("default").expect("scene");
+        assert!(!follows_lens(&default));
+        assert_eq!(reference_size_m(&default), default.targets.reference_size_m);
+        let mut rounded = default.clone();
+        (rounded.camera.width_px, rounded.camera.height_px) = (1000, 664);
+        assert!(!follows_lens(&rounded), "{}", framing_scale(&rounded));
+        let wide = Scene::load("strong-distortion").expect("scene");
+        assert!(!follows_lens(&wide), "{}", framing_scale(&wide));
+        let long = Scene::load("long-lens").expect("scene");
+        assert!(follows_lens(&long));
+        let s = framing_scale(&long);
+        assert!((0.6..0.65).contains(&s), "{s}");
+    }
+
+    /// The framing tests project through a fixed-width model of the lens, so rendering a scene
+    /// at half its pixels (as `tests/scenes.rs` does) keeps its rig.
+    #[test]
+    fn a_planned_rig_does_not_depend_on_the_rendering_resolution() {
+        let full = Scene::load("long-lens").expect("scene");
+        let mut half = full.clone();
+        half.camera.width_px /= 2;
+        half.camera.height_px /= 2;
+        let centres = |s: &Scene| -> Vec<(u32, [f64; 3])> {
+            build_rig(s)
+                .reference
+                .iter()
+                .map(|t| (t.id, t.centre().to_array()))
+                .collect()
+        };
+        assert_eq!(centres(&full), centres(&half));
+    }
 }
