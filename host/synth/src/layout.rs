@@ -350,8 +350,8 @@ pub fn build_rig(scene: &Scene) -> Rig {
                 .any(|eye| hides(*eye, centre, ref_r, &protected))
     };
     let framing_camera = crate::framing::framing_camera(scene);
-    let framing_cams = framing_cameras(scene, &framing_camera, roi_centre_head, std_pos);
     if crate::framing::follows_lens(scene) {
+        let framing_cams = framing_cameras(scene, &framing_camera, roi_centre_head, std_pos);
         let inputs = crate::framing::CageInputs {
             scene,
             camera: &framing_camera,
@@ -365,38 +365,34 @@ pub fn build_rig(scene: &Scene) -> Rig {
         };
         cage = crate::framing::plan_cage(&inputs, id);
         id += cage.len() as u32;
-    }
-    let design_rows = if crate::framing::follows_lens(scene) {
-        &[][..]
     } else {
-        &REFERENCE_ROWS_M[..]
-    };
-    for (row, &dz) in design_rows.iter().enumerate() {
-        let zc = roi_centre_head.z + dz;
-        let mut b_deg = -180.0
-            + if dz.abs() < 0.1 {
-                0.5 * REFERENCE_STEP_DEG
-            } else {
-                0.0
-            };
-        let mut step = 0i64;
-        while b_deg < 180.0 - 1e-9 {
-            let centre = crate::shape::direction(b_deg.to_radians(), 0.0) * REFERENCE_RADIUS_M
-                + DVec3::Z * zc;
-            b_deg += REFERENCE_STEP_DEG;
-            step += 1;
-            if !safe(centre) {
-                continue;
-            }
-            // Lean towards the arc's height at 2 m.
-            let out = (facing + DVec3::Z * ((s.camera_height_m - zc) / 2.0)).normalize();
-            if let Some(tg) = Target::square(id, ref_size, centre, out, DVec3::Z) {
-                cage.push(CageTarget {
-                    target: tg,
-                    row,
-                    step,
-                });
-                id += 1;
+        for (row, dz) in REFERENCE_ROWS_M.into_iter().enumerate() {
+            let zc = roi_centre_head.z + dz;
+            let mut b_deg = -180.0
+                + if dz.abs() < 0.1 {
+                    0.5 * REFERENCE_STEP_DEG
+                } else {
+                    0.0
+                };
+            let mut step = 0i64;
+            while b_deg < 180.0 - 1e-9 {
+                let centre = crate::shape::direction(b_deg.to_radians(), 0.0) * REFERENCE_RADIUS_M
+                    + DVec3::Z * zc;
+                b_deg += REFERENCE_STEP_DEG;
+                step += 1;
+                if !safe(centre) {
+                    continue;
+                }
+                // Lean towards the arc's height at 2 m.
+                let out = (facing + DVec3::Z * ((s.camera_height_m - zc) / 2.0)).normalize();
+                if let Some(tg) = Target::square(id, ref_size, centre, out, DVec3::Z) {
+                    cage.push(CageTarget {
+                        target: tg,
+                        row,
+                        step,
+                    });
+                    id += 1;
+                }
             }
         }
     }
