@@ -19,6 +19,25 @@
 //! (standard position), from 2 m. The cage's neighbours can be printed on shared sheets
 //! ([`crate::sheets`]). [`crate::visibility::usable_targets`] says which targets a shot can use; the
 //! tests check every shot of every built-in scene sees enough of them.
+//!
+//! **The layout follows the lens.** The constants above are laid out for the default lens;
+//! every lens that frames as much at the head or more (the default's 16 degrees at 2 m, the
+//! wide lens of `strong-distortion` from 0.9 m) gets them exactly. The method's own optics see
+//! about 10 degrees across at 2 m: a frame about 0.35 x 0.23 m at the head, little wider than
+//! the head with its headdress, which the cylinder of radius 0.22 m mostly misses (and one
+//! shrunk to fit hides the forehead or the headdress from part of the arc). For a lens that
+//! frames less ([`crate::framing::follows_lens`], scene `long-lens`) a studio puts each
+//! reference target where the cameras frame it: the cage is planned for the nominal
+//! measurement and standard images' frames ([`crate::framing::plan_cage`]: candidates around
+//! the head that pass the same occlusion rule, chosen greedily until every frame holds a dozen
+//! or no more fit); the reference targets (cage and relay) shrink with the framing
+//! ([`crate::framing::reference_size_m`]), so that they keep their pixel size and more of them
+//! fit beside the head; and the flash stand's panel, smaller in the same ratio, takes the room
+//! the flash's target ring leaves in the light-position frames
+//! ([`crate::framing::framed_panel`]); the standard images are taken from further back
+//! ([`standard_camera_distance_m`]), so that they frame the standard with as much of the cage as
+//! at the design lens. The headdress, the flash ring, the standard and the other cameras' places
+//! do not change (their targets stay in frame).
 
 use std::collections::BTreeMap;
 
@@ -170,7 +189,8 @@ fn camera_model(scene: &Scene) -> CameraModel {
 
 /// Distance of the reference structure's targets from the head's vertical axis, metres: outside
 /// the head and the headdress, inside the field of view of the measurement images on both sides
-/// of the head.
+/// of the head at the design lens (a lens that frames less gets a planned cage,
+/// [`crate::framing`]).
 pub const REFERENCE_RADIUS_M: f64 = 0.22;
 /// Heights of the reference structure's rows relative to the forehead's centre, metres (two
 /// rows above/below the face, two beside it).
@@ -181,7 +201,8 @@ pub const REFERENCE_STEP_DEG: f64 = 15.0;
 pub const TARGET_GAP_M: f64 = 0.006;
 /// Distance of the light-position cameras from the flash, metres.
 pub const LIGHT_CAMERA_DISTANCE_M: f64 = 1.4;
-/// Distance of the standard cameras from the standard, metres.
+/// Distance of the standard cameras from the standard at the design lens, metres
+/// ([`standard_camera_distance_m`]).
 pub const STANDARD_CAMERA_DISTANCE_M: f64 = 2.0;
 
 /// Paper half-diagonal of a printed target of edge `size_m` (the paper is
@@ -244,7 +265,9 @@ fn hides(eye: DVec3, c: DVec3, r: f64, protected: &[Protected]) -> bool {
 ///   targets pass the same occlusion checks, and no paper touches another), each sheet tilted,
 ///   scaled or folded as the scene's `[studio]` says. Plus a small panel of reference targets
 ///   around the flash (at two depths, so not coplanar, always cut-outs) for the light-position
-///   images.
+///   images. A lens that frames less than the design lens gets a cage planned for its frames,
+///   smaller reference targets and a panel where the flash ring leaves room
+///   ([`crate::framing`]; the module docs).
 /// * the **headdress**: rows of targets on the head above and beside the forehead region, one
 ///   pitch ([`target_pitch_m`]) apart, leaning towards the cameras and the flash, none within
 ///   the region of interest; with `studio.headdress_band`, stated as one printed band whose
@@ -252,6 +275,7 @@ fn hides(eye: DVec3, c: DVec3, r: f64, protected: &[Protected]) -> bool {
 /// * a reference target of `studio.duplicate_id` printed with the other target's code
 ///   ([`Rig::prints`]).
 pub fn build_rig(scene: &Scene) -> Rig {
+    let camera = camera_model(scene);
     let shape = Shape::from_scene(&scene.geometry);
     let g = &scene.geometry;
     let t = &scene.targets;
@@ -279,7 +303,7 @@ pub fn build_rig(scene: &Scene) -> Rig {
         .extend(0.0)
         .normalize_or(DVec3::Y);
     let std_pos = roi_world + to_flash_h * 0.15 + DVec3::Y * 0.05;
-    let cam_rs = reference_standard_camera_position(std_pos);
+    let cam_rs = reference_standard_camera_position(scene, std_pos);
     let normal = ((flash_pos - std_pos).normalize() + (cam_rs - std_pos).normalize()).normalize();
     let z = normal;
     let x = DVec3::Z.cross(z).normalize_or(DVec3::X);
@@ -292,6 +316,8 @@ pub fn build_rig(scene: &Scene) -> Rig {
     let off = half + 0.75 * t.standard_size_m + 0.006;
     let standard_radius_m =
         off * std::f64::consts::SQRT_2 + paper_half_diagonal_m(t.standard_size_m);
+    // Half-edge of the standard with its targets' papers, as a square plate.
+    let standard_half_m = off + 0.5 * t.standard_size_m * PAPER_HALF_EXTENT;
 
     // Reference cage around the head.
     let mut protected = vec![
@@ -315,39 +341,58 @@ pub fn build_rig(scene: &Scene) -> Rig {
     let cams = nominal_cameras(scene, roi_centre_head, flash_pos, std_pos);
     let mut cage = Vec::new();
     let mut id = REFERENCE_ID0;
-    let ref_r = paper_half_diagonal_m(t.reference_size_m) + 0.005;
+    let ref_size = crate::framing::reference_size_m(scene);
+    let ref_r = paper_half_diagonal_m(ref_size) + 0.005;
     let safe = |centre: DVec3| {
         centre.distance(std_pos) >= standard_radius_m + ref_r
             && !cams
                 .iter()
                 .any(|eye| hides(*eye, centre, ref_r, &protected))
     };
-    for (row, dz) in REFERENCE_ROWS_M.into_iter().enumerate() {
-        let zc = roi_centre_head.z + dz;
-        let mut b_deg = -180.0
-            + if dz.abs() < 0.1 {
-                0.5 * REFERENCE_STEP_DEG
-            } else {
-                0.0
-            };
-        let mut step = 0i64;
-        while b_deg < 180.0 - 1e-9 {
-            let centre = crate::shape::direction(b_deg.to_radians(), 0.0) * REFERENCE_RADIUS_M
-                + DVec3::Z * zc;
-            b_deg += REFERENCE_STEP_DEG;
-            step += 1;
-            if !safe(centre) {
-                continue;
-            }
-            // Lean towards the arc's height at 2 m.
-            let out = (facing + DVec3::Z * ((s.camera_height_m - zc) / 2.0)).normalize();
-            if let Some(tg) = Target::square(id, t.reference_size_m, centre, out, DVec3::Z) {
-                cage.push(CageTarget {
-                    target: tg,
-                    row,
-                    step,
-                });
-                id += 1;
+    let framing_camera = crate::framing::framing_camera(scene);
+    if crate::framing::follows_lens(scene) {
+        let framing_cams = framing_cameras(scene, &framing_camera, roi_centre_head, std_pos);
+        let inputs = crate::framing::CageInputs {
+            scene,
+            camera: &framing_camera,
+            shape: &shape,
+            roi_centre: roi_centre_head,
+            facing,
+            headdress: &headdress,
+            standard: (world_from_standard, standard_half_m),
+            cameras: &framing_cams,
+            safe: &safe,
+        };
+        cage = crate::framing::plan_cage(&inputs, id);
+        id += cage.len() as u32;
+    } else {
+        for (row, dz) in REFERENCE_ROWS_M.into_iter().enumerate() {
+            let zc = roi_centre_head.z + dz;
+            let mut b_deg = -180.0
+                + if dz.abs() < 0.1 {
+                    0.5 * REFERENCE_STEP_DEG
+                } else {
+                    0.0
+                };
+            let mut step = 0i64;
+            while b_deg < 180.0 - 1e-9 {
+                let centre = crate::shape::direction(b_deg.to_radians(), 0.0) * REFERENCE_RADIUS_M
+                    + DVec3::Z * zc;
+                b_deg += REFERENCE_STEP_DEG;
+                step += 1;
+                if !safe(centre) {
+                    continue;
+                }
+                // Lean towards the arc's height at 2 m.
+                let out = (facing + DVec3::Z * ((s.camera_height_m - zc) / 2.0)).normalize();
+                if let Some(tg) = Target::square(id, ref_size, centre, out, DVec3::Z) {
+                    cage.push(CageTarget {
+                        target: tg,
+                        row,
+                        step,
+                    });
+                    id += 1;
+                }
             }
         }
     }
@@ -370,28 +415,75 @@ pub fn build_rig(scene: &Scene) -> Rig {
     let mut reference = printed.targets;
     let mut sheets = printed.sheets;
     let mut prints = printed.prints;
+    // Flash targets: a ring of eight around the diffuser, in the flash frame (+z out).
+    let flash_targets: Vec<Target> = (0..8)
+        .filter_map(|k| {
+            let a = k as f64 * std::f64::consts::FRAC_PI_4;
+            let r = 0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01;
+            let centre = DVec3::new(r * a.cos(), r * a.sin(), 0.0);
+            Target::square(
+                FLASH_ID0 + k,
+                t.flash_size_m,
+                centre,
+                DVec3::Z,
+                DVec3::NEG_Y,
+            )
+        })
+        .collect();
+
     // Reference panel around the flash, for the light-position images: two columns each side
     // of the flash's target ring, the outer ones on 4 cm stand-offs (not coplanar).
-    // Smaller than the head cage's: the light-position cameras are closer.
+    // Smaller than the head cage's: the light-position cameras are closer. A lens that frames
+    // less takes smaller ones where its frame leaves room (crate::framing).
     let flash_ref_size = (0.7 * t.flash_size_m).min(t.reference_size_m);
-    let ring_outer = 0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01 + 0.75 * t.flash_size_m;
-    let col_in = ring_outer + 0.75 * flash_ref_size + TARGET_GAP_M;
-    let col_out = col_in + target_pitch_m(flash_ref_size);
-    let toward_head = world_from_flash.transform_vector(DVec3::Z);
-    let right = world_from_flash.transform_vector(DVec3::X);
-    let up = world_from_flash.transform_vector(DVec3::NEG_Y);
-    let dz_row = 0.5 * target_pitch_m(flash_ref_size);
-    for (dx, standoff) in [
-        (-col_out, 0.04),
-        (-col_in, 0.0),
-        (col_in, 0.0),
-        (col_out, 0.04),
-    ] {
-        for dz in [-dz_row, dz_row] {
-            let centre = flash_pos + right * dx + up * dz + toward_head * standoff;
-            if let Some(tg) = Target::square(id, flash_ref_size, centre, toward_head, DVec3::Z) {
-                reference.push(tg);
-                id += 1;
+    if crate::framing::follows_lens(scene) {
+        let light_cams: Vec<crate::framing::FramingCamera> = (0..3)
+            .filter_map(|k| {
+                crate::framing::FramingCamera::aimed(
+                    &framing_camera,
+                    light_camera_eye(scene, flash_pos, roi_centre_head, k),
+                    flash_pos,
+                    LIGHT_CAMERA_AIM_JITTER_M,
+                    false,
+                )
+            })
+            .collect();
+        let panel = crate::framing::framed_panel(
+            &crate::framing::PanelInputs {
+                camera: &framing_camera,
+                world_from_flash,
+                ring: &flash_targets,
+                diffuser_radius_m: 0.5 * s.flash_diameter_m,
+                cameras: &light_cams,
+                size_m: flash_ref_size * crate::framing::framing_scale(scene),
+            },
+            id,
+            FLASH_PANEL_TARGETS,
+        );
+        id += panel.len() as u32;
+        reference.extend(panel);
+    } else {
+        let ring_outer =
+            0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01 + 0.75 * t.flash_size_m;
+        let col_in = ring_outer + 0.75 * flash_ref_size + TARGET_GAP_M;
+        let col_out = col_in + target_pitch_m(flash_ref_size);
+        let toward_head = world_from_flash.transform_vector(DVec3::Z);
+        let right = world_from_flash.transform_vector(DVec3::X);
+        let up = world_from_flash.transform_vector(DVec3::NEG_Y);
+        let dz_row = 0.5 * target_pitch_m(flash_ref_size);
+        for (dx, standoff) in [
+            (-col_out, 0.04),
+            (-col_in, 0.0),
+            (col_in, 0.0),
+            (col_out, 0.04),
+        ] {
+            for dz in [-dz_row, dz_row] {
+                let centre = flash_pos + right * dx + up * dz + toward_head * standoff;
+                if let Some(tg) = Target::square(id, flash_ref_size, centre, toward_head, DVec3::Z)
+                {
+                    reference.push(tg);
+                    id += 1;
+                }
             }
         }
     }
@@ -406,22 +498,6 @@ pub fn build_rig(scene: &Scene) -> Rig {
     );
     let relay_ids: Vec<u32> = relay.iter().map(|t| t.id).collect();
     reference.extend(relay);
-
-    // Flash targets: a ring of eight around the diffuser, in the flash frame (+z out).
-    let flash_targets = (0..8)
-        .filter_map(|k| {
-            let a = k as f64 * std::f64::consts::FRAC_PI_4;
-            let r = 0.5 * s.flash_diameter_m + 0.9 * t.flash_size_m + 0.01;
-            let centre = DVec3::new(r * a.cos(), r * a.sin(), 0.0);
-            Target::square(
-                FLASH_ID0 + k,
-                t.flash_size_m,
-                centre,
-                DVec3::Z,
-                DVec3::NEG_Y,
-            )
-        })
-        .collect();
 
     let standard_targets = [
         (-1.0, -1.0),
@@ -461,7 +537,7 @@ pub fn build_rig(scene: &Scene) -> Rig {
     }
 
     Rig {
-        camera: camera_model(scene),
+        camera,
         shape,
         roi_centre_head,
         reference,
@@ -517,7 +593,7 @@ fn relay_targets(
     lit: &[DVec3],
 ) -> Vec<Target> {
     let n = scene.studio.flash_relay_targets;
-    let size = scene.targets.reference_size_m;
+    let size = crate::framing::reference_size_m(scene);
     let pitch = RELAY_SPACING_M.max(target_pitch_m(size));
     let u = (flash_pos - roi)
         .truncate()
@@ -658,10 +734,60 @@ pub(crate) fn nominal_cameras(
         cams.push(light_camera_eye(scene, flash_pos, roi, k));
     }
     for (az, dz) in standard_camera_offsets() {
-        cams.push(standard_camera_eye(std_pos, az, dz));
+        cams.push(standard_camera_eye(scene, std_pos, az, dz));
     }
     cams
 }
+
+/// The cameras the rig's targets must be framed by when the rig follows the lens
+/// ([`crate::framing`]): every measurement image's nominal camera (no jitter) aimed at the
+/// forehead, and the standard images' cameras.
+fn framing_cameras(
+    scene: &Scene,
+    camera: &CameraModel,
+    roi: DVec3,
+    std_pos: DVec3,
+) -> Vec<crate::framing::FramingCamera> {
+    let s = &scene.session;
+    let n = s.measurement_images.max(1) as usize;
+    let mut out: Vec<crate::framing::FramingCamera> = (0..n)
+        .filter_map(|k| {
+            let f = if n > 1 {
+                k as f64 / (n - 1) as f64
+            } else {
+                0.5
+            };
+            let az = (s.arc_start_deg + (s.arc_end_deg - s.arc_start_deg) * f).to_radians();
+            let eye =
+                crate::shape::direction(az, 0.0) * s.camera_radius_m + DVec3::Z * s.camera_height_m;
+            crate::framing::FramingCamera::aimed(camera, eye, roi, s.aim_jitter_m, false)
+        })
+        .collect();
+    out.extend(
+        standard_camera_offsets()
+            .into_iter()
+            .filter_map(|(az, dz)| {
+                crate::framing::FramingCamera::aimed(
+                    camera,
+                    standard_camera_eye(scene, std_pos, az, dz),
+                    standard_aim(std_pos),
+                    STANDARD_CAMERA_JITTER_M,
+                    true,
+                )
+            }),
+    );
+    out
+}
+
+/// How far a light-position camera's aim wanders from the flash, metres (per axis).
+pub const LIGHT_CAMERA_AIM_JITTER_M: f64 = 0.005;
+/// How far a light-position camera stands from its nominal place, metres (per axis).
+pub const LIGHT_CAMERA_JITTER_M: f64 = 0.01;
+/// How far a standard image's camera stands from its nominal place, metres (per axis); its aim
+/// is exact.
+pub const STANDARD_CAMERA_JITTER_M: f64 = 0.005;
+/// Reference targets of the flash stand's panel: two columns of two each side of the ring.
+pub const FLASH_PANEL_TARGETS: usize = 8;
 
 /// The light-position cameras' azimuth offsets and heights.
 fn light_camera_eye(scene: &Scene, flash_pos: DVec3, roi: DVec3, k: usize) -> DVec3 {
@@ -689,15 +815,27 @@ fn standard_aim(std_pos: DVec3) -> DVec3 {
 /// the arc's height: the reference cage behind the head stays in view).
 pub const STANDARD_CAMERA_HEIGHT_M: f64 = 0.10;
 
-fn standard_camera_eye(std_pos: DVec3, az_deg: f64, dz: f64) -> DVec3 {
+/// Distance of the standard cameras from the standard, metres: [`STANDARD_CAMERA_DISTANCE_M`]
+/// at the design lens; a lens that frames less steps back in proportion
+/// ([`crate::framing::framing_scale`]), so that its frame holds the standard with as much of
+/// the cage around the head as the design lens's does.
+pub fn standard_camera_distance_m(scene: &Scene) -> f64 {
+    if crate::framing::follows_lens(scene) {
+        STANDARD_CAMERA_DISTANCE_M / crate::framing::framing_scale(scene)
+    } else {
+        STANDARD_CAMERA_DISTANCE_M
+    }
+}
+
+fn standard_camera_eye(scene: &Scene, std_pos: DVec3, az_deg: f64, dz: f64) -> DVec3 {
     std_pos
-        + crate::shape::direction(az_deg.to_radians(), 0.0) * STANDARD_CAMERA_DISTANCE_M
+        + crate::shape::direction(az_deg.to_radians(), 0.0) * standard_camera_distance_m(scene)
         + DVec3::Z * (STANDARD_CAMERA_HEIGHT_M + dz)
 }
 
-fn reference_standard_camera_position(std_pos: DVec3) -> DVec3 {
+fn reference_standard_camera_position(scene: &Scene, std_pos: DVec3) -> DVec3 {
     let (az, dz) = standard_camera_offsets()[0];
-    standard_camera_eye(std_pos, az, dz)
+    standard_camera_eye(scene, std_pos, az, dz)
 }
 
 /// Smooth pseudo-random head sway: a sum of slow sinusoids per axis, amplitude-normalised.
@@ -786,8 +924,13 @@ fn camera_for(
         }
         ImageRole::LightPosition => {
             let flash = rig.world_from_flash.translation_m;
-            let eye = light_camera_eye(scene, flash, roi, k) + jitter(rng, 0.01);
-            Pose::look_at(eye, flash + jitter(rng, 0.005), DVec3::Z).unwrap_or(fallback)
+            let eye = light_camera_eye(scene, flash, roi, k) + jitter(rng, LIGHT_CAMERA_JITTER_M);
+            Pose::look_at(
+                eye,
+                flash + jitter(rng, LIGHT_CAMERA_AIM_JITTER_M),
+                DVec3::Z,
+            )
+            .unwrap_or(fallback)
         }
         ImageRole::ReferenceStandard | ImageRole::StandardPosition => {
             let offsets = standard_camera_offsets();
@@ -797,7 +940,8 @@ fn camera_for(
                 _ => offsets[2],
             };
             let std_pos = rig.world_from_standard.translation_m;
-            let eye = standard_camera_eye(std_pos, az_deg, dz) + jitter(rng, 0.005);
+            let eye = standard_camera_eye(scene, std_pos, az_deg, dz)
+                + jitter(rng, STANDARD_CAMERA_JITTER_M);
             Pose::look_at(eye, standard_aim(std_pos), DVec3::Z).unwrap_or(fallback)
         }
         // Never reached: no exposure has this role (`shots_from` skips them); survey shots are

@@ -7,6 +7,8 @@
 //!   analytic normals, tessellation and an independent analytic ray intersection.
 //! * [`layout`]: the set-up (reference structure, headdress, flash, standard), the shot list
 //!   (30 measurement + 6 extra images, or one per exposure of a `capture.json`) and head motion.
+//! * [`framing`]: how the rig follows a lens narrower than the one its constants are laid out
+//!   for (a cage planned for the frames, the flash stand's panel in the frame the ring leaves).
 //! * [`sheets`]: printed sheets of the rig (cage targets flattened onto sheets, the headdress
 //!   band) and how a real sheet differs from its layout (tilt, print scale, fold, wrap).
 //! * [`photograph`]: the synthetic photographer: ray casting (obvhs through `skinbrdf-mesh`,
@@ -24,6 +26,7 @@
 //! renders to `V = rho cos(theta_i) / (C D²)`, so the method's equation 2 inverts the renderer
 //! exactly (tested at sampled pixels in `tests/forward_model.rs`).
 
+pub mod framing;
 pub mod generate;
 pub mod layout;
 pub mod photograph;

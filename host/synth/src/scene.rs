@@ -56,6 +56,7 @@ pub const BUILTIN_SCENES: &[(&str, &str)] = &[
         "survey-flash",
         include_str!("../../../scenes/survey-flash.toml"),
     ),
+    ("long-lens", include_str!("../../../scenes/long-lens.toml")),
 ];
 
 /// Largest image side, pixels (a 100-megapixel frame is 12000 px wide).

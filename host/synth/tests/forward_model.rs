@@ -86,6 +86,7 @@ fn rendered_skin_radiance_matches_equation_2_in_memory() {
         "cylinder",
         "near-mirror",
         "strong-distortion",
+        "long-lens",
     ] {
         let mut scene = Scene::load(name).unwrap();
         scene.camera.width_px = 400;
