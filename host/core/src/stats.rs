@@ -35,6 +35,11 @@ pub fn median(values: &[f64]) -> f64 {
     quantile(values, 0.5)
 }
 
+/// The median of the finite values; `None` when none (a figure of nothing is absent, not NaN).
+pub fn median_finite(values: &[f64]) -> Option<f64> {
+    Some(median(values)).filter(|m| m.is_finite())
+}
+
 /// At most `k` indices into `0..n`, evenly strided and increasing: all of them when `n <= k`.
 pub fn strided_indices(n: usize, k: usize) -> Vec<usize> {
     if n <= k {

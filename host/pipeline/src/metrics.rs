@@ -40,7 +40,7 @@ pub struct SurveyMetrics {
     /// Targets the survey could not place or left out (moved, duplicated, unseen).
     pub targets_left_out: usize,
     /// Median of the surveyed targets' centre sigmas, mm.
-    pub position_sigma_median_mm: f64,
+    pub position_sigma_median_mm: Option<f64>,
     /// RMS reprojection error of the adjustment, px.
     pub reprojection_rms_px: f64,
     /// Parameters of the adjustment.
@@ -77,9 +77,9 @@ pub struct CameraPoseMetrics {
     /// Images with a camera pose.
     pub images_with_camera_pose: usize,
     /// Median of the per-image reprojection RMS, px.
-    pub reprojection_rms_median_px: f64,
+    pub reprojection_rms_median_px: Option<f64>,
     /// Median per-image detection plus pose time, ms.
-    pub detect_plus_pose_per_image_median_ms: f64,
+    pub detect_plus_pose_per_image_median_ms: Option<f64>,
     /// Individual pose estimates that failed (listed in `poses.json`).
     pub failed_estimates: usize,
     /// Camera position error against the truth, median, mm.
@@ -286,12 +286,13 @@ impl StageMetrics {
                     "",
                     Count,
                 ));
-                r.push(Metric::new(
+                opt(
+                    &mut r,
                     "position_sigma_median",
                     m.position_sigma_median_mm,
                     "mm",
                     Quality,
-                ));
+                );
                 r.push(Metric::new(
                     "reprojection_rms",
                     m.reprojection_rms_px,
@@ -353,18 +354,20 @@ impl StageMetrics {
                     "",
                     Count,
                 ));
-                r.push(Metric::new(
+                opt(
+                    &mut r,
                     "reprojection_rms_median",
                     m.reprojection_rms_median_px,
                     "px",
                     Quality,
-                ));
-                r.push(Metric::new(
+                );
+                opt(
+                    &mut r,
                     "detect_plus_pose_per_image_median",
                     m.detect_plus_pose_per_image_median_ms,
                     "ms",
                     Cost,
-                ));
+                );
                 bounded(
                     &mut r,
                     "camera_position_error_median",

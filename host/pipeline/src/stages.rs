@@ -17,7 +17,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use skinbrdf_core::stats::median;
+use skinbrdf_core::stats::median_finite;
 use skinbrdf_derender::{DerenderConfig, SessionRun};
 
 use crate::pose_inputs::{PoseChoice, SessionOptions};
@@ -350,7 +350,7 @@ pub fn survey_report(
         StageMetrics::Survey(SurveyMetrics {
             targets_surveyed: survey.targets.len(),
             targets_left_out: survey.issues.iter().filter(|i| !i.is_warning()).count(),
-            position_sigma_median_mm: median(
+            position_sigma_median_mm: median_finite(
                 &survey
                     .targets
                     .iter()
@@ -494,6 +494,18 @@ pub fn flash_panel_sigma_mm(survey: &skinbrdf_poses::Survey) -> Option<f64> {
     (!sd.is_empty()).then(|| sd.iter().sum::<f64>() / sd.len() as f64)
 }
 
+/// Says that the truth's head frame is not the session's, so that a frame difference is not
+/// read as a measurement error.
+fn head_frame_offset_note(o: &skinbrdf_poses::session::HeadFrameOffset) -> String {
+    format!(
+        "the truth's head frame is not this session's: every estimated head pose differs from \
+         the truth by the same rigid transform ({:.1} mm, {:.2} degrees, over {} images), so \
+         the head errors measure the two frames' difference, not the measurement; score with a \
+         truth stated in the frame of the session's scan",
+        o.distance_mm, o.angle_deg, o.images
+    )
+}
+
 /// The pose stages' reports: typed figures from the poses and, with truth, their errors.
 /// `panel_sd_mm` ([`flash_panel_sigma_mm`]) is added in quadrature to the flash's sd.
 pub fn pose_stage_reports(
@@ -537,8 +549,10 @@ pub fn pose_stage_reports(
         run_time_s,
         StageMetrics::CameraPoses(CameraPoseMetrics {
             images_with_camera_pose: cams.len(),
-            reprojection_rms_median_px: median(&cams.iter().map(|p| p.rms_px).collect::<Vec<_>>()),
-            detect_plus_pose_per_image_median_ms: median(
+            reprojection_rms_median_px: median_finite(
+                &cams.iter().map(|p| p.rms_px).collect::<Vec<_>>(),
+            ),
+            detect_plus_pose_per_image_median_ms: median_finite(
                 &poses
                     .images
                     .iter()
@@ -548,10 +562,11 @@ pub fn pose_stage_reports(
             failed_estimates,
             camera_position_error_median_mm: errs
                 .as_ref()
-                .map(|e| median(&e.camera_position_error_m) * 1e3),
+                .and_then(|e| median_finite(&e.camera_position_error_m))
+                .map(|m| m * 1e3),
             camera_orientation_error_median_deg: errs
                 .as_ref()
-                .map(|e| median(&e.camera_orientation_error_deg)),
+                .and_then(|e| median_finite(&e.camera_orientation_error_deg)),
             reference_corner_error_median_px: corner("reference"),
         }),
     );
@@ -573,15 +588,19 @@ pub fn pose_stage_reports(
                 .count(),
             head_position_error_median_mm: errs
                 .as_ref()
-                .map(|e| median(&e.head_position_error_m) * 1e3),
+                .and_then(|e| median_finite(&e.head_position_error_m))
+                .map(|m| m * 1e3),
             head_orientation_error_median_deg: errs
                 .as_ref()
-                .map(|e| median(&e.head_orientation_error_deg)),
+                .and_then(|e| median_finite(&e.head_orientation_error_deg)),
             headdress_corner_error_median_px: corner("headdress"),
         }),
     );
     if plan.runs(Stage::HeadTracking) {
         r.notes.push("timed together with camera poses".into());
+        if let Some(o) = truth.and_then(|t| skinbrdf_poses::session::head_frame_offset(poses, t)) {
+            r.notes.push(head_frame_offset_note(&o));
+        }
     }
     out.push(r);
 
@@ -1179,8 +1198,8 @@ pub fn fit_reports(plan: &Plan, fr: &FitReport) -> [StageReport; 3] {
                 (c.iter().map(|m| m.log_rmse * m.log_rmse).sum::<f64>() / c.len().max(1) as f64)
                     .sqrt()
             }),
-            model_median_rel_error_vs_truth_pct: fr.truth.as_ref().map(|t| {
-                median(
+            model_median_rel_error_vs_truth_pct: fr.truth.as_ref().and_then(|t| {
+                median_finite(
                     &t.channels
                         .iter()
                         .map(|m| m.median_rel_err * 100.0)

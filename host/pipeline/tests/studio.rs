@@ -139,7 +139,7 @@ fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
     let mut cfg = ProcessConfig::new();
     cfg.fit.figures = false;
     let png = process(&s, &cfg, &mut |_| {}).expect("process the PNG session");
-    cfg.truth_file = Some(s.join("truth.json"));
+    cfg.truth_file = Some(s.join(STUDIO_DIR).join("truth.json"));
     let raw = process(&s2, &cfg, &mut |_| {}).expect("process the studio session");
 
     let cam = raw.report.camera_poses().expect("camera poses ran");

@@ -1003,6 +1003,79 @@ pub fn compare_truth(est: &SessionPoses, truth: &Truth) -> TruthErrors {
     e
 }
 
+/// A difference between the truth's head frame and the session's that is the same in every
+/// image: the truth was stated for another scan's frame, so the head errors measure the two
+/// frames' difference, not the measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeadFrameOffset {
+    /// Translation of the common offset, mm.
+    pub distance_mm: f64,
+    /// Rotation of the common offset, degrees.
+    pub angle_deg: f64,
+    /// Images whose estimated head pose was compared.
+    pub images: usize,
+}
+
+/// Smallest common head-frame offset called a frame difference: far beyond any head pose
+/// error the pose stage reaches (bounded at 1 mm and 0.1 degree), and beyond a poor
+/// registration of the scan.
+const HEAD_FRAME_OFFSET_MIN_MM: f64 = 20.0;
+/// The same for the rotation.
+const HEAD_FRAME_OFFSET_MIN_DEG: f64 = 2.0;
+/// The per-image offsets agree to this fraction of their size when the frames differ (a
+/// measurement error varies from image to image; a frame difference does not).
+const HEAD_FRAME_OFFSET_AGREEMENT: f64 = 0.05;
+/// Images needed to call an offset common.
+const HEAD_FRAME_OFFSET_MIN_IMAGES: usize = 3;
+
+/// The common head-frame offset between the estimate and the truth, when the head errors are
+/// one rigid transform repeated in every image (see [`HeadFrameOffset`]); `None` when they are
+/// small or vary between images.
+///
+/// Per image `T_i = (world_from_head_true)⁻¹ · world_from_head_est`, the estimated head frame
+/// seen from the true one; a frame difference makes every `T_i` the same transform `T`. The
+/// reference `T` is the image's offset with the median translation; the others must lie within
+/// [`HEAD_FRAME_OFFSET_AGREEMENT`] of its size.
+pub fn head_frame_offset(est: &SessionPoses, truth: &Truth) -> Option<HeadFrameOffset> {
+    let offsets: Vec<Pose> = est
+        .images
+        .iter()
+        .filter_map(|img| {
+            let p = img
+                .world_from_head
+                .as_ref()
+                .filter(|p| p.source == "estimated")?;
+            let t = truth.image(&img.file)?;
+            Some(t.world_from_head.inverse() * p.pose)
+        })
+        .collect();
+    if offsets.len() < HEAD_FRAME_OFFSET_MIN_IMAGES {
+        return None;
+    }
+    let mut by_size: Vec<&Pose> = offsets.iter().collect();
+    by_size.sort_by(|a, b| {
+        a.translation_m
+            .length()
+            .total_cmp(&b.translation_m.length())
+    });
+    let reference = *by_size[by_size.len() / 2];
+    let distance_mm = reference.translation_m.length() * 1e3;
+    let angle_deg = reference.angle_to_rad(&Pose::IDENTITY).to_degrees();
+    if distance_mm < HEAD_FRAME_OFFSET_MIN_MM && angle_deg < HEAD_FRAME_OFFSET_MIN_DEG {
+        return None;
+    }
+    let agrees = offsets.iter().all(|o| {
+        o.distance_to_m(&reference) * 1e3 <= HEAD_FRAME_OFFSET_AGREEMENT * distance_mm.max(1.0)
+            && o.angle_to_rad(&reference).to_degrees()
+                <= HEAD_FRAME_OFFSET_AGREEMENT * angle_deg.max(1.0)
+    });
+    agrees.then_some(HeadFrameOffset {
+        distance_mm,
+        angle_deg,
+        images: offsets.len(),
+    })
+}
+
 /// Reprojects a session target through a camera pose (for overlays and checks).
 pub fn reproject_target(
     cam: &CameraModel,

@@ -3,7 +3,8 @@
 //! tag edges onto pixel boundaries, ±0.5 px): every image posed, the bounds met, the joint
 //! bundle adjustment never worse than the per-image estimates, covariances everywhere.
 
-use skinbrdf_poses::session::{compare_truth, estimate_session_stages, median};
+use skinbrdf_core::Pose;
+use skinbrdf_poses::session::{compare_truth, estimate_session_stages, head_frame_offset, median};
 use skinbrdf_poses::PoseConfig;
 use skinbrdf_session::{ImageRole, Session};
 use skinbrdf_synth::{generate, Scene, SynthOptions};
@@ -78,6 +79,8 @@ fn default_scene_poses_meet_the_bounds_and_the_bundle_adjustment_helps() {
     assert!(co < CAMERA_ORIENTATION_MAX_DEG, "camera orientation {co}");
     assert!(hp < HEAD_POSITION_MAX_M, "head position {hp}");
     assert!(fl < FLASH_POSITION_MAX_M, "flash {fl}");
+    assert_eq!(head_frame_offset(&after, &truth), None, "one frame");
+    assert_frame_difference_is_named(&after, &truth);
     let b = after.bundle.as_ref().expect("bundle adjustment ran");
     assert!(b.final_cost <= b.initial_cost, "{b:?}");
     assert!(b.observations > 500 && b.parameters > 40, "{b:?}");
@@ -117,3 +120,27 @@ const CORNER_MEDIAN_MAX_PX: f64 = 0.2;
 /// the stated sigma being the worst direction's); the full demo session measures 1.08..1.13.
 /// 1.4 leaves room for a few-image session's scatter and catches sigmas a third too small.
 const ERROR_OVER_SIGMA_MAX: f64 = 1.4;
+
+/// A truth stated in another head frame (a scan 300 mm away, turned 20 degrees) is named as a
+/// frame difference of that size, not read as a measurement error.
+fn assert_frame_difference_is_named(
+    est: &skinbrdf_poses::SessionPoses,
+    truth: &skinbrdf_session::Truth,
+) {
+    /// The offset is found to this fraction (the estimates' own errors are ~0.1 mm, 0.02 deg).
+    const OFFSET_REL_TOL: f64 = 0.01;
+    let axis = glam::DVec3::new(0.3, 1.0, 0.2).normalize();
+    let head_from_scanner = Pose::new(
+        glam::DQuat::from_axis_angle(axis, 20f64.to_radians()),
+        glam::DVec3::new(0.1, -0.2, 0.2),
+    );
+    let other = truth.clone().with_head_frame(&head_from_scanner);
+    let o = head_frame_offset(est, &other).expect("a frame difference");
+    let want_mm = head_from_scanner.translation_m.length() * 1e3;
+    eprintln!("frame offset {o:?}, stated {want_mm:.1} mm 20 deg");
+    assert!(
+        (o.distance_mm / want_mm - 1.0).abs() < OFFSET_REL_TOL,
+        "{o:?}"
+    );
+    assert!((o.angle_deg / 20.0 - 1.0).abs() < OFFSET_REL_TOL, "{o:?}");
+}

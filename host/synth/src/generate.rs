@@ -239,7 +239,8 @@ pub fn make_scan(shape: &Shape, scene: &Scene, rng: &mut ChaCha8Rng) -> TriMesh 
     mesh
 }
 
-fn unit_name(u: skinbrdf_session::LengthUnit) -> &'static str {
+/// The unit's name in a PLY header's comment.
+pub(crate) fn unit_name(u: skinbrdf_session::LengthUnit) -> &'static str {
     use skinbrdf_session::LengthUnit;
     match u {
         LengthUnit::M => "metres",

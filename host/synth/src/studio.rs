@@ -12,22 +12,24 @@
 //!   capture.json                      the controller's record (no image names: it never knew them)
 //!   layouts/NAME.layout.toml          each printed sheet's layout (sheet frame, nominal print,
 //!                                     the format `skinbrdf targets` writes)
-//!   rig-measured.toml                 the rig with its true placements, head frame (a surveyed
-//!                                     rig, for scan.ply): flat sheets by pose and print scale,
+//!   rig-measured.toml                 the rig with its true placements, scanner frame (a
+//!                                     surveyed rig): flat sheets by pose and print scale,
 //!                                     a folded sheet's and the headdress band's targets as
 //!                                     cut-outs (no pose places their flat layouts)
 //!   rig.toml                          what a studio states before any survey: the declared
 //!                                     origin, the printed flash and standard layouts, the flash
 //!                                     stand's panel (only without a relay) and the ROI, in the
 //!                                     textured scan's frame; every sheet by its layout, unplaced
-//!   scan.ply                          the head scan, head frame (already registered)
+//!   scan.ply                          the head scan, scanner frame (untextured, already
+//!                                     registered: rig-measured.toml places the headdress in it)
 //!   scan/head.obj, head.mtl, head.png the textured scan in the scanner's frame, headdress
 //!                                     included (crate::textured_scan), scan-truth.json;
 //!                                     head.glb, head-colours.ply the same scan as binary glTF
 //!                                     and as PLY with vertex colours, when the scene's
 //!                                     `[studio] scan_formats` asks for them
-//!   truth.json                        the truth with the head frame the textured scan's (for
-//!                                     scoring a session ingested with scan/head.obj)
+//!   truth.json                        the truth with the head frame the scanner's, the frame of
+//!                                     every file here (scores a session ingested with either
+//!                                     rig and either scan)
 //! ```
 //!
 //! # Raw image formation
@@ -1203,19 +1205,67 @@ pub fn write_studio_files(
         )?;
     }
     write_camera_file(&dir.join(CAMERA_FILE), &rig.camera)?;
-    RigIo::write_file(&dir.join("rig-measured.toml"), &rig_file(scene, rig))?;
+    let scanner_from_head = scanner_from_head(scene);
+    RigIo::write_file(
+        &dir.join("rig-measured.toml"),
+        &in_scanner_frame(rig_file(scene, rig), &scanner_from_head),
+    )?;
     RigIo::write_file(
         &dir.join("rig.toml"),
-        &unmeasured_rig(scene, rig, origin, declared_head, &scanner_from_head(scene)),
+        &unmeasured_rig(scene, rig, origin, declared_head, &scanner_from_head),
     )?;
     // A head is scanned (with its headdress, textured); an ideal sample's shape is in the rig.
     if crate::generate::analytic_geometry(scene).is_none() {
-        let scan = session_dir.join("scan.ply");
-        let bytes = std::fs::read(&scan).map_err(|e| io(&scan, e))?;
-        skinbrdf_session::write_atomic(&dir.join("scan.ply"), &bytes)?;
+        write_scan_in_scanner_frame(scene, &session_dir.join("scan.ply"), &dir.join("scan.ply"))?;
         crate::textured_scan::write_textured_scan(&dir.join("scan"), scene, rig)?;
     }
     Ok(dir)
+}
+
+/// A rig file's head-frame placements (headdress sheets and targets, the region of interest)
+/// moved into the scanner's frame, the one frame of every file in `studio/`: the studio's
+/// truth then scores a session ingested with any of its rigs and scans.
+pub fn in_scanner_frame(mut f: RigFile, scanner_from_head: &Pose) -> RigFile {
+    if let Some(roi) = f.roi.as_mut() {
+        roi.centre_m = scanner_from_head.transform_point(roi.centre_m);
+    }
+    for sheet in f
+        .sheets
+        .iter_mut()
+        .filter(|s| s.group == TargetGroup::Headdress)
+    {
+        sheet.group_from_sheet = sheet.group_from_sheet.map(|p| *scanner_from_head * p);
+    }
+    for t in f
+        .targets
+        .iter_mut()
+        .filter(|t| t.group == TargetGroup::Headdress)
+    {
+        t.corners_m = t
+            .corners_m
+            .map(|c| c.map(|p| scanner_from_head.transform_point(p)));
+    }
+    f
+}
+
+/// Writes the session's scan (`from`, head frame, in the scene's scan units) as the studio's
+/// `scan.ply` in the scanner's frame (see [`in_scanner_frame`]).
+fn write_scan_in_scanner_frame(scene: &Scene, from: &Path, to: &Path) -> Result<(), SynthError> {
+    let (mut mesh, _) = skinbrdf_mesh::read_ply(from)?;
+    let units = scene.geometry.scan_units;
+    let m_per_unit = units.to_m();
+    let scanner_from_head = scanner_from_head(scene);
+    for p in &mut mesh.positions {
+        let q = scanner_from_head.transform_point(p.as_dvec3() * m_per_unit) / m_per_unit;
+        *p = q.as_vec3();
+    }
+    if let Some(normals) = mesh.normals.as_mut() {
+        for n in normals.iter_mut() {
+            *n = scanner_from_head.transform_vector(n.as_dvec3()).as_vec3();
+        }
+    }
+    skinbrdf_mesh::write_ply_binary_in(to, &mesh, crate::generate::unit_name(units))?;
+    Ok(())
 }
 
 /// Writes the camera's calibration as a studio keeps it from an earlier calibration: the
