@@ -89,6 +89,10 @@ pub struct BundleConfig {
     /// Refine the intrinsics too (always done when the camera was calibrated from the
     /// session's own images).
     pub refine_intrinsics: bool,
+    /// Hold `k3` at its start when refining the intrinsics, as the calibration does by default
+    /// (`CalibConfig::k3`): a sixth-order term no narrow field observes, which otherwise
+    /// wanders with `k2` into large, nearly cancelling values.
+    pub hold_k3: bool,
     /// A target of an image whose worst corner is off by more than this many sigmas (and
     /// [`GATE_MIN_PX`]) at the input is left out (the per-image estimates' outlier rule: those
     /// targets were not used there either).
@@ -107,6 +111,7 @@ impl BundleConfig {
         sigma_floor_px: 0.05,
         max_iterations: 30,
         refine_intrinsics: false,
+        hold_k3: true,
         gate_sigma: 6.0,
     };
 }
@@ -249,6 +254,8 @@ pub struct BundleResult {
 }
 
 const N_INTR: usize = 9;
+/// `k3`'s index in the intrinsics block (`fx, fy, cx, cy, k1, k2, k3, p1, p2`).
+const K3_INDEX: usize = 6;
 
 /// Current state: all poses and the intrinsics.
 #[derive(Debug, Clone)]
@@ -555,6 +562,9 @@ fn image_normal(
         let mut cols: Vec<(bool, usize, DVec2)> = Vec::new();
         for (b, lo, go) in blocks_of(lay, i, *f) {
             for k in 0..b.size() {
+                if matches!(b, Block::Intrinsics) && cfg.hold_k3 && k == K3_INDEX {
+                    continue;
+                }
                 let hstep = step(b, k);
                 let qp = project(&perturbed(st, i, b, k, hstep), i, *f, o.object_m)?;
                 let qm = project(&perturbed(st, i, b, k, -hstep), i, *f, o.object_m)?;
@@ -636,6 +646,7 @@ fn damp(h: &DMatrix<f64>, lambda: f64) -> DMatrix<f64> {
 fn solve(
     normals: &[ImageNormal],
     lay: &Layout,
+    held: &[usize],
     lambda: f64,
 ) -> Option<(
     Vec<DVector<f64>>,
@@ -666,6 +677,11 @@ fn solve(
             rhs -= &t * &n.b_l;
         }
         inv_ll.push(inv);
+    }
+    // A held global parameter has no Jacobian column: its row and column are zero; a unit
+    // diagonal keeps the system regular and its step zero.
+    for &h in held {
+        s[(h, h)] = 1.0;
     }
     let (dg, s_inv) = if ng > 0 {
         let ch = s.clone().cholesky()?;
@@ -753,6 +769,12 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
     }
     let p = &gated;
     let lay = layout(p, cfg.refine_intrinsics);
+    let held: Vec<usize> = lay
+        .intr
+        .filter(|_| cfg.hold_k3)
+        .map(|o| o + K3_INDEX)
+        .into_iter()
+        .collect();
     let n_params = lay.local.iter().map(|l| l.2).sum::<usize>() + lay.n_global;
     if n_params == 0 {
         return None;
@@ -786,7 +808,7 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
     for _ in 0..cfg.max_iterations {
         let mut accepted = false;
         for _ in 0..10 {
-            let Some((dl, dg, _, _)) = solve(&normals, &lay, lambda) else {
+            let Some((dl, dg, _, _)) = solve(&normals, &lay, &held, lambda) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -814,7 +836,7 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
     }
     let e1 = evaluate(p, &st, cfg)?;
     // Covariance at the solution (undamped).
-    let (_, _, cov_l, cov_g) = solve(&normals, &lay, 0.0)?;
+    let (_, _, cov_l, cov_g) = solve(&normals, &lay, &held, 0.0)?;
     let dof = (2 * e1.count).saturating_sub(n_params).max(1);
     let vf = e1.weighted_sq / dof as f64;
     let images = p
@@ -853,9 +875,13 @@ pub fn bundle_adjust(p: &BundleProblem, cfg: &BundleConfig) -> Option<BundleResu
     };
     Some(BundleResult {
         camera: st.camera,
-        intrinsics_covariance: lay
-            .intr
-            .map_or_else(Vec::new, |o| row_major(&cov_g, o, N_INTR, vf)),
+        intrinsics_covariance: lay.intr.map_or_else(Vec::new, |o| {
+            let mut c = row_major(&cov_g, o, N_INTR, vf);
+            if cfg.hold_k3 {
+                c[K3_INDEX * N_INTR + K3_INDEX] = 0.0;
+            }
+            c
+        }),
         images,
         world_from_flash: global(lay.flash, st.flash),
         world_from_standard: global(lay.standard, st.standard),
@@ -1116,6 +1142,10 @@ mod tests {
         assert_eq!(r.intrinsics_covariance.len(), 81);
         let err = (r.camera.fx_px - truth_fx).abs();
         assert!(err < 0.2 * 0.01 * truth_fx, "fx error {err}");
+        // k3 is held at its start, with no variance.
+        assert_eq!(r.camera.distortion.k3, p.camera.distortion.k3);
+        assert_eq!(r.intrinsics_covariance[K3_INDEX * N_INTR + K3_INDEX], 0.0);
+        assert!(r.intrinsics_covariance[0] > 0.0);
         assert!(max_head_error(&r, &heads) < 2e-3);
     }
 }
