@@ -336,67 +336,94 @@ impl RunReport {
 
     /// The self-checks as a Markdown table (empty when no stage has any).
     pub fn checks_markdown(&self) -> String {
-        use crate::checks::Outcome;
-        let mut out = String::new();
-        for (s, c) in self.checks() {
-            let figure = c
-                .figure
-                .map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit));
-            let outcome = match &c.outcome {
-                Outcome::Passed => "passed".to_string(),
-                Outcome::Failed { likely_cause } => format!("**FAILED**: {likely_cause}"),
-                Outcome::NotChecked { why } => format!("not checked: {why}"),
-            };
-            out.push_str(&format!(
-                "| {} | {} | {} | {figure} | ≤ {} {} | {outcome} |\n",
-                s.stage.name(),
-                c.name,
-                c.what,
-                sig(c.bound),
-                c.unit
-            ));
-        }
-        if out.is_empty() {
-            return out;
+        let rows: String = self
+            .check_rows()
+            .iter()
+            .map(|r| {
+                let verdict = match r.verdict {
+                    Verdict::Passed => "passed".to_string(),
+                    Verdict::Failed(cause) => format!("**FAILED**: {cause}"),
+                    Verdict::NotChecked(why) => format!("not checked: {why}"),
+                };
+                let [stage, check, what, figure, bound] = &r.cells;
+                format!("| {stage} | {check} | {what} | {figure} | {bound} | {verdict} |\n")
+            })
+            .collect();
+        if rows.is_empty() {
+            return rows;
         }
         format!(
-            "| stage | check | what | figure | bound | outcome |\n|---|---|---|---:|---:|---|\n{out}"
+            "| {} |\n|---|---|---|---:|---:|---|\n{rows}",
+            CHECK_COLUMNS.join(" | ")
         )
     }
 
     /// The self-checks as an HTML table (empty when no stage has any).
     pub fn checks_html(&self) -> String {
-        use crate::checks::Outcome;
-        let mut rows = String::new();
-        for (s, c) in self.checks() {
-            let figure = c
-                .figure
-                .map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit));
-            let outcome = match &c.outcome {
-                Outcome::Passed => "passed".to_string(),
-                Outcome::Failed { likely_cause } => format!(
-                    "<span class=\"bad\">FAILED</span>: {}",
-                    html_escape(likely_cause)
-                ),
-                Outcome::NotChecked { why } => format!("not checked: {}", html_escape(why)),
-            };
-            rows.push_str(&format!(
-                "<tr><td>{}</td><td>{}</td><td>{}</td><td class=\"num\">{}</td><td class=\"num\">≤ {} {}</td><td>{outcome}</td></tr>\n",
-                html_escape(s.stage.name()),
-                html_escape(&c.name),
-                html_escape(&c.what),
-                html_escape(&figure),
-                sig(c.bound),
-                html_escape(&c.unit)
-            ));
-        }
+        let rows: String = self
+            .check_rows()
+            .iter()
+            .map(|r| {
+                let verdict = match r.verdict {
+                    Verdict::Passed => "passed".to_string(),
+                    Verdict::Failed(cause) => {
+                        format!("<span class=\"bad\">FAILED</span>: {}", html_escape(cause))
+                    }
+                    Verdict::NotChecked(why) => format!("not checked: {}", html_escape(why)),
+                };
+                let [stage, check, what, figure, bound] = r.cells.each_ref().map(|c| html_escape(c));
+                format!(
+                    "<tr><td>{stage}</td><td>{check}</td><td>{what}</td><td class=\"num\">{figure}</td><td class=\"num\">{bound}</td><td>{verdict}</td></tr>\n"
+                )
+            })
+            .collect();
         if rows.is_empty() {
             return rows;
         }
-        format!(
-            "<h2>Self-checks</h2>\n<table>\n<tr><th>stage</th><th>check</th><th>what</th><th>figure</th><th>bound</th><th>outcome</th></tr>\n{rows}</table>\n"
-        )
+        let head: String = CHECK_COLUMNS.iter().map(|c| format!("<th>{c}</th>")).collect();
+        format!("<h2>Self-checks</h2>\n<table>\n<tr>{head}</tr>\n{rows}</table>\n")
     }
+
+    /// Every self-check as the report's tables show it, in plain text.
+    fn check_rows(&self) -> Vec<CheckRow<'_>> {
+        use crate::checks::Outcome;
+        self.checks()
+            .map(|(s, c)| CheckRow {
+                cells: [
+                    s.stage.name().to_string(),
+                    c.name.clone(),
+                    c.what.clone(),
+                    c.figure
+                        .map_or_else(String::new, |f| format!("{} {}", sig(f), c.unit)),
+                    format!("≤ {} {}", sig(c.bound), c.unit),
+                ],
+                verdict: match &c.outcome {
+                    Outcome::Passed => Verdict::Passed,
+                    Outcome::Failed { likely_cause } => Verdict::Failed(likely_cause),
+                    Outcome::NotChecked { why } => Verdict::NotChecked(why),
+                },
+            })
+            .collect()
+    }
+}
+
+/// The self-check tables' columns.
+const CHECK_COLUMNS: [&str; 6] = ["stage", "check", "what", "figure", "bound", "outcome"];
+
+/// One self-check in the report's tables: its text cells and its verdict (the one cell each
+/// format marks up).
+struct CheckRow<'a> {
+    /// Stage, check, what, figure, bound.
+    cells: [String; 5],
+    /// The outcome.
+    verdict: Verdict<'a>,
+}
+
+/// A self-check's outcome as the tables print it.
+enum Verdict<'a> {
+    Passed,
+    Failed(&'a str),
+    NotChecked(&'a str),
 }
 
 /// Escapes text for HTML.
