@@ -12,6 +12,8 @@
 //! |---|---|---|---|
 //! | camera calibration | `focal_vs_files` | calibrated fx against the focal length the files state | more than [`FOCAL_VS_FILES_MAX_REL`] apart |
 //! | camera poses | `reprojection_chi2` | median over images of `(rms / sigma)²`, the per-image reprojection RMS against the median stated corner sigma | above [`REPROJECTION_CHI2_MAX`] |
+//! | placement survey | `survey_chi2` | the survey adjustment's reduced chi-square (variance factor) | above [`REPROJECTION_CHI2_MAX`] |
+//! | camera poses | `bundle_chi2` | the joint pose adjustment's reduced chi-square over all images | above [`REPROJECTION_CHI2_MAX`] |
 //! | camera poses | `camera_distance_spread` | relative sd of the measurement cameras' distances to the point their optical axes meet | above [`CAMERA_DISTANCE_SPREAD_MAX`] |
 //! | flash triangulation | `flash_sigma` | the flash position's stated sd | above [`FLASH_SIGMA_MAX_MM`] |
 //! | radiometric calibration (in derender) | `c_spread` | C's relative spread over the standard | above [`C_SPREAD_MAX_PCT`] |
@@ -183,11 +185,34 @@ pub struct PoseCheckInputs<'a> {
     pub stated_camera: &'a CameraSpec,
 }
 
+/// The survey unit's checks, by stage.
+pub fn survey_checks(survey: &skinbrdf_poses::Survey) -> Vec<(Stage, Check)> {
+    vec![(
+        Stage::PlacementSurvey,
+        adjustment_chi2(
+            "survey_chi2",
+            Some(survey.bundle.variance_factor),
+            "the survey's adjustment does not fit the photographs: a target that moved, a sheet \
+             that is not flat, or a camera model that does not fit",
+        ),
+    )]
+}
+
 /// The pose unit's checks, by stage.
 pub fn pose_checks(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Vec<(Stage, Check)> {
     vec![
         (Stage::CameraCalibration, focal_vs_files(poses, inputs)),
         (Stage::CameraPoses, reprojection_chi2(poses)),
+        (
+            Stage::CameraPoses,
+            adjustment_chi2(
+                "bundle_chi2",
+                poses.bundle.as_ref().map(|b| b.variance_factor),
+                "the joint adjustment of every pose does not fit the photographs: a target \
+                 that moved since the survey, a head that moved against its headdress, or a \
+                 camera model that does not fit",
+            ),
+        ),
         (Stage::CameraPoses, camera_distance_spread(poses)),
         (Stage::FlashTriangulation, flash_sigma(poses)),
     ]
@@ -269,6 +294,24 @@ fn reprojection_chi2(poses: &SessionPoses) -> Check {
         "the camera model does not fit the reference field: wrong intrinsics or distortion, or \
          reference targets placed wrongly (moved since the survey)",
     )
+}
+
+/// An adjustment's reduced chi-square (its a-posteriori variance factor: the robustly
+/// weighted squared residuals over their stated corner sigmas, per degree of freedom) against
+/// [`REPROJECTION_CHI2_MAX`].
+fn adjustment_chi2(name: &str, variance_factor: Option<f64>, likely_cause: &str) -> Check {
+    const WHAT: &str =
+        "the adjustment's reduced chi-square over all images (residuals over stated corner sigmas)";
+    match variance_factor {
+        Some(v) => Check::at_most(name, WHAT, v, "", REPROJECTION_CHI2_MAX, likely_cause),
+        None => Check::not_checked(
+            name,
+            WHAT,
+            "",
+            REPROJECTION_CHI2_MAX,
+            "no joint adjustment ran",
+        ),
+    }
 }
 
 fn camera_distance_spread(poses: &SessionPoses) -> Check {
@@ -461,6 +504,18 @@ mod tests {
         let nan = Check::at_most("x", "x", f64::NAN, "", 2.0, "cause");
         assert!(nan.failed());
         assert_eq!(nan.figure, None);
+    }
+
+    #[test]
+    fn an_adjustment_that_does_not_fit_fails_and_none_is_not_checked() {
+        let fits = adjustment_chi2("survey_chi2", Some(0.7), "cause");
+        assert_eq!(fits.outcome, Outcome::Passed);
+        assert!(adjustment_chi2("survey_chi2", Some(40.0), "cause").failed());
+        assert!(adjustment_chi2("survey_chi2", Some(f64::NAN), "cause").failed());
+        assert!(matches!(
+            adjustment_chi2("bundle_chi2", None, "cause").outcome,
+            Outcome::NotChecked { .. }
+        ));
     }
 
     #[test]

@@ -317,6 +317,15 @@ pub fn process(
         samples: None,
         fit: None,
     };
+    let mut survey_reports = survey_reports;
+    let mut failed: Option<(Stage, Vec<crate::checks::Check>)> = None;
+    if ctx.survey.is_some() {
+        let checks = SurveyUnit.checks(&ctx, &survey_reports);
+        let failures = crate::checks::attach(&mut survey_reports, checks);
+        if !failures.is_empty() && !cfg.accept_failed_checks {
+            failed = Some((Stage::PlacementSurvey, failures));
+        }
+    }
     for mut r in survey_reports {
         r.metrics.insert(0, input_metric.clone());
         r.notes.extend(input_notes.iter().cloned());
@@ -324,7 +333,6 @@ pub fn process(
         reports.push(r);
     }
     let units: [&dyn StageUnit; 4] = [&PoseUnit, &DerenderUnit, &FitUnit, &RenderUnit];
-    let mut failed: Option<(Stage, Vec<crate::checks::Check>)> = None;
     for unit in units {
         if let Some((stage, _)) = &failed {
             reports.extend(not_run_after(&ctx.plan, &reports, *stage));

@@ -380,7 +380,10 @@ impl RunReport {
         if rows.is_empty() {
             return rows;
         }
-        let head: String = CHECK_COLUMNS.iter().map(|c| format!("<th>{c}</th>")).collect();
+        let head: String = CHECK_COLUMNS
+            .iter()
+            .map(|c| format!("<th>{c}</th>"))
+            .collect();
         format!("<h2>Self-checks</h2>\n<table>\n<tr>{head}</tr>\n{rows}</table>\n")
     }
 

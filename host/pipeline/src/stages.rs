@@ -220,6 +220,15 @@ impl StageUnit for SurveyUnit {
         );
         Ok(())
     }
+    fn checks(
+        &self,
+        ctx: &Ctx<'_>,
+        _reports: &[StageReport],
+    ) -> Vec<(Stage, crate::checks::Check)> {
+        ctx.survey
+            .as_ref()
+            .map_or_else(Vec::new, crate::checks::survey_checks)
+    }
 }
 
 /// The scan registration's report, relative to the output directory.
