@@ -9,10 +9,19 @@
 use std::path::{Path, PathBuf};
 
 /// Files that still format with debug formatting, with the reason they are not fixed here.
-const PENDING: &[(&str, &str)] = &[(
-    "session/src/linear.rs",
-    "the raw-linearization work changes this file; its three messages are to be put in words there",
-)];
+const PENDING: &[(&str, &str)] = &[
+    ("session/src/linear.rs", OTHER_WORK),
+    ("raw/src/dng.rs", OTHER_WORK),
+    ("raw/src/error.rs", OTHER_WORK),
+    ("raw/src/meta.rs", OTHER_WORK),
+    ("derender/src/from_session.rs", OTHER_WORK),
+    ("fit/src/fit.rs", OTHER_WORK),
+    ("fit/src/report.rs", OTHER_WORK),
+];
+
+/// Why a file is pending.
+const OTHER_WORK: &str = "the per-photosite raw work changes this file at the same time; its \
+                          messages are to be put in words there";
 
 /// Lines where debug formatting is not shown to anyone: a cache fingerprint's key.
 const NOT_SHOWN: &[&str] = &[".value(\"model\", &format!(\"{:?}\", ctx.cfg.fit.model))"];
@@ -61,7 +70,7 @@ fn library_part(text: &str) -> &str {
         if line.trim() == "#[cfg(test)]"
             && lines
                 .peek()
-                .is_some_and(|next| next.trim_start().starts_with("mod "))
+                .is_some_and(|next| next.split_whitespace().any(|w| w == "mod"))
         {
             return &text[..offset];
         }
@@ -135,5 +144,7 @@ fn the_scan_finds_debug_placeholders_and_nothing_else() {
     assert!(debug_placeholders(r#"format!("{a} {{b:?}} {:.3}", 1)"#).is_empty());
     assert!(debug_placeholders(r#"let q = x.map(|v| v?);"#).is_empty());
     let text = "fn a() {}\n#[cfg(test)]\nmod tests {\n    x!(\"{:?}\")\n}\n";
+    assert_eq!(library_part(text), "fn a() {}\n");
+    let text = "fn a() {}\n#[cfg(test)]\npub(crate) mod tests {\n}\n";
     assert_eq!(library_part(text), "fn a() {}\n");
 }
