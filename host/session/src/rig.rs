@@ -474,6 +474,8 @@ impl Rig {
     /// state: reference targets with at least one placed (the world's origin), headdress
     /// targets, a flash located by its ring's placed targets or by a stated light position or
     /// pose, and a reflectance standard located by its frame's placed targets or a stated pose.
+    /// Flash and standard targets must be placed (the placement survey places reference and
+    /// headdress targets only), also where a stated pose makes them unnecessary.
     pub fn check_needs(&self) -> Result<(), SessionErrors> {
         let mut errs = SessionErrors::default();
         let path = self.path.as_path();
@@ -503,30 +505,33 @@ impl Rig {
                  headdress's targets",
             );
         }
-        if !f.flash.located() {
-            let flash = self.declarations(TargetGroup::Flash);
-            if flash.is_empty() {
-                errs.push(
-                    path,
-                    "flash",
-                    "no target of group \"flash\" and no light_position_m: the flash is \
-                     located from its ring's targets in the light-position images; state the \
-                     measured light position (light_position_m, world frame, metres) or the \
-                     ring's targets (group \"flash\", placed in the flash frame). The \
-                     light-position images alone, without the ring, do not locate it",
-                );
-            }
-            for d in flash.iter().filter(|d| !d.placed) {
-                errs.push(
-                    path,
-                    d.placement_key(),
-                    "a flash target without a placement: the ring's targets are placed in the \
-                     flash frame by their printed layout (the survey places reference and \
-                     headdress targets only); state it, or the measured light position \
-                     ([flash] light_position_m)",
-                );
-            }
+        // The placement survey refuses unplaced flash and standard targets (their layouts
+        // place them), also where a stated pose makes them unnecessary.
+        let flash = self.declarations(TargetGroup::Flash);
+        if !f.flash.located() && flash.is_empty() {
+            errs.push(
+                path,
+                "flash",
+                "no target of group \"flash\" and no light_position_m: the flash is located \
+                 from its ring's targets in the light-position images; state the measured \
+                 light position (light_position_m, world frame, metres) or the ring's targets \
+                 (group \"flash\", placed in the flash frame). The light-position images \
+                 alone, without the ring, do not locate it",
+            );
         }
+        let unplaced_flash = if f.flash.located() {
+            "a flash target without a placement: the rig states where the flash is, so the \
+             ring's targets are not needed; leave it out, or state its placement in the flash \
+             frame (the survey places reference and headdress targets only)"
+        } else {
+            "a flash target without a placement: the ring's targets are placed in the flash \
+             frame by their printed layout (the survey places reference and headdress targets \
+             only); state it, or the measured light position ([flash] light_position_m)"
+        };
+        for d in flash.iter().filter(|d| !d.placed) {
+            errs.push(path, d.placement_key(), unplaced_flash);
+        }
+        let standard = self.declarations(TargetGroup::Standard);
         match &f.standard {
             None => errs.push(
                 path,
@@ -534,31 +539,32 @@ impl Rig {
                 "missing: the radiometric calibration (C) needs the reflectance standard (its \
                  brdf and size_m)",
             ),
-            Some(s) if s.world_from_standard.is_none() => {
-                let standard = self.declarations(TargetGroup::Standard);
-                if standard.is_empty() {
-                    errs.push(
-                        path,
-                        "standard",
-                        "no target of group \"standard\" and no world_from_standard: the \
-                         standard is located from the targets framing it in the \
-                         standard-position images; state its measured pose \
-                         (world_from_standard, world frame) or its frame's targets (group \
-                         \"standard\", placed in the standard frame)",
-                    );
-                }
-                for d in standard.iter().filter(|d| !d.placed) {
-                    errs.push(
-                        path,
-                        d.placement_key(),
-                        "a standard target without a placement: the frame's targets are \
-                         placed in the standard frame by their printed layout (the survey \
-                         places reference and headdress targets only); state it, or the \
-                         standard's measured pose ([standard] world_from_standard)",
-                    );
-                }
-            }
+            Some(s) if s.world_from_standard.is_none() && standard.is_empty() => errs.push(
+                path,
+                "standard",
+                "no target of group \"standard\" and no world_from_standard: the standard is \
+                 located from the targets framing it in the standard-position images; state \
+                 its measured pose (world_from_standard, world frame) or its frame's targets \
+                 (group \"standard\", placed in the standard frame)",
+            ),
             Some(_) => {}
+        }
+        let unplaced_standard = if f
+            .standard
+            .as_ref()
+            .is_some_and(|s| s.world_from_standard.is_some())
+        {
+            "a standard target without a placement: the rig states the standard's pose, so \
+             its frame's targets are not needed; leave it out, or state its placement in the \
+             standard frame (the survey places reference and headdress targets only)"
+        } else {
+            "a standard target without a placement: the frame's targets are placed in the \
+             standard frame by their printed layout (the survey places reference and headdress \
+             targets only); state it, or the standard's measured pose ([standard] \
+             world_from_standard)"
+        };
+        for d in standard.iter().filter(|d| !d.placed) {
+            errs.push(path, d.placement_key(), unplaced_standard);
         }
         errs.into_result(())
     }
