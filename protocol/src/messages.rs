@@ -315,6 +315,24 @@ pub enum ResponseBody {
     Status(Status),
 }
 
+impl ResponseBody {
+    /// The answer's name in words, for messages (`hello`, `clock`, ...).
+    pub const fn name(&self) -> &'static str {
+        match self {
+            Self::Hello(_) => "hello",
+            Self::Clock { .. } => "clock",
+            Self::PlanLoaded { .. } => "plan loaded",
+            Self::Running { .. } => "running",
+            Self::Aborted { .. } => "aborted",
+            Self::Acked { .. } => "records acknowledged",
+            Self::Fetching { .. } => "fetching records",
+            Self::Pong { .. } => "pong",
+            Self::WatchdogSet { .. } => "watchdog set",
+            Self::Status(_) => "status",
+        }
+    }
+}
+
 /// What is wrong with a plan.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 pub enum PlanProblem {

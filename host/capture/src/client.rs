@@ -323,7 +323,7 @@ impl<T: Transport> Client<T> {
                     return Err(ClientError::Unexpected {
                         port: self.port.clone(),
                         request: "Hello",
-                        got: format!("{other:?}"),
+                        got: other.name().to_string(),
                     })
                 }
                 Err(ClientError::Device {
@@ -442,7 +442,7 @@ impl<T: Transport> Client<T> {
             other => Err(ClientError::Unexpected {
                 port: self.port.clone(),
                 request: "ReadClock",
-                got: format!("{other:?}"),
+                got: other.name().to_string(),
             }),
         }
     }

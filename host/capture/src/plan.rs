@@ -74,7 +74,7 @@ pub enum PlanError {
     Invalid {
         /// The plan file.
         path: PathBuf,
-        /// The group and field (`groups[0] ("measurement").count`) or `max_retries`.
+        /// The group and field (groups[0] (`measurement`).count) or `max_retries`.
         location: String,
         /// What is wrong.
         problem: String,
@@ -107,7 +107,7 @@ pub fn parse_plan(text: &str, origin: &Path) -> Result<CapturePlan, PlanError> {
 
 fn group_location(index: usize, label: Option<&str>) -> String {
     match label {
-        Some(l) => format!("groups[{index}] ({l:?})"),
+        Some(l) => format!("groups[{index}] (`{l}`)"),
         None => format!("groups[{index}]"),
     }
 }
@@ -373,7 +373,7 @@ flash_mode = "controller-on-xsync"
         let msg = err.to_string();
         assert!(matches!(err, PlanError::UnknownKey { .. }), "{msg}");
         assert!(msg.contains("min_interval_ms"), "{msg}");
-        assert!(msg.contains("groups[0] (\"measurement\")"), "{msg}");
+        assert!(msg.contains("groups[0] (`measurement`)"), "{msg}");
     }
 
     #[test]
@@ -400,14 +400,14 @@ flash_mode = "controller-on-xsync"
     fn zero_count_is_rejected_with_location() {
         let text = GOOD.replace("count = 30", "count = 0");
         let msg = parse_plan(&text, origin()).expect_err("zero").to_string();
-        assert!(msg.contains("groups[0] (\"measurement\").count"), "{msg}");
+        assert!(msg.contains("groups[0] (`measurement`).count"), "{msg}");
     }
 
     #[test]
     fn a_survey_group_is_refused_naming_the_group() {
         let text = GOOD.replace("role = \"measurement\"", "role = \"survey\"");
         let msg = parse_plan(&text, origin()).expect_err("survey").to_string();
-        assert!(msg.contains("groups[0] (\"measurement\").role"), "{msg}");
+        assert!(msg.contains("groups[0] (`measurement`).role"), "{msg}");
         assert!(msg.contains("--survey"), "{msg}");
     }
 
@@ -466,8 +466,8 @@ flash_mode = "controller-on-xsync"
 "#;
         let msg = parse_plan(text, origin()).expect_err("merged").to_string();
         assert!(
-            msg.contains("groups[1] (\"b\").min_interval_us")
-                && msg.contains("groups[0] (\"a\")")
+            msg.contains("groups[1] (`b`).min_interval_us")
+                && msg.contains("groups[0] (`a`)")
                 && msg.contains("100000 us")
                 && msg.contains(">= 150000"),
             "{msg}"

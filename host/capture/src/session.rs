@@ -365,7 +365,7 @@ pub fn to_protocol_plan(
         let label =
             heapless::String::try_from(g.label.as_str()).map_err(|_| PlanError::Invalid {
                 path: origin.to_path_buf(),
-                location: format!("label {:?}", g.label),
+                location: format!("label `{}`", g.label),
                 problem: "too long for the controller".into(),
             })?;
         let group = proto::ShotGroup {
@@ -379,7 +379,7 @@ pub fn to_protocol_plan(
                 ImageRole::Survey => {
                     return Err(PlanError::Invalid {
                         path: origin.to_path_buf(),
-                        location: format!("group {:?}.role", g.label),
+                        location: format!("group `{}`.role", g.label),
                         problem: "survey images are not fired by the controller".into(),
                     })
                 }
@@ -838,7 +838,7 @@ impl<C: Connector, O: CaptureObserver> Runner<'_, C, O> {
                 .as_ref()
                 .map_or_else(String::new, |c| c.port().to_string()),
             request,
-            got: format!("{got:?}"),
+            got: got.name().to_string(),
         }
     }
 

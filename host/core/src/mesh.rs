@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MeshError {
     /// A vertex has a NaN or infinite coordinate.
-    #[error("vertex {index} is not finite: {position:?}")]
+    #[error("vertex {index} is not finite: ({}, {}, {})", position[0], position[1], position[2])]
     NonFiniteVertex {
         /// Vertex index.
         index: usize,

@@ -12,6 +12,8 @@
 //! # The two sources
 //!
 //! The focal-plane resolution is preferred; the 35 mm equivalent is used when it gives none.
+//! A focal length the rig file states (`[camera] focal_guess_px`) is preferred to both
+//! ([`stated_focal_guess`]; the files' value is noted where the two differ).
 //!
 //! 1. **Focal-plane resolution** (`FocalLength` `f_mm` and `FocalPlaneXResolution` `rho_x`,
 //!    pixels of the camera's image per millimetre of the focal plane: photosites, for a raw
@@ -87,6 +89,9 @@ pub enum FocalGuessSource {
         /// `FocalLengthIn35mmFilm`, millimetres.
         focal_length_35mm_mm: f64,
     },
+    /// The rig file's `[camera] focal_guess_px` (preferred to the metadata: the studio knows
+    /// its lens).
+    Rig,
 }
 
 /// A starting focal length for the calibration, in the session's image pixels.
@@ -128,6 +133,7 @@ impl std::fmt::Display for FocalGuess {
                 "FocalLengthIn35mmFilm {focal_length_35mm_mm} mm over the 36 x 24 mm frame's \
                  {FULL_FRAME_DIAGONAL_MM:.2} mm diagonal"
             )?,
+            FocalGuessSource::Rig => write!(f, "the rig's [camera] focal_guess_px")?,
         }
         for n in &self.notes {
             write!(f, "; {n}")?;
@@ -195,6 +201,26 @@ pub fn focal_guess_px(
 /// Whether `v` is a usable positive number.
 fn positive(v: f64) -> bool {
     v.is_finite() && v > 0.0
+}
+
+/// The rig's stated focal length as a guess, with the metadata's own guess (`files`) in its
+/// notes when the two differ by more than [`SOURCES_AGREE_REL`].
+pub fn stated_focal_guess(focal_px: f64, width_px: u32, files: Option<&FocalGuess>) -> FocalGuess {
+    let mut notes = Vec::new();
+    if let Some(g) = files {
+        if (g.focal_px - focal_px).abs() > SOURCES_AGREE_REL * focal_px {
+            notes.push(format!(
+                "the files give {:.1} px ({:.2} degrees across)",
+                g.focal_px, g.hfov_deg
+            ));
+        }
+    }
+    FocalGuess {
+        focal_px,
+        hfov_deg: hfov_deg(focal_px, f64::from(width_px)),
+        source: FocalGuessSource::Rig,
+        notes,
+    }
 }
 
 /// The horizontal field of view of focal length `f_px` across `w_px`, degrees.

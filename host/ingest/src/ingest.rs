@@ -56,12 +56,14 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use skinbrdf_raw::{CaptureTime, ExposureMeta, FileKind, RawError};
 use skinbrdf_session::capture::CaptureRecord;
+use skinbrdf_session::rig::RigCamera;
 use skinbrdf_session::{
     CameraSpec, GeometrySpec, ImageEntry, ImageRole, LengthUnit, Linearization, RegistrationFit,
-    RegistrationSpec, Rig, Session, SessionErrors, SessionFile, SESSION_FORMAT_VERSION,
+    RegistrationSpec, Rig, Session, SessionErrors, SessionFile, SESSION_FILE,
+    SESSION_FORMAT_VERSION,
 };
 
-use crate::focal::{focal_guess_px, FocalGuess};
+use crate::focal::{focal_guess_px, stated_focal_guess, FocalGuess};
 use crate::matching::{
     self, CameraShot, CameraTime, ExposureInput, ExtraReason, MatchError, MatchOptions, Matching,
 };
@@ -219,9 +221,14 @@ pub struct IngestedSurveyImage {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case", tag = "source")]
 pub enum CameraSource {
-    /// A calibration file.
+    /// A calibration file (`--camera`).
     File {
         /// The file.
+        path: PathBuf,
+    },
+    /// The rig file's `[camera]` calibration.
+    Rig {
+        /// The rig file.
         path: PathBuf,
     },
     /// None given: the session calibrates the camera from its reference targets.
@@ -248,6 +255,9 @@ pub struct IngestReport {
     pub lens: String,
     /// Where the intrinsics come from.
     pub camera: CameraSource,
+    /// What was chosen over what (a `--camera` file over the rig's `[camera]`), in words.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub camera_notes: Vec<String>,
     /// The loaded image size (superpixels for raw files).
     pub image_size_px: (u32, u32),
     /// Without a calibration file: the focal length written as the session's
@@ -258,6 +268,10 @@ pub struct IngestReport {
     /// per source); the calibration then starts from its own guess.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub focal_guess_refused: Vec<String>,
+    /// What the rig states as known (the session's `[known]`), in words: each skips the stage
+    /// that would estimate it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub known_from_rig: Vec<String>,
     /// Targets with a placement / without one (the survey fills those in).
     pub placed_targets: usize,
     /// Targets without a placement.
@@ -293,11 +307,23 @@ pub enum IngestError {
         /// The parser's error.
         source: serde_json::Error,
     },
-    /// The rig file has problems.
-    #[error("the rig file is not valid")]
+    /// The rig file has problems, or lacks what the session's stages need.
+    #[error("{}: the rig file is not valid, or does not state what the session needs", path.display())]
     Rig {
-        /// Every problem.
+        /// The rig file.
+        path: PathBuf,
+        /// Every problem, each naming the file and the key.
         source: SessionErrors,
+    },
+    /// A key of an input file is unusable.
+    #[error("{}: `{key}`: {problem}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// The key in it.
+        key: String,
+        /// What is wrong.
+        problem: String,
     },
     /// An input is unusable.
     #[error("{path}: {problem}")]
@@ -370,8 +396,9 @@ pub enum IngestError {
         /// The exposure it was matched to.
         exposure_index: u32,
     },
-    /// The written session does not load (a bug: the ingest's own output must load).
-    #[error("the written session does not load")]
+    /// The session written from the inputs does not load: each problem is named by the input
+    /// file (and key) it comes from.
+    #[error("the session written from these files does not load")]
     Session {
         /// Every problem.
         source: SessionErrors,
@@ -390,8 +417,14 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     let t0 = std::time::Instant::now();
     // 1. Inputs.
     let record = read_capture(&cfg.capture)?;
-    let rig = Rig::load(&cfg.rig).map_err(|source| IngestError::Rig { source })?;
+    let rig_error = |source| IngestError::Rig {
+        path: cfg.rig.clone(),
+        source,
+    };
+    let rig = Rig::load(&cfg.rig).map_err(rig_error)?;
+    rig.check_needs().map_err(rig_error)?;
     let parts = rig.session_parts();
+    let known_from_rig = known_in_words(&parts.known);
     let shape = match (&cfg.scan, &rig.file.geometry) {
         (Some(scan), None) => {
             let (units, files) = check_scan(scan, cfg.scan_units)?;
@@ -459,6 +492,8 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
         .iter()
         .filter_map(|pair| by_name.get(pair.file.as_str()).map(|p| (pair, *p)))
         .collect();
+
+    check_roles(&cfg.capture, &matched)?;
 
     // 5. One camera, the survey images' included.
     check_one_camera(&m, &matched, &shots)?;
@@ -538,54 +573,17 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     }
 
     // 8. The session, written beside the output and moved into place.
-    let (camera, camera_source, focal) = match camera_file {
-        Some((path, spec)) => {
-            if spec.size_px() != image_size_px {
-                return Err(IngestError::Input {
-                    path: path.clone(),
-                    problem: format!(
-                        "the calibration is for {}x{} images, the photographs load as {}x{}{}",
-                        spec.size_px().0,
-                        spec.size_px().1,
-                        image_size_px.0,
-                        image_size_px.1,
-                        if matches!(photos.first().map(|p| sniff_raw(&p.path)), Some(true)) {
-                            " (raw files load as 2x2 superpixels: half the sensor's size; see docs/ingest.md)"
-                        } else {
-                            ""
-                        }
-                    ),
-                });
-            }
-            (spec, CameraSource::File { path }, Ok(None))
-        }
-        None => {
-            // A camera to be calibrated starts where the lens is (the files share one lens
-            // and focal length: checked above).
-            let guess = match matched.first() {
-                Some((_, photo)) => {
-                    // The pixels the focal-plane resolution counts: a raw file's photosites,
-                    // two per superpixel across and down; another image's own pixels.
-                    let per = if sniff_raw(&photo.path) { 2 } else { 1 };
-                    let sensor = (
-                        image_size_px.0.saturating_mul(per),
-                        image_size_px.1.saturating_mul(per),
-                    );
-                    focal_guess_px(&photo.meta, image_size_px, sensor).map_err(|e| e.reasons)
-                }
-                None => Err(vec!["no matched photograph".to_string()]),
-            };
-            (
-                CameraSpec::ToBeCalibrated {
-                    width_px: image_size_px.0,
-                    height_px: image_size_px.1,
-                    focal_guess_px: guess.as_ref().ok().map(|g| g.focal_px),
-                },
-                CameraSource::ToBeCalibrated,
-                guess.map(Some),
-            )
-        }
-    };
+    let ChosenCamera {
+        spec: camera,
+        source: camera_source,
+        focal,
+        notes: camera_notes,
+    } = choose_camera(
+        camera_file,
+        &rig,
+        image_size_px,
+        matched.first().map(|(_, p)| *p),
+    )?;
     let (focal_guess, focal_guess_refused) = match focal {
         Ok(g) => (g, Vec::new()),
         Err(reasons) => (None, reasons),
@@ -594,7 +592,7 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     let result = write_session(
         cfg, &staging, &record, &rig, parts, &matched, &scales, &survey, camera, &shape,
     );
-    let (images, survey_images) = match result {
+    let (images, survey_images, sources) = match result {
         Ok(images) => images,
         Err(e) => {
             let _ = std::fs::remove_dir_all(&staging);
@@ -628,6 +626,8 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
             })
             .unwrap_or_default(),
         camera: camera_source,
+        camera_notes,
+        known_from_rig,
         image_size_px,
         focal_guess,
         focal_guess_refused,
@@ -641,6 +641,13 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     };
     // The written session must load; a rig without placements leaves exactly one kind of
     // problem, the unplaced targets a stage needs, which the placement survey resolves.
+    let owners = Owners {
+        cfg,
+        staging: &staging,
+        camera: &report.camera,
+        rig_camera: rig.file.camera.is_some(),
+        images: &sources,
+    };
     if let Err(source) = Session::load(&staging) {
         if !source
             .problems
@@ -648,13 +655,17 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
             .all(|p| p.field == "targets.unplaced")
         {
             let _ = std::fs::remove_dir_all(&staging);
-            return Err(IngestError::Session { source });
+            return Err(IngestError::Session {
+                source: owners.of(source),
+            });
         }
     }
     let session_file = {
-        let p = staging.join("session.toml");
+        let p = staging.join(SESSION_FILE);
         let text = std::fs::read_to_string(&p).map_err(io(&p))?;
-        Session::parse_toml(&text, &p).map_err(|source| IngestError::Session { source })?
+        Session::parse_toml(&text, &p).map_err(|source| IngestError::Session {
+            source: owners.of(source),
+        })?
     };
     let t = &session_file.targets;
     report.placed_targets = t.reference.len()
@@ -676,6 +687,246 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     write_file(&staging.join(INGEST_REPORT_FILE), &json)?;
     move_into_place(&staging, &cfg.out_dir)?;
     Ok(report)
+}
+
+/// The known quantities a rig states, in words.
+fn known_in_words(k: &skinbrdf_session::KnownQuantities) -> Vec<String> {
+    let mut out = Vec::new();
+    if let Some(p) = k.light_position_m {
+        out.push(format!(
+            "the light position ([flash] light_position_m, [{:.4}, {:.4}, {:.4}] m): no flash \
+             triangulation",
+            p.x, p.y, p.z
+        ));
+    }
+    if k.world_from_flash.is_some() {
+        out.push("the flash's pose ([flash] world_from_flash): no flash triangulation".into());
+    }
+    if k.world_from_standard.is_some() {
+        out.push(
+            "the standard's pose ([standard] world_from_standard): not located from its targets"
+                .into(),
+        );
+    }
+    out
+}
+
+/// The camera the session states, where it comes from, the focal length a calibration starts
+/// from (or why the files give none), and what was chosen over what.
+struct ChosenCamera {
+    spec: CameraSpec,
+    source: CameraSource,
+    focal: Result<Option<FocalGuess>, Vec<String>>,
+    notes: Vec<String>,
+}
+
+/// The session's camera: a `--camera` file, else the rig's `[camera]`, else one to be
+/// calibrated from the focal length the first photograph's metadata give. A stated image
+/// size must be the photographs' as loaded.
+fn choose_camera(
+    camera_file: Option<(PathBuf, CameraSpec)>,
+    rig: &Rig,
+    image_size_px: (u32, u32),
+    first: Option<&CardPhoto>,
+) -> Result<ChosenCamera, IngestError> {
+    let raw = first.is_some_and(|p| sniff_raw(&p.path));
+    let size_problem = |stated: (u32, u32)| {
+        (stated != image_size_px).then(|| {
+            format!(
+                "the camera is stated for {}x{} images, the photographs load as {}x{}{}",
+                stated.0,
+                stated.1,
+                image_size_px.0,
+                image_size_px.1,
+                if raw {
+                    " (raw files load as 2x2 superpixels: half the sensor's size; see \
+                     docs/ingest.md)"
+                } else {
+                    ""
+                }
+            )
+        })
+    };
+    // A camera to be calibrated starts where the lens is (the files share one lens and focal
+    // length: checked before).
+    let files_guess = || match first {
+        Some(photo) => {
+            // The pixels the focal-plane resolution counts: a raw file's photosites, two per
+            // superpixel across and down; another image's own pixels.
+            let per = if raw { 2 } else { 1 };
+            let sensor = (
+                image_size_px.0.saturating_mul(per),
+                image_size_px.1.saturating_mul(per),
+            );
+            focal_guess_px(&photo.meta, image_size_px, sensor).map_err(|e| e.reasons)
+        }
+        None => Err(vec!["no matched photograph".to_string()]),
+    };
+    let to_be_calibrated = |guess: Result<FocalGuess, Vec<String>>, notes| ChosenCamera {
+        spec: CameraSpec::ToBeCalibrated {
+            width_px: image_size_px.0,
+            height_px: image_size_px.1,
+            focal_guess_px: guess.as_ref().ok().map(|g| g.focal_px),
+        },
+        source: CameraSource::ToBeCalibrated,
+        focal: guess.map(Some),
+        notes,
+    };
+    let rig_camera = rig.file.camera;
+    match (camera_file, rig_camera) {
+        (Some((path, spec)), rc) => {
+            if let Some(problem) = size_problem(spec.size_px()) {
+                return Err(IngestError::Input { path, problem });
+            }
+            let notes = rc
+                .map(|c| {
+                    format!(
+                        "--camera {} is used; the rig's [camera] ({c}) is not",
+                        path.display()
+                    )
+                })
+                .into_iter()
+                .collect();
+            Ok(ChosenCamera {
+                spec,
+                source: CameraSource::File { path },
+                focal: Ok(None),
+                notes,
+            })
+        }
+        (None, Some(c)) => {
+            if let Some(problem) = c.size_px().and_then(size_problem) {
+                return Err(IngestError::Invalid {
+                    path: rig.path.clone(),
+                    key: "camera.width_px".into(),
+                    problem,
+                });
+            }
+            match c {
+                RigCamera::Calibrated(m) => Ok(ChosenCamera {
+                    spec: CameraSpec::Calibrated(m),
+                    source: CameraSource::Rig {
+                        path: rig.path.clone(),
+                    },
+                    focal: Ok(None),
+                    notes: Vec::new(),
+                }),
+                RigCamera::ToBeCalibrated {
+                    focal_guess_px: Some(f),
+                    ..
+                } => {
+                    let files = files_guess().ok();
+                    let guess = stated_focal_guess(f, image_size_px.0, files.as_ref());
+                    Ok(to_be_calibrated(Ok(guess), Vec::new()))
+                }
+                RigCamera::ToBeCalibrated { .. } => Ok(to_be_calibrated(files_guess(), Vec::new())),
+            }
+        }
+        (None, None) => Ok(to_be_calibrated(files_guess(), Vec::new())),
+    }
+}
+
+/// The matched photographs must include the measurement and the reference standard (the
+/// radiometric calibration): a refusal names the capture record.
+fn check_roles(
+    capture: &Path,
+    matched: &[(&matching::MatchedPair, &CardPhoto)],
+) -> Result<(), IngestError> {
+    let needed = [
+        (ImageRole::Measurement, "the measurement needs them"),
+        (
+            ImageRole::ReferenceStandard,
+            "the radiometric calibration (C) needs one",
+        ),
+    ];
+    for (role, why) in needed {
+        if !matched.iter().any(|(pair, _)| pair.role == role) {
+            return Err(IngestError::Invalid {
+                path: capture.to_path_buf(),
+                key: "exposures".into(),
+                problem: format!(
+                    "no exposure of role {} has a file on the card ({why})",
+                    role.name()
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Who owns what ingest writes into the session: a problem of the written session is the
+/// problem of the user's file (and key) it was written from, never of the staging directory.
+struct Owners<'a> {
+    cfg: &'a IngestConfig,
+    staging: &'a Path,
+    camera: &'a CameraSource,
+    /// The rig states the camera (a camera to be calibrated from its focal length).
+    rig_camera: bool,
+    /// Each image entry's source photograph, in the session's order.
+    images: &'a [PathBuf],
+}
+
+impl Owners<'_> {
+    /// The problems, each moved to the input file and key its section was written from.
+    fn of(&self, errs: SessionErrors) -> SessionErrors {
+        let mut out = SessionErrors::default();
+        for p in errs.problems {
+            let (file, field) = self.owner(&p.file, &p.field);
+            out.push(file, field, p.problem);
+        }
+        out
+    }
+
+    fn owner(&self, file: &Path, field: &str) -> (PathBuf, String) {
+        let cfg = self.cfg;
+        if file != self.staging.join(SESSION_FILE) {
+            // A file ingest wrote beside session.toml (capture.json), or an image.
+            return match file.strip_prefix(self.staging) {
+                Ok(rel) if rel == Path::new("capture.json") => (cfg.capture.clone(), field.into()),
+                Ok(rel) => (cfg.out_dir.join(rel), field.into()),
+                Err(_) => (file.to_path_buf(), field.into()),
+            };
+        }
+        let head = field.split(['.', '[']).next().unwrap_or_default();
+        let rig = |key: &str| (cfg.rig.clone(), key.to_string());
+        match head {
+            "images" if field == "images" => (cfg.capture.clone(), "exposures".into()),
+            "images" => {
+                let index = field
+                    .strip_prefix("images[")
+                    .and_then(|r| r.split(']').next())
+                    .and_then(|i| i.parse::<usize>().ok());
+                match index.and_then(|i| self.images.get(i)) {
+                    Some(photo) => (photo.clone(), String::new()),
+                    None => (cfg.out_dir.join(SESSION_FILE), field.into()),
+                }
+            }
+            "capture" => (cfg.capture.clone(), String::new()),
+            "camera" => match self.camera {
+                CameraSource::File { path } => (path.clone(), field.into()),
+                CameraSource::Rig { path } => (path.clone(), field.into()),
+                CameraSource::ToBeCalibrated if self.rig_camera => rig(field),
+                CameraSource::ToBeCalibrated => (cfg.card_dir.clone(), String::new()),
+            },
+            "targets" => rig("targets"),
+            "known" => rig(match field {
+                "known.light_position_m" => "flash.light_position_m",
+                "known.world_from_flash" => "flash.world_from_flash",
+                "known.world_from_standard" => "standard.world_from_standard",
+                _ => field,
+            }),
+            "flash" | "standard" | "roi" => rig(field),
+            "geometry" => match &cfg.scan {
+                Some(scan) => (scan.clone(), String::new()),
+                None => rig(field),
+            },
+            "registration" => match &cfg.scan_points {
+                Some(points) => (points.clone(), String::new()),
+                None => (cfg.out_dir.join(SESSION_FILE), field.into()),
+            },
+            _ => (cfg.out_dir.join(SESSION_FILE), field.into()),
+        }
+    }
 }
 
 /// The ingest's report inside the session directory.
@@ -1193,7 +1444,7 @@ fn write_session(
     survey: &[CardPhoto],
     camera: CameraSpec,
     shape: &Shape,
-) -> Result<(Vec<IngestedImage>, Vec<IngestedSurveyImage>), IngestError> {
+) -> Result<WrittenImages, IngestError> {
     // The images: copied into images/, or referenced where they are, relative to the final
     // directory (a sibling of the staging directory, so the same relative path).
     let final_dir = cfg
@@ -1240,6 +1491,8 @@ fn write_session(
         .fold(f64::INFINITY, f64::min);
     let mut survey_images = Vec::new();
     let mut survey_entries = (Vec::new(), Vec::new());
+    // Each entry's source file, in the entries' order.
+    let mut survey_sources = (Vec::new(), Vec::new());
     for photo in survey {
         let before = taken_s(photo).is_none_or(|t| t < first_s);
         // Their own folder when copied: survey and card files may share a name.
@@ -1256,8 +1509,10 @@ fn write_session(
         };
         if before {
             survey_entries.0.push(entry);
+            survey_sources.0.push(photo.path.clone());
         } else {
             survey_entries.1.push(entry);
+            survey_sources.1.push(photo.path.clone());
         }
         survey_images.push(IngestedSurveyImage {
             file,
@@ -1266,6 +1521,7 @@ fn write_session(
             before_session: before,
         });
     }
+    let mut sources: Vec<PathBuf> = survey_sources.0;
     entries.append(&mut survey_entries.0);
     for ((pair, photo), &scale) in matched.iter().zip(scales) {
         let file = place(photo, "images")?;
@@ -1279,6 +1535,7 @@ fn write_session(
             world_from_head: None,
             exposure_scale: (scale != 1.0).then_some(scale),
         });
+        sources.push(photo.path.clone());
         images.push(IngestedImage {
             file,
             card_file: photo.path.clone(),
@@ -1290,6 +1547,7 @@ fn write_session(
         });
     }
     entries.append(&mut survey_entries.1);
+    sources.append(&mut survey_sources.1);
     // The scan and what comes with it, or the rig's ideal shape.
     let geometry = match shape {
         Shape::Scan { path, units, files } => {
@@ -1361,15 +1619,19 @@ fn write_session(
         standard: parts.standard,
         geometry,
         roi: rig.file.roi,
-        known: Default::default(),
+        known: parts.known,
         registration,
     };
     Session::write_file(staging, &session).map_err(|e| IngestError::Input {
         path: staging.join("session.toml"),
         problem: skinbrdf_core::error_text(&e),
     })?;
-    Ok((images, survey_images))
+    Ok((images, survey_images, sources))
 }
+
+/// The images written: the card's, the survey's, and every entry's source file in the
+/// session's order.
+type WrittenImages = (Vec<IngestedImage>, Vec<IngestedSurveyImage>, Vec<PathBuf>);
 
 /// Where `--copy` puts the survey images inside the session.
 pub const SURVEY_IMAGES_DIR: &str = "images/survey";

@@ -3,14 +3,20 @@
 //! session's superpixels, is written as `focal_guess_px` and reported with its source; it is
 //! within 1 % of the synthetic scene's true focal length. With a calibration file no guess is
 //! made.
+//!
+//! A rig that states the camera (`[camera]`): its focal length is where the calibration starts
+//! (the files' own value noted where they differ), its calibration is the session's, a stated
+//! image size other than the photographs' is refused by the rig's key, and a `--camera` file
+//! wins over it, which the report says.
 
 use std::path::{Path, PathBuf};
 
 use skinbrdf_core::CameraModel;
 use skinbrdf_ingest::focal::{focal_guess_px, FocalGuessSource};
-use skinbrdf_ingest::{ingest, IngestConfig};
+use skinbrdf_ingest::ingest::CameraSource;
+use skinbrdf_ingest::{ingest, IngestConfig, IngestError};
 use skinbrdf_raw::ExposureMeta;
-use skinbrdf_session::{CameraSpec, Session};
+use skinbrdf_session::{CameraSpec, Rig, RigCamera, Session};
 use skinbrdf_synth::studio::{CAMERA_FILE, STUDIO_DIR};
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
@@ -140,4 +146,110 @@ fn a_synthetic_card_gives_the_scenes_focal_length() {
     let d = dir.path().join("long");
     let (st, truth) = studio(&d, scene, (240, 160));
     check(&d, &st, truth, "long");
+}
+
+/// The studio's measured rig with `camera` stated, written beside it; returns its path.
+fn rig_with_camera(studio: &Path, name: &str, camera: RigCamera) -> PathBuf {
+    let mut file = Rig::load(&studio.join("rig-measured.toml"))
+        .expect("measured rig")
+        .file;
+    file.camera = Some(camera);
+    let p = studio.join(name);
+    Rig::write_file(&p, &file).expect("write the rig");
+    p
+}
+
+#[test]
+#[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
+fn a_rig_states_the_camera_and_a_calibration_file_wins_over_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let scene = Scene::load("default").expect("default scene");
+    let (st, truth) = studio(dir.path(), scene, (200, 133));
+
+    // A stated focal length 20 % off the files' (as a studio's note of another lens would
+    // be): the calibration starts from it, and the report notes the files' value.
+    let stated = 1.2 * truth;
+    let rig = rig_with_camera(
+        &st,
+        "rig-focal.toml",
+        RigCamera::ToBeCalibrated {
+            width_px: None,
+            height_px: None,
+            focal_guess_px: Some(stated),
+        },
+    );
+    let mut cfg = config(&st, dir.path().join("focal"));
+    cfg.rig = rig.clone();
+    let r = ingest(&cfg).expect("ingest with the rig's focal length");
+    let g = r.focal_guess.clone().expect("a guess");
+    assert_eq!(g.source, FocalGuessSource::Rig);
+    assert_eq!(g.focal_px, stated);
+    assert!(g.notes.iter().any(|n| n.contains("the files give")), "{g}");
+    assert_eq!(r.camera, CameraSource::ToBeCalibrated);
+    let session = Session::load(dir.path().join("focal")).expect("the session loads");
+    assert!(matches!(
+        session.file.camera,
+        CameraSpec::ToBeCalibrated { focal_guess_px: Some(f), .. } if f == stated
+    ));
+
+    // A calibration file wins over the rig's camera, and the report says so.
+    cfg.out_dir = dir.path().join("file-wins");
+    cfg.camera = Some(st.join(CAMERA_FILE));
+    let r = ingest(&cfg).expect("ingest with a calibration file");
+    assert!(matches!(r.camera, CameraSource::File { .. }));
+    assert_eq!(r.camera_notes.len(), 1, "{:?}", r.camera_notes);
+    assert!(
+        r.camera_notes[0].contains("--camera") && r.camera_notes[0].contains("the rig's [camera]"),
+        "{}",
+        r.camera_notes[0]
+    );
+
+    // The rig's calibration: the session's camera.
+    let text = std::fs::read_to_string(st.join(CAMERA_FILE)).expect("camera.toml");
+    let mut table: toml::Table = toml::from_str(&text).expect("toml");
+    let spec: CameraSpec = table
+        .remove("camera")
+        .expect("[camera]")
+        .try_into()
+        .expect("camera");
+    let model = *spec.model().expect("calibrated");
+    let rig = rig_with_camera(&st, "rig-calibrated.toml", RigCamera::Calibrated(model));
+    let mut cfg = config(&st, dir.path().join("calibrated"));
+    cfg.rig = rig.clone();
+    let r = ingest(&cfg).expect("ingest with the rig's calibration");
+    assert_eq!(r.camera, CameraSource::Rig { path: rig });
+    assert_eq!(r.focal_guess, None);
+    let session = Session::load(dir.path().join("calibrated")).expect("the session loads");
+    assert_eq!(session.file.camera, CameraSpec::Calibrated(model));
+
+    // A stated size that is not the photographs': refused by the rig's key.
+    let rig = rig_with_camera(
+        &st,
+        "rig-size.toml",
+        RigCamera::ToBeCalibrated {
+            width_px: Some(400),
+            height_px: Some(266),
+            focal_guess_px: None,
+        },
+    );
+    let mut cfg = config(&st, dir.path().join("size"));
+    cfg.rig = rig.clone();
+    match ingest(&cfg) {
+        Err(e @ IngestError::Invalid { .. }) => {
+            let text = e.to_string();
+            assert!(
+                text.starts_with(&format!("{}: `camera.width_px`: ", rig.display())),
+                "{text}"
+            );
+            assert!(
+                text.contains("400x266") && text.contains("200x133"),
+                "{text}"
+            );
+        }
+        other => panic!(
+            "expected the rig's size refused, got {:?}",
+            other.map(|_| ())
+        ),
+    }
+    assert!(!dir.path().join("size").exists());
 }

@@ -104,7 +104,7 @@ pub enum GltfProblem {
         mode: String,
     },
     /// A position is NaN or infinite (the specification forbids it).
-    #[error("{at}: POSITION {vertex} is not finite ({value:?})")]
+    #[error("{at}: POSITION {vertex} is not finite ({}, {}, {})", value[0], value[1], value[2])]
     NonFinitePosition {
         /// Mesh and primitive.
         at: String,
@@ -406,6 +406,44 @@ fn load_buffers(
     Ok(out)
 }
 
+/// A component type's name in the glTF specification.
+fn data_type_name(t: DataType) -> &'static str {
+    match t {
+        DataType::I8 => "BYTE",
+        DataType::U8 => "UNSIGNED_BYTE",
+        DataType::I16 => "SHORT",
+        DataType::U16 => "UNSIGNED_SHORT",
+        DataType::U32 => "UNSIGNED_INT",
+        DataType::F32 => "FLOAT",
+    }
+}
+
+/// An accessor type's name in the glTF specification.
+fn dimensions_name(d: Dimensions) -> &'static str {
+    match d {
+        Dimensions::Scalar => "SCALAR",
+        Dimensions::Vec2 => "VEC2",
+        Dimensions::Vec3 => "VEC3",
+        Dimensions::Vec4 => "VEC4",
+        Dimensions::Mat2 => "MAT2",
+        Dimensions::Mat3 => "MAT3",
+        Dimensions::Mat4 => "MAT4",
+    }
+}
+
+/// A primitive mode's name in the glTF specification.
+fn mode_name(m: Mode) -> &'static str {
+    match m {
+        Mode::Points => "POINTS",
+        Mode::Lines => "LINES",
+        Mode::LineLoop => "LINE_LOOP",
+        Mode::LineStrip => "LINE_STRIP",
+        Mode::Triangles => "TRIANGLES",
+        Mode::TriangleStrip => "TRIANGLE_STRIP",
+        Mode::TriangleFan => "TRIANGLE_FAN",
+    }
+}
+
 /// Checks an accessor's type and that its bytes lie inside its buffer view and buffer (the
 /// `gltf` crate's readers assume a valid file and panic or stop short otherwise).
 fn check_accessor(
@@ -416,13 +454,14 @@ fn check_accessor(
     count: Option<usize>,
 ) -> Result<(), String> {
     if !types.contains(&acc.data_type()) || !dims.contains(&acc.dimensions()) {
+        let names = |v: Vec<&str>| v.join(" or ");
         return Err(format!(
-            "accessor {} is {:?} {:?}, expected one of {:?} and {:?}",
+            "accessor {} is {} {}, expected {} and {}",
             acc.index(),
-            acc.data_type(),
-            acc.dimensions(),
-            types,
-            dims
+            data_type_name(acc.data_type()),
+            dimensions_name(acc.dimensions()),
+            names(types.iter().map(|&t| data_type_name(t)).collect()),
+            names(dims.iter().map(|&d| dimensions_name(d)).collect()),
         ));
     }
     if let Some(n) = count {
@@ -577,7 +616,7 @@ pub(crate) fn read_gltf(path: &Path, detail: Detail) -> Result<GltfData, MeshErr
                     path,
                     GltfProblem::UnsupportedMode {
                         at,
-                        mode: format!("{:?}", prim.mode()),
+                        mode: mode_name(prim.mode()).to_string(),
                     },
                 ));
             }
@@ -1386,7 +1425,7 @@ mod tests {
         assert!(e.to_string().contains("mesh 0 `quad`, primitive 0"), "{e}");
 
         // Unsupported primitive modes.
-        for (mode, name) in [(0, "Points"), (5, "TriangleStrip")] {
+        for (mode, name) in [(0, "POINTS"), (5, "TRIANGLE_STRIP")] {
             let m = quad_glb(&png_2x2(), |j| {
                 j["meshes"][0]["primitives"][0]["mode"] = json!(mode)
             });

@@ -55,6 +55,18 @@ pub enum NormalMethod {
     PlanarFitAuto,
 }
 
+impl std::fmt::Display for NormalMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Vertex => write!(f, "vertex normals"),
+            Self::PlanarFit { radius_m } => {
+                write!(f, "plane fit over {:.2} mm", radius_m * 1e3)
+            }
+            Self::PlanarFitAuto => write!(f, "plane fit, radius from the scan's noise"),
+        }
+    }
+}
+
 /// The scan's noise and the fit radius it suggests.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct NoiseEstimate {

@@ -90,7 +90,8 @@ impl MeshReport {
         let mut parts = Vec::new();
         let mut add = |p: &Problem, what: &str| {
             if p.count > 0 {
-                parts.push(format!("{} {what} (e.g. {:?})", p.count, p.examples));
+                let examples: Vec<String> = p.examples.iter().map(usize::to_string).collect();
+                parts.push(format!("{} {what} (e.g. {})", p.count, examples.join(", ")));
             }
         };
         add(&self.non_finite_vertices, "non-finite vertices");

@@ -529,12 +529,12 @@ fn demo_markdown(
         md.push_str("\n**Out of bounds:**\n\n");
         for (st, m) in v {
             md.push_str(&format!(
-                "- {}: {} = {} {} (bound {:?})\n",
+                "- {}: {} = {} {} (bound {})\n",
                 st.stage.name(),
                 m.name,
                 m.value,
                 m.unit,
-                m.bound
+                m.bound.map_or("none".to_string(), |b| b.to_string())
             ));
         }
     }

@@ -6,7 +6,8 @@
 //!
 //! Then the refusals: an image exposed unlike the reference-standard image, a camera body
 //! swapped during the session, a truncated raw file and a raw file with a wrong extension are
-//! each a precise error naming the file, and nothing is written.
+//! each a precise error naming the file, as is a rig that places nothing (by its keys), and
+//! nothing is written.
 //!
 //! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
 
@@ -325,20 +326,43 @@ fn damaged_and_misnamed_raw_files_are_refused_by_name() {
     assert_nothing_written(&out);
     std::fs::write(&files[3], &bytes).expect("restore");
 
-    // The ingest then succeeds. A rig that states no placement at all gives a session that
-    // says the survey has no world origin.
+    // A rig that states no placement at all is refused by its own keys: no world origin, and
+    // flash and standard targets that only their layouts place; nothing is written.
     let studio = s.join(STUDIO_DIR);
     let measured = skinbrdf_session::Rig::load(&studio.join("rig-measured.toml")).expect("rig");
+    let bare = studio.join("rig-bare.toml");
     skinbrdf_session::Rig::write_file(
-        &studio.join("rig-bare.toml"),
+        &bare,
         &skinbrdf_session::Rig::without_placements(&measured.file),
     )
     .expect("bare rig");
-    let r = ingest(&ingest_config(&s, &out, "rig-bare.toml")).expect("ingest");
-    assert!(r.unplaced_targets > 0 && r.placed_targets == 0);
-    let err = Session::load(&out).expect_err("an origin needed");
-    assert!(err.has_field("targets.unplaced"), "{err}");
-    assert!(err.to_string().contains("world's origin"), "{err}");
+    match ingest(&ingest_config(&s, &out, "rig-bare.toml")) {
+        Err(IngestError::Rig { path, source }) => {
+            assert_eq!(path, bare);
+            assert!(source.has_field("targets"), "{source}");
+            assert!(source.to_string().contains("world's origin"), "{source}");
+            assert!(
+                source
+                    .problems
+                    .iter()
+                    .all(|p| p.file == bare && !p.problem.contains("known.")),
+                "{source}"
+            );
+            assert!(
+                source
+                    .problems
+                    .iter()
+                    .any(|p| p.field.ends_with(".corners_m") && p.problem.contains("flash")),
+                "{source}"
+            );
+        }
+        other => panic!("expected the bare rig refused, got {:?}", other.map(|_| ())),
+    }
+    assert_nothing_written(&out);
+
+    // The ingest then succeeds.
+    ingest(&ingest_config(&s, &out, "rig-measured.toml")).expect("ingest");
+    Session::load(&out).expect("the session loads");
 }
 
 #[test]

@@ -143,3 +143,45 @@ pub enum Diagnostic {
         reason: String,
     },
 }
+
+impl std::fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let list = |v: &[String]| v.join(", ");
+        match self {
+            Self::GrazingTarget {
+                target,
+                angle_deg,
+                used,
+            } => write!(
+                f,
+                "target {target} seen at {angle_deg:.1} degrees from its normal ({})",
+                if *used { "used" } else { "not used" }
+            ),
+            Self::OutlierTargets { targets } => write!(
+                f,
+                "target(s) {} disagree with the others and were left out",
+                list(&targets.iter().map(u32::to_string).collect::<Vec<_>>())
+            ),
+            Self::IllConditioned { condition_number } => write!(
+                f,
+                "poorly conditioned (condition number {condition_number:.3e}): the targets are \
+                 nearly planar, collinear or small in the field"
+            ),
+            Self::SingleTarget => write!(
+                f,
+                "one target only: its pose may be ambiguous (a planar flip)"
+            ),
+            Self::NearCollinear { spread_ratio } => write!(
+                f,
+                "the points are nearly collinear (spread ratio {spread_ratio:.3}): the rotation \
+                 about their line is weakly determined"
+            ),
+            Self::OccludedCorners { target, corners } => write!(
+                f,
+                "target {target}: corner(s) {} partly hidden and not used",
+                list(&corners.iter().map(usize::to_string).collect::<Vec<_>>())
+            ),
+            Self::Skipped { reason } => write!(f, "skipped: {reason}"),
+        }
+    }
+}

@@ -522,6 +522,14 @@ impl SurveyIssue {
     }
 }
 
+/// Target ids in words: `3, 7, 12`.
+fn id_list(ids: &[u32]) -> String {
+    ids.iter()
+        .map(u32::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 impl std::fmt::Display for SurveyIssue {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -555,7 +563,7 @@ impl std::fmt::Display for SurveyIssue {
                 shift_mm,
                 chi2,
             } => {
-                write!(f, "target(s) {ids:?} moved during the session: ")?;
+                write!(f, "target(s) {} moved during the session: ", id_list(ids))?;
                 match (shift_mm, chi2, disagreeing_images.first()) {
                     (Some(mm), Some(c), Some(first)) => write!(
                         f,
@@ -595,9 +603,10 @@ impl std::fmt::Display for SurveyIssue {
                 linked_images,
             } => write!(
                 f,
-                "target(s) {ids:?}: seen only in {} ({linked_images} of them linked to the \
+                "target(s) {}: seen only in {} ({linked_images} of them linked to the \
                  rest of the session): too few targets in common with the images that see \
                  placed targets; photograph them together with placed ones",
+                id_list(ids),
                 images.join(", ")
             ),
             Self::TwoPlaces {
@@ -621,7 +630,11 @@ impl std::fmt::Display for SurveyIssue {
                 variance_ratio,
             } => {
                 let ids: Vec<u32> = targets.iter().map(|t| t.0).collect();
-                write!(f, "sheet `{sheet}` (targets {ids:?}) is not rigid: ")?;
+                write!(
+                    f,
+                    "sheet `{sheet}` (targets {}) is not rigid: ",
+                    id_list(&ids)
+                )?;
                 match (worst_px, variance_ratio) {
                     (Some(px), _) => write!(f, "its layout leaves corners up to {px:.1} px off")?,
                     (_, Some(r)) => write!(
@@ -2771,8 +2784,11 @@ mod tests {
             flash: skinbrdf_session::rig::RigFlash {
                 diameter_m: 0.082,
                 light_centre_m: DVec3::ZERO,
+                light_position_m: None,
+                world_from_flash: None,
             },
             standard: None,
+            camera: None,
             roi: None,
             geometry: None,
         };

@@ -289,7 +289,11 @@ pub fn fit_correspondences(
     {
         return Err(RegisterError::InvalidParameter {
             field: "align config",
-            reason: format!("thresholds must be positive and finite: {cfg:?}"),
+            reason: format!(
+                "thresholds must be positive and finite: max_target_residual_mm {}, \
+                 reject_factor {}",
+                cfg.max_target_residual_mm, cfg.reject_factor
+            ),
         });
     }
     let mut kept: Vec<Correspondence> = pairs.to_vec();

@@ -362,7 +362,17 @@ pub fn find_scan_targets(
     if !valid {
         return Err(RegisterError::InvalidParameter {
             field: "scan target config",
-            reason: format!("out of range: {cfg:?}"),
+            reason: format!(
+                "out of range: overview_views {} (> 0), overview_px {} and detail_px {} (>= 64), \
+                 detail_mm_per_px {} (> 0), overview_hfov_deg {} (1 to 150), max_size_error {} \
+                 (> 0)",
+                cfg.overview_views,
+                cfg.overview_px,
+                cfg.detail_px,
+                cfg.detail_mm_per_px,
+                cfg.overview_hfov_deg,
+                cfg.max_size_error
+            ),
         });
     }
     let bvh = MeshBvh::build(&scan.mesh, BuildQuality::Medium)?;

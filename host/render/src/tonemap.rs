@@ -87,9 +87,9 @@ pub fn compose_side_by_side(
         return Err(RenderError::InvalidConfig {
             field: "panels",
             reason: format!(
-                "panel sizes differ: {:?} vs {:?}",
-                (w, h),
-                right.dimensions()
+                "panel sizes differ: {w}x{h} vs {}x{}",
+                right.dimensions().0,
+                right.dimensions().1
             ),
         });
     }

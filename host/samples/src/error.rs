@@ -12,7 +12,7 @@ pub enum SamplesError {
         source: std::io::Error,
     },
     /// The file does not start with the sample-file magic.
-    #[error("{path}: not a skinbrdf sample file (first bytes {found:02x?}, expected {expected:02x?})", path = path.display())]
+    #[error("{path}: not a skinbrdf sample file (first bytes {}, expected {})", hex(found), hex(expected), path = path.display())]
     BadMagic {
         /// The file.
         path: PathBuf,
@@ -80,4 +80,13 @@ pub enum SamplesError {
         /// The offending wavelength.
         wavelength_nm: f64,
     },
+}
+
+/// Bytes as hexadecimal pairs (`53 4b 42 ...`), for messages.
+fn hex(bytes: &[u8]) -> String {
+    bytes
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }

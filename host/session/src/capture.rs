@@ -155,6 +155,19 @@ pub enum ShotOutcome {
     Aborted,
 }
 
+impl ShotOutcome {
+    /// The outcome in words, for messages.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Self::Ok => "ok",
+            Self::MissingXsync => "no X-sync (the camera did not fire)",
+            Self::MissingFlash => "no flash seen (misfire)",
+            Self::FlashNotReady => "the flash was not ready",
+            Self::Aborted => "aborted",
+        }
+    }
+}
+
 /// One exposure, as the controller reported it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Exposure {

@@ -83,7 +83,7 @@ impl SessionErrors {
 
 impl fmt::Display for SessionErrors {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} problem(s) in the session:", self.problems.len())?;
+        write!(f, "{} problem(s):", self.problems.len())?;
         for p in &self.problems {
             write!(f, "\n  - {p}")?;
         }

@@ -55,7 +55,7 @@ pub use load::{
     TARGET_SIZE_REL_TOL,
 };
 pub use parse::toml_unknown_keys;
-pub use rig::{LayoutFile, Rig, RigFile, SessionParts, RIG_FORMAT_VERSION};
+pub use rig::{LayoutFile, Rig, RigCamera, RigFile, SessionParts, RIG_FORMAT_VERSION};
 pub use truth::{
     ImageTruth, PlacementTruth, RenderTruth, SheetTruth, SurfaceTruth, TargetTruth, Truth,
     TRUTH_FORMAT_VERSION,

@@ -292,7 +292,7 @@ fn positive(v: f64) -> bool {
     v.is_finite() && v > 0.0
 }
 
-fn check_pose(p: &Pose, file: &Path, field: &str, errs: &mut SessionErrors) {
+pub(crate) fn check_pose(p: &Pose, file: &Path, field: &str, errs: &mut SessionErrors) {
     if !p.is_finite() {
         errs.push(file, field, "pose has a non-finite component");
     } else if (p.rotation.length() - 1.0).abs() > 1e-6 {
@@ -798,7 +798,10 @@ fn validate(
             errs.push(
                 file,
                 "standard.size_m",
-                format!("must be positive, got {:?}", st.size_m),
+                format!(
+                    "must be positive, got {} x {} m",
+                    st.size_m[0], st.size_m[1]
+                ),
             );
         }
     }
@@ -863,7 +866,10 @@ fn validate(
             errs.push(
                 file,
                 "known.calibration_c",
-                format!("must be positive and finite, got {c:?}"),
+                format!(
+                    "must be positive and finite, got [{}, {}, {}]",
+                    c[0], c[1], c[2]
+                ),
             );
         }
     }

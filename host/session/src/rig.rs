@@ -33,10 +33,19 @@
 //! [flash]
 //! diameter_m = 0.082
 //! light_centre_m = [0.0, 0.0, 0.0]   # the emitting point in the flash frame (default: origin)
+//! # light_position_m = [0.61, 1.02, 0.05]   (measured: the emitting point, world frame)
+//! # world_from_flash = { rotation = [x, y, z, w], translation_m = [x, y, z] }   (measured)
 //!
 //! [standard]
 //! brdf = { model = "lambertian", albedo = [0.99, 0.99, 0.99] }
 //! size_m = [0.12, 0.12]
+//! # world_from_standard = { rotation = [x, y, z, w], translation_m = [x, y, z] }   (fixed, measured)
+//!
+//! # [camera]                      # optional: as session.toml's [camera]
+//! # status = "to-be-calibrated"
+//! # focal_guess_px = 8700.0       (where the calibration starts; the loaded images' pixels)
+//! # or status = "calibrated" with width_px, height_px, fx_px, fy_px, cx_px, cy_px and
+//! # [camera.distortion] k1, k2, k3, p1, p2
 //!
 //! # [geometry]                    # optional: an ideal sample instead of a scanned head
 //! # kind = "sphere"                (or "cylinder" with axis and length_m), head frame
@@ -48,9 +57,33 @@
 //! radius_m = 0.03
 //! ```
 //!
+//! # What the studio knows without targets
+//!
+//! A studio may know where something is without the targets that would locate it:
+//!
+//! * `[flash] light_position_m`: the flash's emitting point, measured in the world frame (the
+//!   frame the placed reference targets define), metres; or `[flash] world_from_flash`, the
+//!   flash's whole pose (the emitting point is then `light_centre_m` in it). Either lets the
+//!   flash go without its ring of targets (group `flash`): the session states it as
+//!   `known.light_position_m` / `known.world_from_flash` and the flash triangulation is
+//!   skipped. Without either, the flash is located from its ring's placed targets in the
+//!   light-position images; locating it from the light-position images without a ring (its
+//!   diffuser's disc seen from several posed cameras) is not supported.
+//! * `[standard] world_from_standard`: the standard's fixed pose in the world frame, so that
+//!   it needs no frame of targets (group `standard`): the session's
+//!   `known.world_from_standard`.
+//! * `[camera]`: the camera as session.toml's `[camera]` table states it: a calibration
+//!   (`status = "calibrated"`), or a camera to be calibrated with a starting focal length
+//!   (`status = "to-be-calibrated"`, `focal_guess_px`, in the pixels of the images as the
+//!   session loads them: 2x2 superpixels for camera raw files). The image size is optional
+//!   there (ingest reads it from the photographs; a stated one must agree). A calibration file
+//!   given to `skinbrdf ingest --camera` wins over it.
+//!
 //! [`Rig::load`] checks every field and reports every problem at once ([`SessionErrors`],
 //! each naming the file and the field); [`Rig::session_parts`] turns a rig into the
-//! `session.toml` sections (placed targets in their group's list, the rest unplaced).
+//! `session.toml` sections (placed targets in their group's list, the rest unplaced, the
+//! known poses under `[known]`); [`Rig::check_needs`] says what a session that states no pose
+//! lacks to run every stage, naming the rig's keys.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -58,14 +91,14 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use skinbrdf_brdf::BrdfModel;
-use skinbrdf_core::Pose;
+use skinbrdf_core::{CameraModel, Pose};
 
 use crate::error::SessionErrors;
 use crate::format::{
-    FlashSpec, GeometrySpec, RegionOfInterest, StandardSpec, Target, TargetGroup, TargetLayouts,
-    UnplacedTarget, TAG_FAMILY,
+    FlashSpec, GeometrySpec, KnownQuantities, RegionOfInterest, StandardSpec, Target, TargetGroup,
+    TargetLayouts, UnplacedTarget, TAG_FAMILY,
 };
-use crate::load::{check_id_and_size, check_target};
+use crate::load::{check_id_and_size, check_pose, check_target};
 
 /// Current `rig.toml` format version.
 pub const RIG_FORMAT_VERSION: u32 = 1;
@@ -128,6 +161,20 @@ pub struct RigFlash {
     /// The emitting point in the flash frame.
     #[serde(default)]
     pub light_centre_m: DVec3,
+    /// The emitting point as measured in the world frame, metres: the flash needs no targets
+    /// (`known.light_position_m`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_position_m: Option<DVec3>,
+    /// The flash's pose as measured in the world frame (`known.world_from_flash`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world_from_flash: Option<Pose>,
+}
+
+impl RigFlash {
+    /// True when the rig states where the flash is (no triangulation needed).
+    pub fn located(&self) -> bool {
+        self.light_position_m.is_some() || self.world_from_flash.is_some()
+    }
 }
 
 /// The reflectance standard as its certificate gives it.
@@ -138,6 +185,63 @@ pub struct RigStandard {
     pub brdf: BrdfModel,
     /// Width and height of the reflecting area, metres.
     pub size_m: [f64; 2],
+    /// Its fixed pose in the world frame, as measured: it needs no targets
+    /// (`known.world_from_standard`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub world_from_standard: Option<Pose>,
+}
+
+/// The camera as the studio knows it (`[camera]`): session.toml's `[camera]`, except that a
+/// camera to be calibrated need not state the image size (ingest reads it from the photographs).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "status", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum RigCamera {
+    /// Intrinsics and distortion known (the [`CameraModel`] fields).
+    Calibrated(CameraModel),
+    /// To be calibrated from the session's targets, optionally from a stated focal length.
+    ToBeCalibrated {
+        /// Image width in pixels, as the session loads the images (optional).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        width_px: Option<u32>,
+        /// Image height in pixels, as the session loads the images (optional).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        height_px: Option<u32>,
+        /// Where the calibration's focal length starts, pixels of the loaded images.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        focal_guess_px: Option<f64>,
+    },
+}
+
+impl RigCamera {
+    /// The image size it states, if any.
+    pub fn size_px(&self) -> Option<(u32, u32)> {
+        match *self {
+            Self::Calibrated(m) => Some((m.width_px, m.height_px)),
+            Self::ToBeCalibrated {
+                width_px: Some(w),
+                height_px: Some(h),
+                ..
+            } => Some((w, h)),
+            Self::ToBeCalibrated { .. } => None,
+        }
+    }
+}
+
+impl std::fmt::Display for RigCamera {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Calibrated(m) => write!(
+                f,
+                "calibrated, {}x{} px, fx {:.1} px",
+                m.width_px, m.height_px, m.fx_px
+            ),
+            Self::ToBeCalibrated {
+                focal_guess_px: Some(g),
+                ..
+            } => write!(f, "to be calibrated from focal_guess_px {g:.1}"),
+            Self::ToBeCalibrated { .. } => write!(f, "to be calibrated"),
+        }
+    }
 }
 
 /// A studio's rig file (see the module docs).
@@ -163,6 +267,9 @@ pub struct RigFile {
     /// The reflectance standard.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub standard: Option<RigStandard>,
+    /// The camera, when the studio knows its calibration or a starting focal length.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera: Option<RigCamera>,
     /// The region of the subject to measure, head frame (where the headdress sits on the
     /// forehead fixes it); `None`: the whole scan.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -189,7 +296,7 @@ pub struct Rig {
 }
 
 /// What a rig gives a session: the placed targets in their sections, the unplaced ones, the
-/// flash and the standard.
+/// flash, the standard and what it knows of their poses.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SessionParts {
     /// Reference and headdress targets, and every unplaced target.
@@ -198,6 +305,9 @@ pub struct SessionParts {
     pub flash: FlashSpec,
     /// The standard with its placed targets.
     pub standard: Option<StandardSpec>,
+    /// The light position, flash pose and standard pose the rig states (`[known]`); the rest
+    /// unset.
+    pub known: KnownQuantities,
 }
 
 impl RigFile {
@@ -341,11 +451,150 @@ impl Rig {
             }
         }
         targets.unplaced = unplaced;
+        let known = KnownQuantities {
+            light_position_m: self.file.flash.light_position_m,
+            world_from_flash: self.file.flash.world_from_flash,
+            world_from_standard: self
+                .file
+                .standard
+                .as_ref()
+                .and_then(|s| s.world_from_standard),
+            ..KnownQuantities::default()
+        };
         SessionParts {
             targets,
             flash,
             standard,
+            known,
         }
+    }
+
+    /// What a session that states no camera or head pose (as `skinbrdf ingest` writes one)
+    /// needs of its rig for every stage to run, each problem naming this file and the key to
+    /// state: reference targets with at least one placed (the world's origin), headdress
+    /// targets, a flash located by its ring's placed targets or by a stated light position or
+    /// pose, and a reflectance standard located by its frame's placed targets or a stated pose.
+    /// Flash and standard targets must be placed (the placement survey places reference and
+    /// headdress targets only), also where a stated pose makes them unnecessary.
+    pub fn check_needs(&self) -> Result<(), SessionErrors> {
+        let mut errs = SessionErrors::default();
+        let path = self.path.as_path();
+        let f = &self.file;
+        let reference = self.declarations(TargetGroup::Reference);
+        if reference.is_empty() {
+            errs.push(
+                path,
+                "targets",
+                "no target of group \"reference\": the camera poses (and the camera's \
+                 calibration) come from the reference structure's targets",
+            );
+        } else if !reference.iter().any(|d| d.placed) {
+            errs.push(
+                path,
+                "targets",
+                "no reference target has a placement to fix the world's origin: state the \
+                 corners_m of at least one reference target, or a reference sheet's \
+                 group_from_sheet",
+            );
+        }
+        if self.declarations(TargetGroup::Headdress).is_empty() {
+            errs.push(
+                path,
+                "targets",
+                "no target of group \"headdress\": head tracking follows the head by the \
+                 headdress's targets",
+            );
+        }
+        // The placement survey refuses unplaced flash and standard targets (their layouts
+        // place them), also where a stated pose makes them unnecessary.
+        let flash = self.declarations(TargetGroup::Flash);
+        if !f.flash.located() && flash.is_empty() {
+            errs.push(
+                path,
+                "flash",
+                "no target of group \"flash\" and no light_position_m: the flash is located \
+                 from its ring's targets in the light-position images; state the measured \
+                 light position (light_position_m, world frame, metres) or the ring's targets \
+                 (group \"flash\", placed in the flash frame). The light-position images \
+                 alone, without the ring, do not locate it",
+            );
+        }
+        let unplaced_flash = if f.flash.located() {
+            "a flash target without a placement: the rig states where the flash is, so the \
+             ring's targets are not needed; leave it out, or state its placement in the flash \
+             frame (the survey places reference and headdress targets only)"
+        } else {
+            "a flash target without a placement: the ring's targets are placed in the flash \
+             frame by their printed layout (the survey places reference and headdress targets \
+             only); state it, or the measured light position ([flash] light_position_m)"
+        };
+        for d in flash.iter().filter(|d| !d.placed) {
+            errs.push(path, d.placement_key(), unplaced_flash);
+        }
+        let standard = self.declarations(TargetGroup::Standard);
+        match &f.standard {
+            None => errs.push(
+                path,
+                "standard",
+                "missing: the radiometric calibration (C) needs the reflectance standard (its \
+                 brdf and size_m)",
+            ),
+            Some(s) if s.world_from_standard.is_none() && standard.is_empty() => errs.push(
+                path,
+                "standard",
+                "no target of group \"standard\" and no world_from_standard: the standard is \
+                 located from the targets framing it in the standard-position images; state \
+                 its measured pose (world_from_standard, world frame) or its frame's targets \
+                 (group \"standard\", placed in the standard frame)",
+            ),
+            Some(_) => {}
+        }
+        let unplaced_standard = if f
+            .standard
+            .as_ref()
+            .is_some_and(|s| s.world_from_standard.is_some())
+        {
+            "a standard target without a placement: the rig states the standard's pose, so \
+             its frame's targets are not needed; leave it out, or state its placement in the \
+             standard frame (the survey places reference and headdress targets only)"
+        } else {
+            "a standard target without a placement: the frame's targets are placed in the \
+             standard frame by their printed layout (the survey places reference and headdress \
+             targets only); state it, or the standard's measured pose ([standard] \
+             world_from_standard)"
+        };
+        for d in standard.iter().filter(|d| !d.placed) {
+            errs.push(path, d.placement_key(), unplaced_standard);
+        }
+        errs.into_result(())
+    }
+
+    /// Where the rig declares a group's targets: each sheet with a layout file and each target
+    /// listed on its own, with whether it places them.
+    fn declarations(&self, group: TargetGroup) -> Vec<Declaration> {
+        let sheets = self
+            .file
+            .sheets
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.group == group && s.layout.is_some())
+            .map(|(i, s)| Declaration {
+                key: format!("sheets[{i}]"),
+                sheet: true,
+                placed: s.group_from_sheet.is_some(),
+            });
+        let targets = self
+            .file
+            .targets
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.group == group)
+            .map(|(i, t)| Declaration {
+                key: format!("targets[{i}]"),
+                sheet: false,
+                placed: t.corners_m.is_some(),
+            });
+        sheets.chain(targets).collect()
     }
 
     /// The same rig without any placement (what a studio knows before the survey).
@@ -358,6 +607,28 @@ impl Rig {
             t.corners_m = None;
         }
         f
+    }
+}
+
+/// A sheet or a target of the rig file, for [`Rig::check_needs`].
+struct Declaration {
+    /// `sheets[i]` or `targets[i]`.
+    key: String,
+    /// A sheet (placed by `group_from_sheet`) or a target (by `corners_m`).
+    sheet: bool,
+    /// Whether the rig places it.
+    placed: bool,
+}
+
+impl Declaration {
+    /// The key that would place it.
+    fn placement_key(&self) -> String {
+        let what = if self.sheet {
+            "group_from_sheet"
+        } else {
+            "corners_m"
+        };
+        format!("{}.{what}", self.key)
     }
 }
 
@@ -395,6 +666,20 @@ fn validate(
     if !f.flash.light_centre_m.is_finite() {
         errs.push(path, "flash.light_centre_m", "non-finite coordinate");
     }
+    if f.flash.light_position_m.is_some_and(|p| !p.is_finite()) {
+        errs.push(path, "flash.light_position_m", "non-finite coordinate");
+    }
+    if let Some(p) = &f.flash.world_from_flash {
+        check_pose(p, path, "flash.world_from_flash", errs);
+        if f.flash.light_position_m.is_some() {
+            errs.push(
+                path,
+                "flash.world_from_flash",
+                "given with light_position_m: state one of them (the emitting point, or the \
+                 flash's pose with light_centre_m the emitting point in it)",
+            );
+        }
+    }
     if let Some(s) = &f.standard {
         if let Err(e) = s.brdf.validate() {
             errs.push(path, "standard.brdf", e.to_string());
@@ -403,7 +688,35 @@ fn validate(
             errs.push(
                 path,
                 "standard.size_m",
-                format!("must be positive, got {:?}", s.size_m),
+                format!("must be positive, got {} x {} m", s.size_m[0], s.size_m[1]),
+            );
+        }
+        if let Some(p) = &s.world_from_standard {
+            check_pose(p, path, "standard.world_from_standard", errs);
+        }
+    }
+    if let Some(c) = &f.camera {
+        check_camera(c, path, errs);
+    }
+    if f.standard.is_none() {
+        let on_standard = f
+            .sheets
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.group == TargetGroup::Standard)
+            .map(|(i, _)| format!("sheets[{i}].group"))
+            .chain(
+                f.targets
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, t)| t.group == TargetGroup::Standard)
+                    .map(|(i, _)| format!("targets[{i}].group")),
+            );
+        for key in on_standard {
+            errs.push(
+                path,
+                key,
+                "`standard`, but the rig has no [standard] for the target to frame",
             );
         }
     }
@@ -548,6 +861,49 @@ fn validate(
     layouts
 }
 
+/// A stated camera: a calibration's invariants, or a positive image size (both or neither)
+/// and focal length.
+fn check_camera(c: &RigCamera, path: &Path, errs: &mut SessionErrors) {
+    match *c {
+        RigCamera::Calibrated(m) => {
+            if let Err(skinbrdf_core::CameraError::InvalidParameter { field, reason }) =
+                m.validate()
+            {
+                errs.push(path, format!("camera.{field}"), reason);
+            }
+        }
+        RigCamera::ToBeCalibrated {
+            width_px,
+            height_px,
+            focal_guess_px,
+        } => {
+            match (width_px, height_px) {
+                (Some(w), Some(h)) if w == 0 || h == 0 => errs.push(
+                    path,
+                    "camera.width_px",
+                    format!("the image size must be positive, got {w} x {h}"),
+                ),
+                (Some(_), None) | (None, Some(_)) => errs.push(
+                    path,
+                    "camera.width_px",
+                    "state both width_px and height_px, or neither (ingest reads the size from \
+                     the photographs)",
+                ),
+                _ => {}
+            }
+            if let Some(g) = focal_guess_px {
+                if !(g.is_finite() && g > 0.0) {
+                    errs.push(
+                        path,
+                        "camera.focal_guess_px",
+                        format!("must be positive and finite, got {g}"),
+                    );
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -647,8 +1003,11 @@ size_m = [0.12, 0.12]
             flash: RigFlash {
                 diameter_m: 0.08,
                 light_centre_m: DVec3::ZERO,
+                light_position_m: None,
+                world_from_flash: None,
             },
             standard: None,
+            camera: None,
             roi: None,
             geometry: None,
         };
@@ -659,6 +1018,188 @@ size_m = [0.12, 0.12]
         assert!((t.size_m - 0.0406).abs() < 1e-12);
         let centre = t.centre();
         assert!((centre - DVec3::new(0.05 * 1.015, 0.0, 1.0)).length() < 1e-12);
+    }
+
+    /// Debug formatting's marks, which a message in words never holds.
+    fn assert_in_words(text: &str) {
+        for mark in ["Some(", "None", "::", "{", "}", "[\"", "\\\""] {
+            assert!(!text.contains(mark), "`{mark}` in: {text}");
+        }
+    }
+
+    fn load_text(dir: &Path, text: &str) -> Result<Rig, SessionErrors> {
+        let p = dir.join("rig.toml");
+        std::fs::write(&p, text).expect("write");
+        Rig::load(&p)
+    }
+
+    const KNOWN: &str = r#"
+[camera]
+status = "to-be-calibrated"
+focal_guess_px = 2900.5
+"#;
+
+    #[test]
+    fn what_the_studio_knows_goes_to_the_session_and_round_trips() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let text = rig_text()
+            .replace(
+                "diameter_m = 0.082",
+                "diameter_m = 0.082\nlight_position_m = [0.6, 1.1, 0.05]",
+            )
+            .replace(
+                "size_m = [0.12, 0.12]",
+                "size_m = [0.12, 0.12]\nworld_from_standard = { rotation = [0.0, 0.0, 0.6, 0.8], translation_m = [0.1, 0.2, 0.3] }",
+            )
+            + KNOWN;
+        let rig = load_text(dir.path(), &text).expect("rig");
+        let parts = rig.session_parts();
+        assert_eq!(
+            parts.known.light_position_m,
+            Some(DVec3::new(0.6, 1.1, 0.05))
+        );
+        let standard = parts.known.world_from_standard.expect("standard pose");
+        assert_eq!(standard.translation_m, DVec3::new(0.1, 0.2, 0.3));
+        assert_eq!(
+            standard.rotation,
+            glam::DQuat::from_xyzw(0.0, 0.0, 0.6, 0.8)
+        );
+        assert_eq!(parts.known.world_from_flash, None);
+        assert_eq!(
+            rig.file.camera,
+            Some(RigCamera::ToBeCalibrated {
+                width_px: None,
+                height_px: None,
+                focal_guess_px: Some(2900.5)
+            })
+        );
+        // Stated, nothing is missing: the flash and the standard need no targets.
+        rig.check_needs()
+            .expect("the rig states what the stages need");
+        // Written and read back, the same rig.
+        let p = dir.path().join("again.toml");
+        Rig::write_file(&p, &rig.file).expect("write");
+        assert_eq!(Rig::load(&p).expect("again").file, rig.file);
+
+        // A flash pose and a calibrated camera instead.
+        let camera = r#"
+[camera]
+status = "calibrated"
+width_px = 600
+height_px = 400
+fx_px = 2900.0
+fy_px = 2900.0
+cx_px = 299.5
+cy_px = 199.5
+"#;
+        let text = rig_text().replace(
+            "diameter_m = 0.082",
+            "diameter_m = 0.082\nworld_from_flash = { rotation = [0.0, 0.0, 0.0, 1.0], translation_m = [0.5, 1.0, 0.0] }",
+        ) + camera;
+        let rig = load_text(dir.path(), &text).expect("rig");
+        let parts = rig.session_parts();
+        let flash = parts.known.world_from_flash.expect("flash pose");
+        assert_eq!(flash.translation_m, DVec3::new(0.5, 1.0, 0.0));
+        assert!(matches!(rig.file.camera, Some(RigCamera::Calibrated(m)) if m.fx_px == 2900.0));
+        assert_eq!(rig.file.camera.and_then(|c| c.size_px()), Some((600, 400)));
+        Rig::write_file(&p, &rig.file).expect("write");
+        assert_eq!(Rig::load(&p).expect("again").file, rig.file);
+    }
+
+    #[test]
+    fn a_rig_that_locates_neither_flash_nor_standard_is_refused_by_key() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let rig = load_text(dir.path(), &rig_text()).expect("a valid rig");
+        let errs = rig
+            .check_needs()
+            .expect_err("no flash ring, no standard frame");
+        assert!(errs.has_field("flash"), "{errs}");
+        assert!(errs.has_field("standard"), "{errs}");
+        let text = errs.to_string();
+        assert!(
+            text.contains(
+                "rig.toml: `flash`: no target of group \"flash\" and no light_position_m"
+            ),
+            "{text}"
+        );
+        assert!(text.contains("world_from_standard"), "{text}");
+        for p in &errs.problems {
+            assert_eq!(p.file, dir.path().join("rig.toml"));
+            assert!(!p.problem.contains("known."), "{}", p.problem);
+            assert_in_words(&p.problem);
+        }
+
+        // A flash target listed without corners: the key that would place it.
+        let text = rig_text().replace(
+            "[flash]",
+            "[[targets]]\nid = 200\nsize_m = 0.012\ngroup = \"flash\"\n\n[flash]",
+        );
+        let errs = load_text(dir.path(), &text)
+            .expect("a valid rig")
+            .check_needs()
+            .expect_err("an unplaced flash target");
+        assert!(errs.has_field("targets[2].corners_m"), "{errs}");
+        assert!(!errs.has_field("flash"), "{errs}");
+
+        // No standard at all; no reference placement; no headdress.
+        let text = rig_text()
+            .replace("corners_m = [[", "# corners_m = [[")
+            .replace("group = \"headdress\"", "group = \"reference\"");
+        let text = &text[..text.find("[standard]").expect("standard")];
+        let errs = load_text(dir.path(), text)
+            .expect("a valid rig")
+            .check_needs()
+            .expect_err("nothing placed");
+        let all = errs.to_string();
+        assert!(all.contains("fix the world's origin"), "{all}");
+        assert!(all.contains("no target of group \"headdress\""), "{all}");
+        assert!(all.contains("`standard`: missing"), "{all}");
+        for p in &errs.problems {
+            assert_in_words(&p.problem);
+        }
+    }
+
+    #[test]
+    fn what_the_studio_knows_is_checked() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let text = rig_text()
+            .replace(
+                "diameter_m = 0.082",
+                "diameter_m = 0.082\nlight_position_m = [0.6, 1.1, 0.05]\n\
+                 world_from_flash = { rotation = [0.0, 0.0, 0.0, 1.0], translation_m = [0.5, 1.0, 0.0] }",
+            )
+            .replace(
+                "size_m = [0.12, 0.12]",
+                "size_m = [0.12, -0.12]\nworld_from_standard = { rotation = [0.0, 0.0, 0.0, 2.0], translation_m = [0.1, 0.2, 0.3] }",
+            )
+            + "\n[camera]\nstatus = \"to-be-calibrated\"\nwidth_px = 600\nfocal_guess_px = -3.0\n\n\
+               [[targets]]\nid = 300\nsize_m = 0.02\ngroup = \"standard\"\n";
+        let text = text.replace("[standard]", "[standardx]");
+        let errs = load_text(dir.path(), &text).expect_err("unknown table");
+        assert!(errs.to_string().contains("standardx"), "{errs}");
+        let text = text.replace("[standardx]", "[standard]");
+        let errs = load_text(dir.path(), &text).expect_err("invalid");
+        for field in [
+            "flash.world_from_flash",
+            "standard.size_m",
+            "standard.world_from_standard.rotation",
+            "camera.width_px",
+            "camera.focal_guess_px",
+        ] {
+            assert!(errs.has_field(field), "{field}: {errs}");
+        }
+        for p in &errs.problems {
+            assert_in_words(&p.problem);
+        }
+        // A standard target needs a standard.
+        let text = rig_text();
+        let cut = &text[..text.find("[standard]").expect("standard")];
+        let errs = load_text(
+            dir.path(),
+            &format!("{cut}[[targets]]\nid = 300\nsize_m = 0.02\ngroup = \"standard\"\n"),
+        )
+        .expect_err("a standard target without a standard");
+        assert!(errs.has_field("targets[2].group"), "{errs}");
     }
 
     #[test]

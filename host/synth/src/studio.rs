@@ -359,8 +359,12 @@ impl StudioScene {
         }
         if !self.channel_gains.iter().all(|g| g.is_finite() && *g > 0.0) {
             out.push(format!(
-                "`studio.channel_gains` must be positive, got {:?}",
+                "`studio.channel_gains` must be positive, got [{}]",
                 self.channel_gains
+                    .iter()
+                    .map(f64::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ));
         }
         if let Some(m) = &self.moved_target {
@@ -444,8 +448,12 @@ impl StudioScene {
             .contains(&crate::textured_scan::ScanFormat::Obj)
         {
             out.push(format!(
-                "`studio.scan_formats` must include \"obj\" (the studio's scan), got {:?}",
+                "`studio.scan_formats` must include \"obj\" (the studio's scan), got [{}]",
                 self.scan_formats
+                    .iter()
+                    .map(|f| format!("\"{}\"", f.name()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ));
         }
         if self.origin_targets == 0 {
@@ -857,11 +865,15 @@ fn rig_base(scene: &Scene, rig: &Rig, description: String) -> RigFile {
         flash: RigFlash {
             diameter_m: scene.session.flash_diameter_m,
             light_centre_m: glam::DVec3::ZERO,
+            light_position_m: None,
+            world_from_flash: None,
         },
         standard: Some(RigStandard {
             brdf: scene.standard.brdf.clone(),
             size_m: [scene.standard.size_m; 2],
+            world_from_standard: None,
         }),
+        camera: None,
         roi: Some(skinbrdf_session::RegionOfInterest {
             centre_m: rig.roi_centre_head,
             radius_m: scene.geometry.roi_radius_m,

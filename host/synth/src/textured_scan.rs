@@ -174,6 +174,17 @@ pub enum ScanFormat {
     Ply,
 }
 
+impl ScanFormat {
+    /// The format's name in a scene file (`obj`, `glb`, `ply`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Obj => "obj",
+            Self::Glb => "glb",
+            Self::Ply => "ply",
+        }
+    }
+}
+
 /// Writes `head.obj`, `head.mtl`, `head.png` and `scan-truth.json` into `dir` (see the module
 /// docs), and `head.glb` and `head-colours.ply` when the scene's `[studio] scan_formats` asks
 /// for them.

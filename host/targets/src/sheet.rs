@@ -23,6 +23,18 @@ pub enum SheetKind {
     Board,
 }
 
+impl SheetKind {
+    /// The kind's name in words (`headdress`, `reference`, `flash`, `board`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Headdress => "headdress",
+            Self::Reference => "reference",
+            Self::Flash => "flash",
+            Self::Board => "board",
+        }
+    }
+}
+
 /// One tag on a sheet.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SheetTag {
@@ -268,12 +280,12 @@ impl Sheet {
     fn title(&self) -> String {
         match self.cutout_page {
             Some((i, n)) => format!(
-                "skinbrdf {:?} targets to cut out, page {i} of {n}, tag36h11, print at 100 % (scale bar = 100 mm)",
-                self.kind
+                "skinbrdf {} targets to cut out, page {i} of {n}, tag36h11, print at 100 % (scale bar = 100 mm)",
+                self.kind.name()
             ),
             None => format!(
-                "skinbrdf {:?} targets, tag36h11, print at 100 % (scale bar = 100 mm)",
-                self.kind
+                "skinbrdf {} targets, tag36h11, print at 100 % (scale bar = 100 mm)",
+                self.kind.name()
             ),
         }
     }

@@ -196,13 +196,13 @@ impl CaptureObserver for CliObserver {
 
     fn before_group(&mut self, index: usize, group: &ShotGroup, shots: usize) -> GroupDecision {
         let line = format!(
-            "group {}/{}: {:?}, {} shot{} ({:?})",
+            "group {}/{}: `{}`, {} shot{} ({})",
             index + 1,
             self.groups,
             group.label,
             group.count,
             if group.count == 1 { "" } else { "s" },
-            group.role
+            group.role.name()
         );
         if !self.prompt {
             self.line(line);
@@ -242,7 +242,7 @@ impl CaptureObserver for CliObserver {
         );
         let outcome = match e.outcome {
             ShotOutcome::Ok => "ok".to_string(),
-            other => format!("FAULT {other:?}"),
+            other => format!("FAULT {}", other.describe()),
         };
         self.line(format!(
             "#{:<3} g{} shot {:<2} try {}  {lag}  {flash}  {recycle}  {outcome}",
@@ -276,7 +276,8 @@ impl CaptureObserver for CliObserver {
 
     fn log(&mut self, level: LogLevel, text: &str) {
         match level {
-            LogLevel::Warn | LogLevel::Error => self.line(format!("  {level:?}: {text}")),
+            LogLevel::Warn => self.line(format!("  warning: {text}")),
+            LogLevel::Error => self.line(format!("  error: {text}")),
             LogLevel::Info => tracing::info!("device: {text}"),
             LogLevel::Debug => tracing::debug!("device: {text}"),
         }

@@ -200,7 +200,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let r = &run.report;
     let c = &r.counts;
     println!(
-        "derender {}: {} measurement images, {} triangles, poses from {:?}",
+        "derender {}: {} measurement images, {} triangles, poses from {}",
         args.session.display(),
         r.images.len(),
         run.triangles,
@@ -236,23 +236,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     );
     println!(
-        "  normals: {:?}, radius {:.2} mm",
+        "  normals: {}, radius {:.2} mm",
         cfg.normals,
         r.normal_radius_m * 1e3
     );
     match &r.calibration {
         Some(cal) => println!(
-            "  C = [{:.5}, {:.5}, {:.5}] from {} standard pixels ({:?}); relative spread (MAD sigma) [{:.2}%, {:.2}%, {:.2}%]",
+            "  C = [{:.5}, {:.5}, {:.5}] from {} standard pixels ({}); relative spread (MAD sigma) [{:.2}%, {:.2}%, {:.2}%]",
             cal.c[0],
             cal.c[1],
             cal.c[2],
             cal.pixels,
-            cal.estimator,
+            match cal.estimator {
+                skinbrdf_derender::calibrate::CEstimator::Median => "median",
+                skinbrdf_derender::calibrate::CEstimator::TrimmedMean => "trimmed mean",
+            },
             cal.rel_spread[0] * 100.0,
             cal.rel_spread[1] * 100.0,
             cal.rel_spread[2] * 100.0
         ),
-        None => println!("  C = {:?} ({})", r.c, run.c_source),
+        None => println!(
+            "  C = [{:.5}, {:.5}, {:.5}] ({})",
+            r.c[0], r.c[1], r.c[2], run.c_source
+        ),
     }
     let t = &r.times;
     println!(

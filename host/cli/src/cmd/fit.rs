@@ -95,12 +95,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     for (c, ch) in f.channels.iter().enumerate() {
         println!(
-            "  {}: log-RMSE {:.4}, median rel. error {:.4}, {} iterations ({:?}), condition {}",
+            "  {}: log-RMSE {:.4}, median rel. error {:.4}, {} iterations ({}), condition {}",
             ["R", "G", "B"][c],
             ch.error.log_rmse,
             ch.error.median_rel_err,
             ch.iterations,
-            ch.status,
+            match ch.status {
+                skinbrdf_fit::lm::LmStatus::CostConverged => "cost converged",
+                skinbrdf_fit::lm::LmStatus::GradientConverged => "gradient converged",
+                skinbrdf_fit::lm::LmStatus::StepConverged => "step converged",
+                skinbrdf_fit::lm::LmStatus::MaxIterations => "iteration limit reached",
+            },
             skinbrdf_fit::fit::condition_text(ch.condition_number)
         );
     }

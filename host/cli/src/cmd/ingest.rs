@@ -153,7 +153,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .map(|n| n.to_string_lossy().into_owned())
                 .unwrap_or_default(),
             i.exposure_index,
-            format!("{:?}", i.role),
+            i.role.name(),
             i.time_residual_s * 1e3,
             i.exposure_scale
         );
@@ -183,9 +183,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("missing: exposure {e} fired the camera but has no file on the card");
     }
     if !r.matching.no_file_expected.is_empty() {
+        let list: Vec<String> = r
+            .matching
+            .no_file_expected
+            .iter()
+            .map(ToString::to_string)
+            .collect();
         println!(
-            "no file expected (the camera did not fire): exposures {:?}",
-            r.matching.no_file_expected
+            "no file expected (the camera did not fire): exposures {}",
+            list.join(", ")
         );
     }
     for (f, what) in &r.skipped_files {
@@ -193,7 +199,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     match &r.camera {
         skinbrdf_ingest::ingest::CameraSource::File { path } => {
-            println!("intrinsics: {}", path.display())
+            println!("intrinsics: {} (--camera)", path.display())
+        }
+        skinbrdf_ingest::ingest::CameraSource::Rig { path } => {
+            println!("intrinsics: the rig's [camera] ({})", path.display())
         }
         skinbrdf_ingest::ingest::CameraSource::ToBeCalibrated => {
             println!(
@@ -208,6 +217,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 ),
             }
         }
+    }
+    for n in &r.camera_notes {
+        println!("camera: {n}");
+    }
+    for k in &r.known_from_rig {
+        println!("known from the rig: {k}");
     }
     if r.unplaced_targets > 0 {
         println!(

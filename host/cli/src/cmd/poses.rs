@@ -167,7 +167,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!(
             "{:<28} {:<18} {:>4} {:>4} {:>4} {:>8} {:>8.1} {:>8.1} {:>9} {:>9} {:>9}",
             im.file,
-            format!("{:?}", im.role),
+            im.role.name(),
             n("reference"),
             n("headdress"),
             fl,
@@ -183,7 +183,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             e(errs.as_ref().map(|e| e.head_position_error_m[i]), 1e3, 3),
         );
         for d in &im.diagnostics {
-            println!("    warning: {d:?}");
+            println!("    warning: {d}");
         }
         for d in &im.errors {
             println!("    error: {d}");

@@ -77,7 +77,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!(
             "{:>4}  {:<9}  {:<12}  {:>5}  {:>8.3}  {:>8.3}  {:>8.3}",
             t.id,
-            format!("{:?}", t.group).to_lowercase(),
+            t.group.name(),
             t.sheet.as_deref().unwrap_or("-"),
             t.views,
             t.rms_px,

@@ -194,8 +194,9 @@ fn scene_cutouts(scene_name: &str, kind: SheetKind, out: &std::path::Path) -> an
     };
     anyhow::ensure!(
         !targets.is_empty(),
-        "scene `{}` has no {kind:?} targets",
-        scene.name
+        "scene `{}` has no {} targets",
+        scene.name,
+        kind.name()
     );
     let tags: Vec<(u32, f64)> = targets.iter().map(|t| (t.id, t.size_m * 1e3)).collect();
     let pages =
