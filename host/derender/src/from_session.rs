@@ -287,6 +287,7 @@ pub fn derender_session(
             height: img.height,
             rgb: img.rgb,
             saturated: img.saturated,
+            cfa: img.cfa,
             mask: mask_px,
             targets,
         })

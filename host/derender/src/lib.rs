@@ -324,7 +324,8 @@ pub fn truth_error(samples: &[BrdfSample], truth: &BrdfModel) -> Option<TruthErr
             s.phi_d_rad as f64,
         );
         for c in 0..3 {
-            if t[c] > 0.0 {
+            // A partial sample is scored on the channels it measured.
+            if t[c] > 0.0 && s.measures(c) {
                 let e = (s.rho[c] as f64 - t[c]) / t[c];
                 per[c].push(e.abs());
                 signed.push(e);

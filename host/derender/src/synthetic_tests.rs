@@ -78,6 +78,7 @@ fn render_sphere(cam: &CameraModel, wfc: &Pose, wfh: &Pose, light_w: DVec3) -> O
         }
     }
     OwnedImage {
+        cfa: None,
         width: cam.width_px,
         height: cam.height_px,
         rgb,
@@ -123,6 +124,7 @@ fn render_standard(
         }
     }
     OwnedImage {
+        cfa: None,
         width: cam.width_px,
         height: cam.height_px,
         rgb,
