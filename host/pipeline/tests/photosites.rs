@@ -1,9 +1,11 @@
 //! Every photosite at its own place: a noise-free synthetic studio whose raw files are formed
 //! per photosite (`[studio] mosaic = "photosite"`: each rendered pixel is one photosite, as on
-//! a camera's sensor) is processed three ways: the generator's PNG session (the same renders
-//! at full resolution), the raw card loaded per photosite (the default) and loaded as 2x2
-//! superpixels. Loaded per photosite, red and blue samples are as accurate as green, and the
-//! camera poses as accurate as from the full-resolution PNGs.
+//! a camera's sensor) is processed two ways: the generator's PNG session (the same renders
+//! at full resolution) and the raw card loaded per photosite (the default). Loaded per
+//! photosite, red and blue samples are as accurate as green, and the camera poses as accurate
+//! as from the full-resolution PNGs. (Loaded as 2x2 superpixels, the same card's red and blue
+//! are 0.09 and 0.21 percentage points worse than green on the full-size studio:
+//! `docs/benchmarks.md`, *Photosites*.)
 //!
 //! Run with `cargo test --release` (ignored in debug builds: rendering takes minutes there).
 
@@ -23,10 +25,14 @@ const CHANNEL_GAP_PP: f64 = 0.03;
 /// The raw card's camera positions may be worse than the PNG session's by at most this
 /// factor plus [`CAMERA_SLACK_MM`]: the same renders, detected on the green channel
 /// (interpolated at red and blue) instead of the mean of the channels, with 14-bit instead
-/// of 16-bit quantisation.
-const CAMERA_FACTOR: f64 = 1.25;
+/// of 16-bit quantisation (superpixels, at half the resolution, are further off).
+const CAMERA_FACTOR: f64 = 1.3;
 /// See [`CAMERA_FACTOR`]: a floor for errors of a few hundredths of a millimetre.
-const CAMERA_SLACK_MM: f64 = 0.02;
+const CAMERA_SLACK_MM: f64 = 0.01;
+
+/// The sensor's photosites: the default scene's half resolution rounded to whole quads and
+/// whole bytes per 14-bit row (multiples of 4).
+const HALF_RESOLUTION: (u32, u32) = (760, 504);
 
 /// Measurement images: enough for the pose stage and a fit, few for the run time.
 const MEASUREMENT_IMAGES: u32 = 10;
@@ -38,13 +44,13 @@ fn scene() -> Scene {
     scene
 }
 
-/// The scene at its full size (the sensor's photosites; multiples of 4), noise-free, with
-/// its studio.
+/// The scene at [`HALF_RESOLUTION`] (the sensor's photosites), noise-free, with its studio.
 fn synthesize(scene: &Scene, dir: &Path) -> PathBuf {
     let s = dir.join("S");
     generate(
         scene,
         &SynthOptions {
+            resolution: Some(HALF_RESOLUTION),
             noise_free: true,
             studio: true,
             ..SynthOptions::default()
@@ -113,29 +119,18 @@ fn photosites_make_red_and_blue_as_accurate_as_green_and_poses_as_from_full_reso
         RawMode::Photosite,
         "out-photosite",
     );
-    let superpixel = run(
-        &s2,
-        Some(&studio_truth),
-        RawMode::Superpixel,
-        "out-superpixel",
-    );
 
     let e_png = channel_errors_pct(&png, &truth);
     let e_photo = channel_errors_pct(&photosite, &truth);
-    let e_super = channel_errors_pct(&superpixel, &truth);
-    let (c_png, c_photo, c_super) = (
-        camera_error_mm(&png),
-        camera_error_mm(&photosite),
-        camera_error_mm(&superpixel),
-    );
+    let (c_png, c_photo) = (camera_error_mm(&png), camera_error_mm(&photosite));
     let summary = format!(
-        "median rel. error % (R, G, B): PNG {e_png:.4?}, photosite {e_photo:.4?}, superpixel \
-         {e_super:.4?}; camera mm: PNG {c_png:.4}, photosite {c_photo:.4}, superpixel {c_super:.4}"
+        "median rel. error % (R, G, B): PNG {e_png:.4?}, photosite {e_photo:.4?}; camera mm: \
+         PNG {c_png:.4}, photosite {c_photo:.4}"
     );
     eprintln!("{summary}");
     for c in [0, 2] {
         assert!(
-            e_photo[c] - e_photo[1] <= CHANNEL_GAP_PP,
+            (e_photo[c] - e_photo[1]).abs() <= CHANNEL_GAP_PP,
             "channel {c}: {summary}"
         );
     }
