@@ -20,7 +20,8 @@ pub struct BrdfSample {
     pub theta_diff_rad: f32,
     /// Difference azimuth in `[0, pi]` (Rusinkiewicz).
     pub phi_diff_rad: f32,
-    /// Reflectance per channel, 1/sr.
+    /// Reflectance per channel, 1/sr; NaN in a channel the sample did not measure (a
+    /// *partial* sample: a camera raw photosite measures its own filter's channel only).
     pub rho: [f32; 3],
     /// Index of the source image in the session (u16::MAX for samples from elsewhere).
     pub image_index: u16,
@@ -56,6 +57,35 @@ impl BrdfSample {
             theta_h_rad: self.theta_h_rad as f64,
             theta_diff_rad: self.theta_diff_rad as f64,
             phi_diff_rad: self.phi_diff_rad as f64,
+        }
+    }
+
+    /// The channels the sample measured: those whose `rho` is not NaN.
+    pub fn measured(&self) -> [bool; 3] {
+        self.rho.map(|r| !r.is_nan())
+    }
+
+    /// True when the sample measured channel `c` (0 red, 1 green, 2 blue).
+    pub fn measures(&self, c: usize) -> bool {
+        self.rho.get(c).is_some_and(|r| !r.is_nan())
+    }
+
+    /// True when the sample measured fewer than three channels.
+    pub fn is_partial(&self) -> bool {
+        self.rho.iter().any(|r| r.is_nan())
+    }
+
+    /// The mean of the measured channels' `rho` (NaN when none is measured).
+    pub fn mean_measured_rho(&self) -> f32 {
+        let (sum, n) = self
+            .rho
+            .iter()
+            .filter(|r| !r.is_nan())
+            .fold((0.0f32, 0u8), |(s, n), r| (s + r, n + 1));
+        if n == 0 {
+            f32::NAN
+        } else {
+            sum / f32::from(n)
         }
     }
 }

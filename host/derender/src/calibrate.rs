@@ -9,7 +9,8 @@
 //! C_c = rho_s,c(w_i, w_e) · cos θ_i / (D² · V_c)
 //! ```
 //!
-//! per channel, and C is a robust average over the pixels (median by default, or the 10%
+//! per channel (a photosite of a camera raw image loaded per photosite gives its own channel
+//! only), and C is a robust average over the pixels (median by default, or the 10%
 //! trimmed mean), reported with its spread (MAD σ and relative spread). Pixels that are
 //! saturated, below the noise floor or beyond the grazing limit are skipped as for the skin.
 
@@ -144,14 +145,20 @@ fn standard_pixels(
                     continue;
                 }
                 let v = s.image.rgb[idx];
+                let measured = s.image.measured(x, y);
                 if v.iter()
-                    .any(|&c| c.is_nan() || (c as f64) < cfg.noise_floor)
+                    .zip(measured)
+                    .any(|(&c, m)| m && (c.is_nan() || (c as f64) < cfg.noise_floor))
                 {
                     continue;
                 }
                 let rho = brdf.eval(wi, we);
                 out.push(std::array::from_fn(|c| {
-                    rho[c] * wi.z / (dist * dist * v[c] as f64)
+                    if measured[c] {
+                        rho[c] * wi.z / (dist * dist * v[c] as f64)
+                    } else {
+                        f64::NAN
+                    }
                 }));
             }
             out
@@ -174,9 +181,15 @@ pub fn calibrate_c(
     for s in images {
         all.extend(standard_pixels(&rays, light_world_m, brdf, size_m, s, cfg));
     }
-    if all.len() < MIN_STANDARD_PIXELS {
+    // A photosite image measures each channel at some of its pixels only: every channel needs
+    // enough of them.
+    let pixels = (0..3)
+        .map(|c| all.iter().filter(|p| !p[c].is_nan()).count())
+        .min()
+        .unwrap_or(0);
+    if pixels < MIN_STANDARD_PIXELS {
         return Err(DerenderError::TooFewStandardPixels {
-            pixels: all.len(),
+            pixels,
             images: images.len(),
             needed: MIN_STANDARD_PIXELS,
         });

@@ -23,10 +23,19 @@ pub fn pixels_used_rgb8(
     image_index: u16,
 ) -> Vec<u8> {
     let n = image.rgb.len();
+    // A photosite image shows each photosite's own channel (a mosaic of grey levels).
     let mut lum: Vec<f32> = image
         .rgb
         .iter()
-        .map(|p| (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]).max(0.0))
+        .map(|p| match image.cfa {
+            Some(_) => p
+                .iter()
+                .copied()
+                .find(|v| !v.is_nan())
+                .unwrap_or(0.0)
+                .max(0.0),
+            None => (0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]).max(0.0),
+        })
         .collect();
     let mut sorted: Vec<f32> = lum.iter().copied().filter(|v| v.is_finite()).collect();
     sorted.sort_by(f32::total_cmp);
@@ -212,6 +221,7 @@ mod tests {
             height: 3,
             rgb: &rgb,
             saturated: None,
+            cfa: None,
         };
         let s = BrdfSample {
             image_index: 2,

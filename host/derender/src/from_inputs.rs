@@ -76,6 +76,8 @@ pub struct OwnedImage {
     pub rgb: Vec<[f32; 3]>,
     /// Saturation flags.
     pub saturated: Vec<bool>,
+    /// The mosaic of a camera raw image loaded per photosite (see [`ImageView::cfa`]).
+    pub cfa: Option<skinbrdf_session::BayerPhase>,
     /// Optional user mask (true = use).
     pub mask: Option<Vec<bool>>,
     /// Optional printed-target depths: distance from the camera centre to the nearest printed
@@ -92,6 +94,7 @@ impl OwnedImage {
             height: self.height,
             rgb: &self.rgb,
             saturated: Some(&self.saturated),
+            cfa: self.cfa,
         }
     }
 }

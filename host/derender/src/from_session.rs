@@ -251,6 +251,14 @@ pub fn derender_session(
         let img = session
             .load_image(i)
             .map_err(|error| DerenderError::Image { index: i, error })?;
+        let camera_px = [inputs.camera.width_px, inputs.camera.height_px];
+        if [img.width, img.height] != camera_px {
+            return Err(DerenderError::ImageSize {
+                index: i,
+                image_px: [img.width, img.height],
+                camera_px,
+            });
+        }
         let e = &f.images[i];
         let mask_px = match &e.mask {
             Some(m) => {
@@ -287,6 +295,7 @@ pub fn derender_session(
             height: img.height,
             rgb: img.rgb,
             saturated: img.saturated,
+            cfa: img.cfa,
             mask: mask_px,
             targets,
         })

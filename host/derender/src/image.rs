@@ -27,7 +27,11 @@
 //!    ([`skinbrdf_mesh::MeshBvh::occluded_toward_grid`], the per-ray verdict exactly).
 //! 6. **Value.** The linearized pixel value `V`; saturated pixels, pixels with a NaN or −∞
 //!    channel and pixels with any channel below the noise floor are dropped;
-//!    `rho_c = C_c · D² · V_c / cos θ_i`.
+//!    `rho_c = C_c · D² · V_c / cos θ_i`. A camera raw image loaded per photosite
+//!    ([`ImageView::cfa`]) measures one channel per pixel: the checks apply to that channel,
+//!    and the sample is *partial*, its other two channels NaN (see
+//!    [`skinbrdf_core::BrdfSample::measured`]). Its ray is the photosite's own (step 2, in the
+//!    photosite image's camera), so no value is moved from where it was measured.
 //!
 //! Every dropped pixel is counted under exactly one reason: the first that is true of it, in
 //! the order documented on [`FilterCounts`].
@@ -37,6 +41,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use skinbrdf_core::{BrdfAngles, BrdfSample, CameraModel, Pose};
 use skinbrdf_mesh::CameraRays;
+use skinbrdf_session::BayerPhase;
 
 use crate::geometry::Geometry;
 use crate::DerenderConfig;
@@ -59,10 +64,21 @@ pub struct ImageView<'a> {
     pub width: u32,
     /// Height, pixels.
     pub height: u32,
-    /// Linear RGB per pixel.
+    /// Linear RGB per pixel (NaN in a channel a photosite image did not measure there).
     pub rgb: &'a [[f32; 3]],
-    /// Saturation flag per pixel (any channel at or above the saturation level).
+    /// Saturation flag per pixel (any measured channel at or above the saturation level).
     pub saturated: Option<&'a [bool]>,
+    /// A camera raw mosaic loaded per photosite: the Bayer phase at pixel `(0, 0)`; pixel
+    /// `(x, y)` measures only the channel of its filter. `None`: every pixel measures all
+    /// three channels.
+    pub cfa: Option<BayerPhase>,
+}
+
+impl ImageView<'_> {
+    /// The channels pixel `(x, y)` measured.
+    pub fn measured(&self, x: u32, y: u32) -> [bool; 3] {
+        skinbrdf_session::measured_channels(self.cfa, x, y)
+    }
 }
 
 /// One measurement image with its poses and masks.
@@ -557,23 +573,34 @@ pub fn derender_image_with_rays(
                         continue;
                     }
                 }
+                // Only the channels the pixel measured (a photosite's own) count; the others
+                // stay NaN in the sample.
+                let measured = m.image.measured(x, y);
                 let v = m.image.rgb[idx];
+                let values = || v.iter().zip(measured).filter(|(_, m)| *m).map(|(v, _)| *v);
                 // +inf is an overflowed (saturated) value whatever the saturation mask says.
-                if m.image.saturated.is_some_and(|s| s[idx]) || v.contains(&f32::INFINITY) {
+                if m.image.saturated.is_some_and(|s| s[idx])
+                    || values().any(|ch| ch == f32::INFINITY)
+                {
                     c.saturated += 1;
                     continue;
                 }
-                if !v.iter().all(|ch| ch.is_finite()) {
+                if !values().all(|ch| ch.is_finite()) {
                     c.non_finite += 1;
                     continue;
                 }
-                if v.iter().any(|&ch| f64::from(ch) < cfg.noise_floor) {
+                if values().any(|ch| f64::from(ch) < cfg.noise_floor) {
                     c.below_noise_floor += 1;
                     continue;
                 }
                 let kk = dist * dist / cos_i;
-                let rho: [f32; 3] =
-                    std::array::from_fn(|ch| (calibration_c[ch] * kk * v[ch] as f64) as f32);
+                let rho: [f32; 3] = std::array::from_fn(|ch| {
+                    if measured[ch] {
+                        (calibration_c[ch] * kk * v[ch] as f64) as f32
+                    } else {
+                        f32::NAN
+                    }
+                });
                 let angles = BrdfAngles::from_world(n, wi, we);
                 let mut s = BrdfSample::from_angles(&angles, rho);
                 s.image_index = m.image_index;

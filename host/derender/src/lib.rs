@@ -130,6 +130,20 @@ pub enum DerenderError {
         /// Image width and height, pixels.
         image_px: [u32; 2],
     },
+    /// An image's size is not the camera's (for a raw session: poses estimated with the other
+    /// raw mode).
+    #[error(
+        "image {index} is {}x{} px as loaded but the camera is {}x{} px (a raw session's poses and its derender must load the images alike: same --raw-mode)",
+        image_px[0], image_px[1], camera_px[0], camera_px[1]
+    )]
+    ImageSize {
+        /// Index of the image in the session.
+        index: usize,
+        /// Image width and height, pixels.
+        image_px: [u32; 2],
+        /// Camera width and height, pixels.
+        camera_px: [u32; 2],
+    },
     /// `truth.json` exists but could not be read (it is read for scoring only).
     #[error("scoring: {error}")]
     Truth {
@@ -324,7 +338,8 @@ pub fn truth_error(samples: &[BrdfSample], truth: &BrdfModel) -> Option<TruthErr
             s.phi_d_rad as f64,
         );
         for c in 0..3 {
-            if t[c] > 0.0 {
+            // A partial sample is scored on the channels it measured.
+            if t[c] > 0.0 && s.measures(c) {
                 let e = (s.rho[c] as f64 - t[c]) / t[c];
                 per[c].push(e.abs());
                 signed.push(e);

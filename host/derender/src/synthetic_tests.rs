@@ -78,6 +78,7 @@ fn render_sphere(cam: &CameraModel, wfc: &Pose, wfh: &Pose, light_w: DVec3) -> O
         }
     }
     OwnedImage {
+        cfa: None,
         width: cam.width_px,
         height: cam.height_px,
         rgb,
@@ -123,6 +124,7 @@ fn render_standard(
         }
     }
     OwnedImage {
+        cfa: None,
         width: cam.width_px,
         height: cam.height_px,
         rgb,
@@ -360,4 +362,98 @@ fn non_finite_values_are_not_below_the_noise_floor() {
     assert_eq!(c.below_noise_floor, base.below_noise_floor, "{c:?}");
     assert_eq!(c.kept + c.non_finite, base.kept, "{c:?}");
     assert!(c.non_finite <= poisoned);
+}
+
+/// A camera raw image loaded per photosite: each pixel keeps the channel of its filter
+/// (phase `phase` at pixel `(0, 0)`), the other two NaN.
+fn mosaic(img: &OwnedImage, phase: skinbrdf_session::BayerPhase) -> OwnedImage {
+    let w = img.width as usize;
+    let rgb = img
+        .rgb
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let c = usize::from(phase.colour_at(i % w, i / w).dng_code());
+            std::array::from_fn(|k| if k == c { p[k] } else { f32::NAN })
+        })
+        .collect();
+    OwnedImage {
+        cfa: Some(phase),
+        rgb,
+        ..img.clone()
+    }
+}
+
+#[test]
+fn photosites_give_partial_samples_as_accurate_as_full_pixels() {
+    // The per-channel medians of a subset of the same pixels: sampling differences only.
+    const SAME_PIXELS_MEDIAN_PP: f64 = 0.03;
+    let s = scene();
+    let geom = geometry(NormalMethod::PlanarFit { radius_m: 0.004 });
+    let cfg = DerenderConfig::DEFAULT;
+    let full = derender_with_loader(&geom, &s.inputs, &cfg, |i| Ok(s.images[i].clone())).unwrap();
+    let phase = skinbrdf_session::BayerPhase::Gbrg;
+    let photo =
+        derender_with_loader(&geom, &s.inputs, &cfg, |i| Ok(mosaic(&s.images[i], phase))).unwrap();
+    // C per channel from the standard's photosites of that channel.
+    let cal = photo.calibration.as_ref().unwrap();
+    for c in 0..3 {
+        assert!(
+            (cal.c[c] - C_TRUE[c]).abs() / C_TRUE[c] < 1e-3,
+            "C {:?} vs {C_TRUE:?}",
+            cal.c
+        );
+    }
+    // One sample per pixel, one channel each: the pixel's own.
+    assert_eq!(photo.counts.kept, full.counts.kept, "{:?}", photo.counts);
+    assert_eq!(
+        photo.counts.dropped() + photo.counts.kept,
+        photo.counts.considered
+    );
+    for smp in &photo.samples {
+        let own = usize::from(
+            phase
+                .colour_at(usize::from(smp.pixel[0]), usize::from(smp.pixel[1]))
+                .dng_code(),
+        );
+        assert!(smp.is_partial());
+        assert_eq!(smp.measured(), std::array::from_fn(|k| k == own), "{smp:?}");
+    }
+    let e_full = truth_error(&full.samples, &brdf()).unwrap();
+    let e_photo = truth_error(&photo.samples, &brdf()).unwrap();
+    for c in 0..3 {
+        let (a, b) = (
+            e_full.median_rel_error_rgb[c].unwrap(),
+            e_photo.median_rel_error_rgb[c].unwrap(),
+        );
+        assert!(
+            (a - b).abs() * 100.0 <= SAME_PIXELS_MEDIAN_PP,
+            "channel {c}: full {a} photosite {b}"
+        );
+    }
+}
+
+#[test]
+fn a_photosite_counts_only_its_own_channel() {
+    let s = scene();
+    let mut img = mosaic(&s.images[0], skinbrdf_session::BayerPhase::Rggb);
+    // Dark or broken values in channels a photosite did not measure change nothing.
+    for (i, p) in img.rgb.iter_mut().enumerate() {
+        let x = i % img.width as usize;
+        let y = i / img.width as usize;
+        let own = usize::from(
+            skinbrdf_session::BayerPhase::Rggb
+                .colour_at(x, y)
+                .dng_code(),
+        );
+        for (k, v) in p.iter_mut().enumerate() {
+            if k != own {
+                *v = if (x + y) % 2 == 0 { -1.0 } else { f32::NAN };
+            }
+        }
+    }
+    let cfa = counts_of(&img);
+    let plain = counts_of(&mosaic(&s.images[0], skinbrdf_session::BayerPhase::Rggb));
+    assert_eq!(cfa, plain);
+    assert_eq!(plain.non_finite, 0, "{plain:?}");
 }

@@ -266,7 +266,10 @@ pub struct FitData {
 
 impl FitData {
     /// Converts samples, rejecting non-finite fields, negative weights and angles outside their
-    /// domain (see [`check_angles`]).
+    /// domain (see [`check_angles`]). A partial sample (a channel it did not measure is NaN,
+    /// [`BrdfSample::measured`]) is kept; a sample measuring no channel, or with an infinite
+    /// `rho`, is refused. Each channel is fitted to the samples that measured it
+    /// ([`FitData::channel`]).
     pub fn from_samples(samples: &[BrdfSample]) -> Result<Self, FitError> {
         let mut geom = Vec::with_capacity(samples.len());
         let mut y: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(samples.len()));
@@ -282,7 +285,7 @@ impl FitData {
                 });
             }
             check_angles(index, s)?;
-            if !s.rho.iter().all(|v| v.is_finite()) {
+            if s.rho.iter().any(|v| v.is_infinite()) || s.rho.iter().all(|v| v.is_nan()) {
                 return Err(FitError::BadSample {
                     index,
                     field: "rho",
@@ -310,6 +313,41 @@ impl FitData {
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.geom.len()
+    }
+
+    /// True when some sample did not measure channel `c`.
+    pub fn is_partial(&self, c: usize) -> bool {
+        self.y.get(c).is_some_and(|y| y.iter().any(|v| v.is_nan()))
+    }
+
+    /// The samples that measured channel `c` (all of them, borrowed, when none is partial
+    /// there); the other channels' values are carried along and may be NaN.
+    pub fn channel(&self, c: usize) -> std::borrow::Cow<'_, Self> {
+        if !self.is_partial(c) {
+            return std::borrow::Cow::Borrowed(self);
+        }
+        let keep: Vec<usize> = (0..self.len())
+            .filter(|&i| !self.y[c][i].is_nan())
+            .collect();
+        std::borrow::Cow::Owned(Self {
+            geom: keep.iter().map(|&i| self.geom[i]).collect(),
+            y: std::array::from_fn(|k| keep.iter().map(|&i| self.y[k][i]).collect()),
+            sqrt_w: keep.iter().map(|&i| self.sqrt_w[i]).collect(),
+        })
+    }
+
+    /// Per sample, the mean of the channels it measured (the grey level the log floor is
+    /// taken from).
+    fn grey(&self) -> Vec<f64> {
+        (0..self.len())
+            .map(|i| {
+                let (sum, n) = (0..3)
+                    .map(|c| self.y[c][i])
+                    .filter(|v| !v.is_nan())
+                    .fold((0.0, 0u32), |(s, n), v| (s + v, n + 1));
+                sum / f64::from(n.max(1))
+            })
+            .collect()
     }
 
     /// True when empty.
@@ -347,7 +385,7 @@ pub fn check_angles(index: usize, s: &BrdfSample) -> Result<(), FitError> {
     Ok(())
 }
 
-fn quantile(v: &[f64], q: f64) -> f64 {
+pub(crate) fn quantile(v: &[f64], q: f64) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
@@ -563,11 +601,8 @@ pub fn fit_channel(
     channel: usize,
     cfg: &FitConfig,
 ) -> Result<(ChannelFit, ResidualKind), FitError> {
-    let grey: Vec<f64> = (0..data.len())
-        .map(|i| (data.y[0][i] + data.y[1][i] + data.y[2][i]) / 3.0)
-        .collect();
-    let floor = auto_floor(&grey, cfg.log_floor_rel_median);
-    fit_channel_with_floor(model, data, channel, cfg, floor)
+    let floor = auto_floor(&data.grey(), cfg.log_floor_rel_median);
+    fit_channel_with_floor(model, &data.channel(channel), channel, cfg, floor)
 }
 
 fn fit_channel_with_floor(
@@ -809,16 +844,13 @@ pub fn fit_data(
     let mut channels = Vec::with_capacity(3);
     let mut residuals = Vec::with_capacity(3);
     let mut warnings = Vec::new();
-    let grey: Vec<f64> = (0..data.len())
-        .map(|i| (data.y[0][i] + data.y[1][i] + data.y[2][i]) / 3.0)
-        .collect();
-    let floor = auto_floor(&grey, cfg.log_floor_rel_median);
+    let floor = auto_floor(&data.grey(), cfg.log_floor_rel_median);
     // The three channels run in parallel (each solve is itself parallel over sample chunks;
     // on small subsamples the channel level is what keeps both cores busy).
     use rayon::prelude::*;
     let fits = (0..3)
         .into_par_iter()
-        .map(|c| fit_channel_with_floor(model, data, c, cfg, floor))
+        .map(|c| fit_channel_with_floor(model, &data.channel(c), c, cfg, floor))
         .collect::<Result<Vec<_>, _>>()?;
     for (c, (fit, res)) in fits.into_iter().enumerate() {
         if !fit.unidentified.is_empty() {

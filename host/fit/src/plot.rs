@@ -650,6 +650,7 @@ pub fn scatter_figure(
 /// `(signed theta_e deg, channel mean)`.
 pub fn plane_samples(samples: &[BrdfSample], theta_i_deg: f64, tol_deg: f64) -> Vec<(f64, f64)> {
     let tol = tol_deg.to_radians();
+    let scale = crate::smooth::GreyScale::of(samples);
     samples
         .iter()
         .filter(|s| (f64::from(s.theta_i_rad) - theta_i_deg.to_radians()).abs() <= tol)
@@ -659,7 +660,7 @@ pub fn plane_samples(samples: &[BrdfSample], theta_i_deg: f64, tol_deg: f64) -> 
         })
         .map(|s| {
             let signed = s.angles().signed_theta_e_rad().to_degrees();
-            (signed, f64::from(s.rho[0] + s.rho[1] + s.rho[2]) / 3.0)
+            (signed, scale.grey(s))
         })
         .collect()
 }

@@ -94,4 +94,72 @@ mod tests {
         let wrong = score_against_truth(&fitted, &lambertian, &samples);
         assert!(wrong.log_rmse() > 0.05, "{wrong:?}");
     }
+
+    /// Each sample keeps one channel, as a Bayer mosaic's photosites do: R, G, G, B in turn.
+    fn partial(samples: &[BrdfSample]) -> Vec<BrdfSample> {
+        samples
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let own = [0, 1, 1, 2][i % 4];
+                let mut p = *s;
+                p.rho = std::array::from_fn(|k| if k == own { s.rho[k] } else { f32::NAN });
+                p
+            })
+            .collect()
+    }
+
+    #[test]
+    fn partial_samples_fit_each_channel_from_the_samples_that_measured_it() {
+        let (truth, samples) = crate::synthetic::lafortune2_samples(6_000, 0.0, 5);
+        let samples = partial(&samples);
+        let fitted = fit_model(
+            &samples,
+            &FitConfig::default(),
+            ModelSpec::Lafortune { lobes: 2 },
+        )
+        .expect("fit");
+        let s = score_against_truth(&fitted, &truth, &samples);
+        // As for complete samples: the fit recovers the model to solver precision.
+        const RECOVERED_LOG_RMSE: f64 = 1e-3;
+        assert!(s.log_rmse() < RECOVERED_LOG_RMSE, "{s:?}");
+        assert_eq!(fitted.fit.n_samples, 6_000);
+        // A sample that measured nothing is refused.
+        let mut bad = samples.clone();
+        bad[7].rho = [f32::NAN; 3];
+        let err = fit_model(
+            &bad,
+            &FitConfig::default(),
+            ModelSpec::Lafortune { lobes: 2 },
+        )
+        .expect_err("refused");
+        assert!(
+            matches!(
+                err,
+                crate::FitError::BadSample {
+                    index: 7,
+                    field: "rho"
+                }
+            ),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn partial_samples_have_grey_levels_on_the_complete_samples_scale() {
+        let (_, samples) = crate::synthetic::lafortune2_samples(4_000, 0.0, 6);
+        let scale = crate::smooth::GreyScale::of(&partial(&samples));
+        let grey = |s: &[BrdfSample]| {
+            let mut v: Vec<f64> = s.iter().map(|x| scale.grey(x)).collect();
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
+        let (a, b) = (grey(&samples), grey(&partial(&samples)));
+        // The channels' medians rescale each partial sample to the set's grey level.
+        const SAME_MEDIAN_REL: f64 = 0.1;
+        assert!(
+            (a - b).abs() / a < SAME_MEDIAN_REL,
+            "complete {a}, partial {b}"
+        );
+    }
 }

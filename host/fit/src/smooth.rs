@@ -4,7 +4,8 @@
 //! * Input ([`smoother_input`], the only place the smoother's design and floor are made): an
 //!   evenly strided subset of at most [`SmoothConfig::max_samples`] samples (plenty for a curve
 //!   and its band; the smoother's cost grows with `n x neighbours`), as radians
-//!   `(theta_i, theta_e, phi_d)` and `ln(grey + floor)`, `grey = (r + g + b) / 3`. BRDF noise is
+//!   `(theta_i, theta_e, phi_d)` and `ln(grey + floor)`, `grey = (r + g + b) / 3` (a partial
+//!   sample's channel scaled to a grey level by [`GreyScale`]). BRDF noise is
 //!   multiplicative and a specular peak would otherwise set one residual scale for the whole
 //!   domain, hence the log. The floor is [`log_floor_rho`]: the fit's own rule
 //!   ([`crate::fit::auto_floor`], 1% of the median grey level by default), so the smoother and
@@ -74,9 +75,64 @@ pub struct SmootherInput {
     pub floor_rho: f64,
 }
 
-/// Grey level `(r + g + b) / 3` of a sample, 1/sr.
+/// Grey level `(r + g + b) / 3` of a sample, 1/sr (the mean of the channels it measured for
+/// a partial sample; [`GreyScale`] makes partial samples of different channels comparable).
 pub fn grey_rho(s: &BrdfSample) -> f64 {
-    f64::from(s.rho.iter().sum::<f32>()) / 3.0
+    f64::from(s.mean_measured_rho())
+}
+
+/// The grey level of samples that may be partial (one channel each, from camera raw
+/// photosites): a sample measuring channel `c` only stands for the grey level
+/// `rho_c · mean_k(m_k) / m_c`, with `m_k` the median of channel `k` over the samples that
+/// measured it. Exact for a sample of the set's median colour; skin's colour changes little
+/// with angle next to the scatter the smoother shows, and no grey level of a set mixes the
+/// channels' levels. A complete sample's grey is `(r + g + b) / 3` as it is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GreyScale {
+    /// `mean_k(m_k) / m_c` per channel (1 where a channel has no partial sample to scale).
+    pub factors: [f64; 3],
+}
+
+impl GreyScale {
+    /// The scale of a sample set (identity when no sample is partial).
+    pub fn of(samples: &[BrdfSample]) -> Self {
+        if !samples.iter().any(BrdfSample::is_partial) {
+            return Self { factors: [1.0; 3] };
+        }
+        let medians: [Option<f64>; 3] = std::array::from_fn(|c| {
+            let v: Vec<f64> = samples
+                .iter()
+                .filter(|s| s.measures(c))
+                .map(|s| f64::from(s.rho[c]))
+                .collect();
+            (!v.is_empty()).then(|| crate::fit::quantile(&v, 0.5))
+        });
+        let known: Vec<f64> = medians.iter().flatten().copied().collect();
+        let mean = known.iter().sum::<f64>() / known.len().max(1) as f64;
+        Self {
+            factors: medians.map(|m| match m {
+                Some(m) if m > 0.0 && mean > 0.0 => mean / m,
+                _ => 1.0,
+            }),
+        }
+    }
+
+    /// A sample's grey level, 1/sr.
+    pub fn grey(&self, s: &BrdfSample) -> f64 {
+        if !s.is_partial() {
+            return grey_rho(s);
+        }
+        let (sum, n) = (0..3)
+            .filter(|&c| s.measures(c))
+            .fold((0.0, 0u32), |(sum, n), c| {
+                (sum + f64::from(s.rho[c]) * self.factors[c], n + 1)
+            });
+        if n == 0 {
+            f64::NAN
+        } else {
+            sum / f64::from(n)
+        }
+    }
 }
 
 /// The log floor of a set of grey levels: `floor_rel_median` times their median (at least
@@ -98,6 +154,7 @@ pub fn log_design(
     k_max: usize,
     floor_rho: f64,
 ) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let scale = GreyScale::of(samples);
     strided(samples.len(), k_max)
         .map(|i| {
             let s = &samples[i];
@@ -106,7 +163,7 @@ pub fn log_design(
                 f64::from(s.theta_e_rad),
                 f64::from(s.phi_d_rad),
             ];
-            (x, (grey_rho(s).max(0.0) + floor_rho).ln())
+            (x, (scale.grey(s).max(0.0) + floor_rho).ln())
         })
         .unzip()
 }
@@ -118,8 +175,9 @@ pub fn smoother_input(
     max_samples: usize,
     floor_rel_median: f64,
 ) -> SmootherInput {
+    let scale = GreyScale::of(samples);
     let grey: Vec<f64> = strided(samples.len(), max_samples)
-        .map(|i| grey_rho(&samples[i]))
+        .map(|i| scale.grey(&samples[i]))
         .collect();
     let floor_rho = log_floor_rho(&grey, floor_rel_median);
     let (x, y_log) = log_design(samples, max_samples, floor_rho);

@@ -429,9 +429,9 @@ pub(crate) mod tests {
                 exposure_scale: None,
             })
             .collect();
-        Session {
-            dir: PathBuf::from("/nonexistent/session"),
-            file: SessionFile {
+        Session::from_parts(
+            PathBuf::from("/nonexistent/session"),
+            SessionFile {
                 format_version: SESSION_FORMAT_VERSION,
                 description: "pose inputs".into(),
                 capture: None,
@@ -461,11 +461,8 @@ pub(crate) mod tests {
                 known,
                 registration: None,
             },
-            capture: None,
-            linearization_source: skinbrdf_session::LinearizationSource::Stated,
-            skipped_images: Vec::new(),
-            truth_file: None,
-        }
+            None,
+        )
     }
 
     fn estimated_pose(pose: Pose) -> PoseWithCov {

@@ -22,7 +22,7 @@ use skinbrdf_derender::DerenderConfig;
 use skinbrdf_fit::report::{FitReport, ReportOptions};
 use skinbrdf_fit::FitConfig;
 use skinbrdf_poses::PoseConfig;
-use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, Session, TargetGroup};
+use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, RawMode, Session, TargetGroup};
 
 use crate::ledger::{write_atomic, Ledger, RunLock};
 use crate::plan::{Geometry, Plan, PlanOptions, SceneFacts, Stage};
@@ -184,6 +184,9 @@ pub struct ProcessConfig {
     /// Go on after a stage FAILED its self-checks ([`crate::checks`]); the report still says
     /// FAILED.
     pub accept_failed_checks: bool,
+    /// How camera raw images load: per photosite (default, full resolution, each photosite
+    /// its own sample) or as 2x2 superpixels (faster); see `skinbrdf_session::linear`.
+    pub raw_mode: RawMode,
 }
 
 impl ProcessConfig {
@@ -205,6 +208,7 @@ impl ProcessConfig {
             skip_bad_images: false,
             truth_file: None,
             accept_failed_checks: false,
+            raw_mode: RawMode::Photosite,
         }
     }
 }
@@ -481,6 +485,7 @@ pub(crate) fn open(dir: &Path, cfg: &ProcessConfig) -> Result<Opened, ProcessErr
         source,
     })?;
     session.truth_file = cfg.truth_file.clone();
+    session.set_raw_mode(cfg.raw_mode);
     let policy = if cfg.skip_bad_images {
         BadImagePolicy::Skip
     } else {

@@ -686,7 +686,7 @@ pub fn estimate_and_write_poses(
     let camera = match &est.calibration {
         Some(cal) => {
             let path = poses_file.with_file_name("camera.toml");
-            write_camera_file(&path, cal, &session.dir)?;
+            write_camera_file(&path, cal, session)?;
             Some(path)
         }
         None => None,
@@ -700,28 +700,30 @@ pub fn estimate_and_write_poses(
     ))
 }
 
-/// Writes a calibration as a `[camera]` table (the `session.toml` format).
+/// Writes a calibration as a `[camera]` table (the `session.toml` format: a raw session's
+/// camera in superpixel units whatever the raw mode, see `skinbrdf_session::linear`).
 fn write_camera_file(
     path: &Path,
     cal: &skinbrdf_poses::calib::Calibration,
-    session: &Path,
+    session: &Session,
 ) -> Result<(), ProcessError> {
     #[derive(serde::Serialize)]
     struct CameraFile {
         camera: skinbrdf_session::CameraSpec,
     }
     let body = toml::to_string(&CameraFile {
-        camera: skinbrdf_session::CameraSpec::Calibrated(cal.camera),
+        camera: session.camera_as_stated(&skinbrdf_session::CameraSpec::Calibrated(cal.camera)),
     })
     .map_err(|source| ProcessError::CameraFile {
         path: path.to_path_buf(),
         source,
     })?;
     let text = format!(
-        "# Camera calibration from the reference targets of {} ({} points, reprojection RMS {:.3} px).\n# The image size is the images' as loaded (2x2 superpixels for raw files).\n{body}",
-        session.display(),
+        "# Camera calibration from the reference targets of {} ({} points, reprojection RMS {:.3} px, raw images loaded per {}).\n# The image size is the session's: the images' as loaded, 2x2 superpixels for raw files (as session.toml states a raw camera).\n{body}",
+        session.dir.display(),
         cal.points,
         cal.rms_px,
+        session.raw_mode(),
     );
     write_atomic(path, text.as_bytes())?;
     Ok(())
@@ -915,6 +917,7 @@ fn write_derender_figures(
             height: img.height,
             rgb: &img.rgb,
             saturated: None,
+            cfa: img.cfa,
         };
         let index = u16::try_from(im.image_index).map_err(|_| {
             skinbrdf_derender::DerenderError::ImageIndex {

@@ -147,10 +147,11 @@ pub fn surveyed_session(
     cfg: &ProcessConfig,
     on_event: &mut dyn FnMut(Event<'_>),
 ) -> Result<(Session, Option<StageReport>), SurveyRunError> {
-    let session = Session::load(dir).map_err(|source| ProcessError::Session {
+    let mut session = Session::load(dir).map_err(|source| ProcessError::Session {
         dir: dir.to_path_buf(),
         source,
     })?;
+    session.set_raw_mode(cfg.raw_mode);
     if session.file.targets.unplaced.is_empty() {
         return Ok((session, None));
     }

@@ -1,5 +1,5 @@
-//! Superpixel decoding of Bayer raw files to linear RGB (see the crate docs for the formula
-//! and the coordinate convention).
+//! Decoding of Bayer raw files to linear values, per photosite or per 2x2 superpixel (see the
+//! crate docs for the formula and the coordinate convention).
 //!
 //! # Levels
 //!
@@ -46,18 +46,23 @@ pub struct RawOptions {
     pub white_level: Option<f64>,
 }
 
-/// A decoded raw image at superpixel (half) resolution.
+/// A decoded raw image, at superpixel (half) or photosite (full) resolution.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RawFrame {
     /// What the file is.
     pub kind: FileKind,
-    /// Width of the image as loaded (half the active area's width, rounded down).
+    /// Superpixels or photosites.
+    pub layout: RawLayout,
+    /// Width of the image as loaded: half the active area's width, rounded down (superpixels),
+    /// or twice that (photosites: an odd last column is dropped in both layouts).
     pub width_px: u32,
     /// Height of the image as loaded.
     pub height_px: u32,
-    /// Normalised linear values per superpixel, row-major: R, mean(G1, G2), B.
+    /// Normalised linear values per pixel, row-major. Superpixels: R, mean(G1, G2), B.
+    /// Photosites: the photosite's own channel, the other two NaN.
     pub rgb: Vec<[f32; 3]>,
-    /// True where any photosite of the quad is at or above the white level.
+    /// True where any photosite of the quad (superpixels), or the photosite itself, is at or
+    /// above the white level.
     pub saturated: Vec<bool>,
     /// The Bayer phase at the active area's top-left photosite.
     pub cfa: BayerPhase,
@@ -78,7 +83,7 @@ pub struct RawFrame {
 }
 
 impl RawFrame {
-    /// The superpixel at column `u`, row `v`.
+    /// The pixel at column `u`, row `v`.
     pub fn get(&self, u: u32, v: u32) -> Option<[f32; 3]> {
         (u < self.width_px && v < self.height_px)
             .then(|| self.rgb[(v * self.width_px + u) as usize])
@@ -94,6 +99,32 @@ pub const fn sensor_to_superpixel_focal(f_px: f64) -> f64 {
 /// superpixels, both with pixel centres at integers: `(c - 0.5) / 2`.
 pub const fn sensor_to_superpixel_centre(c_px: f64) -> f64 {
     (c_px - 0.5) / 2.0
+}
+
+/// A focal length in superpixels as a focal length in active-area photosites: `2 f`.
+pub const fn superpixel_to_sensor_focal(f_px: f64) -> f64 {
+    2.0 * f_px
+}
+
+/// A coordinate in superpixels as a coordinate in active-area photosites: `2 c + 0.5`
+/// (the inverse of [`sensor_to_superpixel_centre`]).
+pub const fn superpixel_to_sensor_centre(c_px: f64) -> f64 {
+    2.0 * c_px + 0.5
+}
+
+/// A calibration of the superpixel image converted to the photosite image (the even part of
+/// the active area: size doubled, focal lengths and principal point as above, distortion
+/// unchanged); the inverse of [`sensor_camera_to_superpixel`] on an even-sized active area.
+pub fn superpixel_camera_to_sensor(cam: &CameraModel) -> CameraModel {
+    CameraModel {
+        width_px: cam.width_px.saturating_mul(2),
+        height_px: cam.height_px.saturating_mul(2),
+        fx_px: superpixel_to_sensor_focal(cam.fx_px),
+        fy_px: superpixel_to_sensor_focal(cam.fy_px),
+        cx_px: superpixel_to_sensor_centre(cam.cx_px),
+        cy_px: superpixel_to_sensor_centre(cam.cy_px),
+        distortion: cam.distortion,
+    }
 }
 
 /// A calibration made on the full-resolution active area, converted to the superpixel image
@@ -234,11 +265,22 @@ fn open_raw(path: &Path) -> Result<(FileKind, RawSource), RawError> {
 
 /// Decodes a Bayer raw file to superpixels (see the module and crate docs).
 pub fn decode_superpixel(path: &Path, opts: &RawOptions) -> Result<RawFrame, RawError> {
+    decode_raw(path, opts, RawLayout::Superpixel)
+}
+
+/// Decodes a Bayer raw file to one pixel per photosite, each with its own channel only (see
+/// the crate docs).
+pub fn decode_photosites(path: &Path, opts: &RawOptions) -> Result<RawFrame, RawError> {
+    decode_raw(path, opts, RawLayout::Photosite)
+}
+
+/// Decodes a Bayer raw file in either layout.
+pub fn decode_raw(path: &Path, opts: &RawOptions, layout: RawLayout) -> Result<RawFrame, RawError> {
     let (kind, src) = open_raw(path)?;
     let image = guarded(path, || {
         loader().decode(&src, &RawDecodeParams::default(), false)
     })?;
-    superpixel(path, kind, &image, opts)
+    normalise(path, kind, &image, opts, layout)
 }
 
 /// What [`read_raw_header`] tells without computing superpixels.
@@ -254,6 +296,19 @@ pub struct RawHeader {
     pub bits_per_sample: u32,
     /// The Bayer phase at the active area's top-left photosite.
     pub cfa: BayerPhase,
+}
+
+impl RawHeader {
+    /// The size of the image as a decode in `layout` gives it.
+    pub const fn size_px(&self, layout: RawLayout) -> (u32, u32) {
+        match layout {
+            RawLayout::Superpixel => (self.width_px, self.height_px),
+            RawLayout::Photosite => (
+                self.width_px.saturating_mul(2),
+                self.height_px.saturating_mul(2),
+            ),
+        }
+    }
 }
 
 /// The size of the image [`decode_superpixel`] would give, its bit depth and phase, with the
@@ -422,22 +477,25 @@ fn geometry(path: &Path, image: &RawImage) -> Result<Geometry, RawError> {
     })
 }
 
-/// The levels of the superpixel computation: per CFA position of a 2x2 quad, its black level
-/// and the scale to the white level; and where red, the two greens and blue sit in the quad.
-struct SuperpixelLevels {
+/// The levels of a decode: per CFA position of a 2x2 quad, its black level and the scale to
+/// the white level; and where red, the two greens and blue sit in the quad.
+struct QuadLevels {
     black: [f64; 4],
     scale: [f64; 4],
     white: f64,
     positions: [usize; 4],
+    /// The channel (0 red, 1 green, 2 blue) of each quad position, reading order.
+    channels: [usize; 4],
 }
 
-impl SuperpixelLevels {
-    fn new(black: [f64; 4], white: f64, positions: [usize; 4]) -> Self {
+impl QuadLevels {
+    fn new(black: [f64; 4], white: f64, phase: BayerPhase) -> Self {
         Self {
             black,
             scale: black.map(|b| 1.0 / (white - b)),
             white,
-            positions,
+            positions: phase.positions(),
+            channels: phase.quad().map(|c| usize::from(c.dng_code())),
         }
     }
 
@@ -445,7 +503,7 @@ impl SuperpixelLevels {
     /// row `top` of a sensor `sw` samples wide): red, the mean of the greens and blue, each
     /// black-subtracted and scaled to the white level; saturated where any sample reaches it.
     /// Generic over the sample type so that the inner loop is monomorphic.
-    fn run<T: Copy + Into<f64>>(
+    fn superpixels<T: Copy + Into<f64>>(
         &self,
         data: &[T],
         sw: usize,
@@ -470,26 +528,59 @@ impl SuperpixelLevels {
         }
         (rgb, saturated)
     }
+
+    /// One pixel per photosite of the active area's `2w` x `2h` photosites from column
+    /// `left`, row `top`: its own channel black-subtracted and scaled to the white level, the
+    /// other two NaN (not measured there); saturated where its own value reaches the white
+    /// level.
+    fn photosites<T: Copy + Into<f64>>(
+        &self,
+        data: &[T],
+        sw: usize,
+        left: usize,
+        top: usize,
+        w: usize,
+        h: usize,
+    ) -> (Vec<[f32; 3]>, Vec<bool>) {
+        let (pw, ph) = (2 * w, 2 * h);
+        let mut rgb = Vec::with_capacity(pw * ph);
+        let mut saturated = Vec::with_capacity(pw * ph);
+        for y in 0..ph {
+            let row = &data[(top + y) * sw + left..(top + y) * sw + left + pw];
+            for (x, &raw) in row.iter().enumerate() {
+                let k = (y % 2) * 2 + x % 2;
+                let raw: f64 = raw.into();
+                let mut px = [f32::NAN; 3];
+                px[self.channels[k]] = ((raw - self.black[k]) * self.scale[k]) as f32;
+                rgb.push(px);
+                saturated.push(raw >= self.white);
+            }
+        }
+        (rgb, saturated)
+    }
 }
 
-/// The superpixel computation on a decoded image.
-fn superpixel(
+/// How a decode lays the photosites out in the image it returns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum RawLayout {
+    /// One pixel per photosite of the active area (full resolution); each pixel holds its own
+    /// channel, the other two NaN ([`decode_photosites`]).
+    Photosite,
+    /// One RGB pixel per 2x2 quad (half resolution; [`decode_superpixel`]).
+    Superpixel,
+}
+
+/// The levels a decode uses: the overrides, else the file's (see the module docs).
+fn levels(
     path: &Path,
     kind: FileKind,
     image: &RawImage,
+    g: &Geometry,
     opts: &RawOptions,
-) -> Result<RawFrame, RawError> {
-    let Geometry {
-        left,
-        top,
-        aw,
-        ah,
-        phase,
-    } = geometry(path, image)?;
-    let (sw, sh) = (image.width, image.height);
+) -> Result<([f64; 4], f64), RawError> {
     let black_levels = match opts.black_levels {
         Some(b) => b,
-        None => file_black_levels(path, kind, image, left, top)?,
+        None => file_black_levels(path, kind, image, g.left, g.top)?,
     };
     let white_level = match opts.white_level {
         Some(w) => w,
@@ -513,23 +604,55 @@ fn superpixel(
             });
         }
     }
-    let (w, h) = (aw / 2, ah / 2);
+    Ok((black_levels, white_level))
+}
+
+/// The superpixel or photosite computation on a decoded image.
+fn normalise(
+    path: &Path,
+    kind: FileKind,
+    image: &RawImage,
+    opts: &RawOptions,
+    layout: RawLayout,
+) -> Result<RawFrame, RawError> {
+    let g = geometry(path, image)?;
+    let (black_levels, white_level) = levels(path, kind, image, &g, opts)?;
+    let (sw, sh) = (image.width, image.height);
+    let (w, h) = (g.aw / 2, g.ah / 2);
     let expected = sw * sh;
-    let levels = SuperpixelLevels::new(black_levels, white_level, phase.positions());
-    let (rgb, saturated) = match &image.data {
-        RawImageData::Integer(d) if d.len() >= expected => levels.run(d, sw, left, top, w, h),
-        RawImageData::Float(d) if d.len() >= expected => levels.run(d, sw, left, top, w, h),
-        RawImageData::Integer(d) => return Err(short_data(path, d.len(), expected)),
-        RawImageData::Float(d) => return Err(short_data(path, d.len(), expected)),
+    let levels = QuadLevels::new(black_levels, white_level, g.phase);
+    let (left, top) = (g.left, g.top);
+    let (rgb, saturated) = match (&image.data, layout) {
+        (RawImageData::Integer(d), _) if d.len() < expected => {
+            return Err(short_data(path, d.len(), expected))
+        }
+        (RawImageData::Float(d), _) if d.len() < expected => {
+            return Err(short_data(path, d.len(), expected))
+        }
+        (RawImageData::Integer(d), RawLayout::Superpixel) => {
+            levels.superpixels(d, sw, left, top, w, h)
+        }
+        (RawImageData::Float(d), RawLayout::Superpixel) => {
+            levels.superpixels(d, sw, left, top, w, h)
+        }
+        (RawImageData::Integer(d), RawLayout::Photosite) => {
+            levels.photosites(d, sw, left, top, w, h)
+        }
+        (RawImageData::Float(d), RawLayout::Photosite) => levels.photosites(d, sw, left, top, w, h),
     };
     let to_u32 = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+    let (width_px, height_px) = match layout {
+        RawLayout::Superpixel => (w, h),
+        RawLayout::Photosite => (2 * w, 2 * h),
+    };
     Ok(RawFrame {
         kind,
-        width_px: to_u32(w),
-        height_px: to_u32(h),
+        layout,
+        width_px: to_u32(width_px),
+        height_px: to_u32(height_px),
         rgb,
         saturated,
-        cfa: phase,
+        cfa: g.phase,
         black_levels,
         white_level,
         bits_per_sample: to_u32(image.bps),

@@ -1,5 +1,5 @@
 //! Camera raw files for skinbrdf: what a file is ([`sniff`]), its radiometrically linear pixels
-//! ([`decode_superpixel`]), its exposure metadata ([`read_metadata`]) and a DNG writer
+//! ([`decode_photosites`], [`decode_superpixel`]), its exposure metadata ([`read_metadata`]) and a DNG writer
 //! ([`dng::write_dng`]) for the synthetic studio.
 //!
 //! # Radiometry
@@ -15,20 +15,32 @@
 //! `C`, one per channel, absorbs the channel gains). `black_c` is the file's black level for
 //! that CFA position; `white` is the file's white level. [`RawOptions`] may override either.
 //!
-//! # Superpixels and coordinates
+//! # Photosites, superpixels and coordinates
 //!
 //! Pixel centres are at integer coordinates (the OpenCV convention) in both the sensor's active
-//! area and the image as loaded. Output pixel `(u, v)` is the Bayer quad whose top-left photosite
-//! is `(2u, 2v)` *in the active area*: its red photosite, the mean of its two green photosites and
-//! its blue photosite. It covers photosites `2u..=2u+1` by `2v..=2v+1`, so its centre is at
-//! sensor (active-area) coordinates `(2u + 0.5, 2v + 0.5)`. An active area of odd width or
-//! height drops its last column or row. Every image-space quantity of the pipeline (intrinsics,
-//! detections, derendering) refers to the image *as loaded*; a calibration made on the full
-//! sensor converts with [`sensor_to_superpixel_focal`] (`f' = f / 2`) and
-//! [`sensor_to_superpixel_centre`] (`c' = (c - 0.5) / 2`).
+//! area and the image as loaded. Two layouts ([`RawLayout`]):
+//!
+//! * **Photosites** ([`decode_photosites`], full resolution): output pixel `(x, y)` is
+//!   active-area photosite `(x, y)`. It holds its own channel (the colour of its filter, from
+//!   the phase at the active area's origin) normalised with its own CFA position's black level;
+//!   the other two channels are NaN: they were not measured there, and no value is interpolated
+//!   into them. The image's camera model is the sensor's (photosite units, no conversion).
+//! * **Superpixels** ([`decode_superpixel`], half resolution, faster): output pixel `(u, v)` is
+//!   the Bayer quad whose top-left photosite is `(2u, 2v)` *in the active area*: its red
+//!   photosite, the mean of its two green photosites and its blue photosite. It covers
+//!   photosites `2u..=2u+1` by `2v..=2v+1`, so its centre is at sensor (active-area)
+//!   coordinates `(2u + 0.5, 2v + 0.5)`, while its red and blue values were measured half a
+//!   photosite from there in x and y. A calibration made on the full sensor converts with
+//!   [`sensor_to_superpixel_focal`] (`f' = f / 2`) and [`sensor_to_superpixel_centre`]
+//!   (`c' = (c - 0.5) / 2`), or as a whole with [`sensor_camera_to_superpixel`];
+//!   [`superpixel_camera_to_sensor`] is the inverse (`f = 2 f'`, `c = 2 c' + 0.5`).
+//!
+//! An active area of odd width or height drops its last column or row in both layouts, so the
+//! photosite image is exactly twice the superpixel image. Every image-space quantity of the
+//! pipeline (intrinsics, detections, derendering) refers to the image *as loaded*.
 //!
 //! A superpixel is *saturated* when any of its four photosites' raw value is at or above the
-//! white level.
+//! white level; a photosite when its own raw value is.
 //!
 //! # Layouts
 //!
@@ -46,8 +58,10 @@ pub mod tiff;
 
 pub use bayer::{BayerPhase, CfaColour};
 pub use decode::{
-    decode_superpixel, read_raw_header, sensor_camera_to_superpixel, sensor_to_superpixel_centre,
-    sensor_to_superpixel_focal, RawFrame, RawHeader, RawOptions,
+    decode_photosites, decode_raw, decode_superpixel, read_raw_header, sensor_camera_to_superpixel,
+    sensor_to_superpixel_centre, sensor_to_superpixel_focal, superpixel_camera_to_sensor,
+    superpixel_to_sensor_centre, superpixel_to_sensor_focal, RawFrame, RawHeader, RawLayout,
+    RawOptions,
 };
 pub use error::RawError;
 pub use kind::{check_extension, sniff, FileKind};

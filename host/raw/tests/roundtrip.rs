@@ -1,5 +1,5 @@
 //! Write DNGs with every Bayer phase, bit depth and active-area offset, decode them back, and
-//! check the superpixels, saturation, levels and metadata exactly; refusals name the file.
+//! check the photosites, superpixels, saturation, levels and metadata exactly; refusals name the file.
 #![allow(clippy::unwrap_used)] // test helpers outside #[test] fns
 
 use std::path::Path;
@@ -7,8 +7,8 @@ use std::path::Path;
 use proptest::prelude::*;
 use skinbrdf_raw::dng::{write_dng, DngImage};
 use skinbrdf_raw::{
-    check_extension, decode_superpixel, read_metadata, read_raw_header, sniff, BayerPhase,
-    CaptureTime, FileKind, LocalDateTime, RawError, RawOptions,
+    check_extension, decode_photosites, decode_superpixel, read_metadata, read_raw_header, sniff,
+    BayerPhase, CaptureTime, FileKind, LocalDateTime, RawError, RawLayout, RawOptions,
 };
 
 /// A sensor with the given active area and margins whose width packs into whole bytes.
@@ -69,6 +69,31 @@ fn expected(l: &Layout, data: &[u16], black: [f64; 4], white: f64) -> (Vec<[f32;
     (rgb, sat)
 }
 
+/// The photosites the crate documents: photosite (x, y) of the even part of the active area
+/// with its own channel `(raw - black_c) / (white - black_c)`, the others NaN.
+fn expected_photosites(
+    l: &Layout,
+    data: &[u16],
+    black: [f64; 4],
+    white: f64,
+) -> (Vec<[f32; 3]>, Vec<bool>) {
+    let (sw, _) = l.sensor();
+    let mut rgb = Vec::new();
+    let mut sat = Vec::new();
+    for y in 0..l.active_h / 2 * 2 {
+        for x in 0..l.active_w / 2 * 2 {
+            let raw = f64::from(data[((l.top + y) * sw + l.left + x) as usize]);
+            let k = (y % 2 * 2 + x % 2) as usize;
+            let mut px = [f32::NAN; 3];
+            let c = usize::from(l.phase.colour_at(x as usize, y as usize).dng_code());
+            px[c] = ((raw - black[k]) * (1.0 / (white - black[k]))) as f32;
+            rgb.push(px);
+            sat.push(raw >= white);
+        }
+    }
+    (rgb, sat)
+}
+
 fn phase() -> impl Strategy<Value = BayerPhase> {
     prop::sample::select(BayerPhase::ALL.to_vec())
 }
@@ -115,6 +140,18 @@ proptest! {
         let (rgb, sat) = expected(&l, &data, black.map(f64::from), f64::from(white));
         prop_assert_eq!(&f.rgb, &rgb);
         prop_assert_eq!(&f.saturated, &sat);
+
+        // Photosites: each its own channel and level, the others NaN; the quads average them.
+        let p = decode_photosites(&path, &RawOptions::default()).unwrap();
+        prop_assert_eq!((p.width_px, p.height_px), (2 * f.width_px, 2 * f.height_px));
+        prop_assert_eq!(p.layout, RawLayout::Photosite);
+        let (rgb, sat) = expected_photosites(&l, &data, black.map(f64::from), f64::from(white));
+        prop_assert_eq!(p.rgb.len(), rgb.len());
+        for (got, want) in p.rgb.iter().zip(&rgb) {
+            prop_assert!(got.iter().zip(want).all(|(a, b)| a == b || (a.is_nan() && b.is_nan())), "{:?} {:?}", got, want);
+        }
+        prop_assert_eq!(&p.saturated, &sat);
+        prop_assert_eq!(hd.size_px(RawLayout::Photosite), (p.width_px, p.height_px));
 
         // The session's override replaces the file's levels.
         let opts = RawOptions { black_levels: Some([10.0; 4]), white_level: Some(f64::from(white) - 5.0) };

@@ -15,7 +15,8 @@
 //! One record (46 bytes): `theta_i_rad, theta_e_rad, phi_d_rad, theta_h_rad, theta_diff_rad,
 //! phi_diff_rad` (6 x `f32`), `rho_r, rho_g, rho_b` (3 x `f32`, 1/sr), `weight` (`f32`),
 //! `image_index` (`u16`, `u16::MAX` = not from an image), `pixel_x, pixel_y` (2 x `u16`).
-//! Angles follow [`skinbrdf_core::angles`].
+//! Angles follow [`skinbrdf_core::angles`]. A channel a partial sample did not measure (a
+//! camera raw photosite measures one) is a NaN `rho` (bits kept as written).
 //!
 //! A reader rejects a wrong magic, an unknown version, a record size other than 46, a file
 //! shorter than its count and one with data past its count, each with an error naming the file. The writer streams records through
@@ -433,6 +434,25 @@ mod tests {
         let len = std::fs::metadata(&path).expect("meta").len();
         let hl = serde_json::to_vec(&h).expect("json").len() as u64;
         assert_eq!(len, 28 + hl + 1000 * RECORD_SIZE as u64);
+    }
+
+    #[test]
+    fn partial_samples_round_trip() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("p.skbs");
+        let samples: Vec<_> = (0..3)
+            .map(|c| {
+                let mut s = sample(c);
+                s.rho = std::array::from_fn(|k| if k == c as usize { 0.4 } else { f32::NAN });
+                s
+            })
+            .collect();
+        write_samples(&path, &SampleHeader::new("test", "partial"), &samples).expect("write");
+        let (_, back) = read_samples(&path).expect("read");
+        for (a, b) in samples.iter().zip(&back) {
+            assert_eq!(a.measured(), b.measured());
+            assert_eq!(a.rho.map(f32::to_bits), b.rho.map(f32::to_bits));
+        }
     }
 
     #[test]

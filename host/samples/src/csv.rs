@@ -1,5 +1,7 @@
 //! CSV export of samples: one header line, one sample per line, angles in radians,
-//! reflectance in 1/sr, written atomically.
+//! reflectance in 1/sr, written atomically. A channel a partial sample did not measure (a
+//! camera raw photosite measures one) is written `NaN`, which Rust's, numpy's and pandas'
+//! number parsers read back as NaN.
 
 use std::io::Write;
 use std::path::Path;
@@ -67,5 +69,25 @@ mod tests {
         assert_eq!(cols.len(), CSV_HEADER.split(',').count());
         assert_eq!(cols[0], 0.5);
         assert_eq!(cols[7], 1.5);
+    }
+
+    #[test]
+    fn a_partial_sample_writes_nan_and_reads_back() {
+        let s = BrdfSample {
+            rho: [f32::NAN, 0.75, f32::NAN],
+            ..BrdfSample::default()
+        };
+        let mut out = Vec::new();
+        write_csv_to(&mut out, &[s]).expect("write");
+        let text = String::from_utf8(out).expect("utf8");
+        let row: Vec<f32> = text
+            .lines()
+            .nth(1)
+            .expect("row")
+            .split(',')
+            .map(|v| v.parse().expect("num"))
+            .collect();
+        assert!(row[6].is_nan() && row[8].is_nan());
+        assert_eq!(row[7], 0.75);
     }
 }

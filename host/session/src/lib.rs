@@ -47,8 +47,9 @@ pub use capture::{CaptureRecord, ImageRole};
 pub use error::{FileError, SessionErrors, SessionProblem};
 pub use format::*;
 pub use linear::{
-    load_linear_image, load_raw_image, raw_kind, raw_options, read_header, ImageHeader,
-    LinearImage, Linearization, ResponseTable, StoredFormat, ToneCurve,
+    load_linear_image, load_raw_image, measured_channels, raw_kind, raw_options, read_header,
+    BayerPhase, ImageHeader, LinearImage, Linearization, RawLayout, RawMode, ResponseTable,
+    StoredFormat, ToneCurve,
 };
 pub use load::{
     BadImagePolicy, LinearizationSource, SectionNeeds, Session, SkippedImage, TAG36H11_CODES,

@@ -18,19 +18,83 @@
 //! # Camera raw files
 //!
 //! A raw file (DNG, CR2, NEF, ARW...; recognised by its content, see [`skinbrdf_raw::sniff`])
-//! is decoded by [`skinbrdf_raw::decode_superpixel`]: `V = (raw - black_c) / (white -
-//! black_c)` per CFA position with the file's own levels, 2x2 superpixels (half resolution),
-//! saturated where any photosite of the quad is at or above the white level. No session-wide
-//! `[linearization]` applies to it. An image's own `linearization` may override its levels:
-//! it must have `curve = "linear"`, and it overrides only when it states `white_level` (then
-//! `black_level`, default 0, and `white_level` replace the file's levels for every CFA
-//! position); `gamma`, `response` and `saturation_level` are errors on a raw file.
+//! is decoded with `V = (raw - black_c) / (white - black_c)` per CFA position with the file's
+//! own levels, in one of two [`RawMode`]s:
+//!
+//! * **`photosite`** (the default): one pixel per photosite of the active area, at full
+//!   resolution ([`skinbrdf_raw::decode_photosites`]). Each pixel holds its own channel (the
+//!   colour of its filter) with its own CFA position's levels; its other two channels are NaN,
+//!   not interpolated: the derender makes of each photosite a sample of one channel, with the
+//!   ray through the photosite's own centre. [`LinearImage::cfa`] names the mosaic, and
+//!   [`LinearImage::geometry_grey`] gives target detection a full-resolution image (green,
+//!   interpolated at the red and blue photosites). Saturated where the photosite itself is at
+//!   or above the white level.
+//! * **`superpixel`** (faster, a quarter of the pixels): 2x2 superpixels at half resolution
+//!   ([`skinbrdf_raw::decode_superpixel`]): red, the mean of the greens and blue of each quad,
+//!   saturated where any photosite of the quad is at or above the white level. Red and blue
+//!   were measured half a photosite from the superpixel's centre in x and y.
+//!
+//! A session states the camera of a raw session in superpixel units (half the active area,
+//! what `skinbrdf ingest` writes and [`read_header`] reports); in photosite mode the session
+//! converts it to the photosite image as it loads (`f = 2 f'`, `c = 2 c' + 0.5`, size
+//! doubled; [`skinbrdf_raw::superpixel_camera_to_sensor`]), so every stage sees the camera of
+//! the image as loaded.
+//!
+//! No session-wide `[linearization]` applies to a raw file. An image's own `linearization` may
+//! override its levels: it must have `curve = "linear"`, and it overrides only when it states
+//! `white_level` (then `black_level`, default 0, and `white_level` replace the file's levels for
+//! every CFA position); `gamma`, `response` and `saturation_level` are errors on a raw file.
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::FileError;
+
+pub use skinbrdf_raw::{BayerPhase, RawLayout};
+
+/// How camera raw files load (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RawMode {
+    /// One pixel per photosite, its own channel only, full resolution.
+    #[default]
+    Photosite,
+    /// One RGB pixel per 2x2 quad, half resolution.
+    Superpixel,
+}
+
+impl RawMode {
+    /// Every mode.
+    pub const ALL: [Self; 2] = [Self::Photosite, Self::Superpixel];
+
+    /// The decoder's layout.
+    pub const fn layout(self) -> RawLayout {
+        match self {
+            Self::Photosite => RawLayout::Photosite,
+            Self::Superpixel => RawLayout::Superpixel,
+        }
+    }
+
+    /// The name used in files and on the command line (`photosite`, `superpixel`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Photosite => "photosite",
+            Self::Superpixel => "superpixel",
+        }
+    }
+
+    /// The mode of a name, if it is one.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+impl std::fmt::Display for RawMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// The tone curve of the stored values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -284,7 +348,7 @@ pub enum StoredFormat {
     U16,
     /// 32-bit float values (OpenEXR).
     F32,
-    /// Camera raw photosites of this many bits, loaded as superpixels.
+    /// Camera raw photosites of this many bits.
     Raw {
         /// Bits per stored sample.
         bits: u32,
@@ -386,7 +450,7 @@ pub fn raw_options(
 }
 
 /// Reads an image file's header only (no pixel data; a raw file's size is its superpixel
-/// size, the image as loaded).
+/// size, the unit a session states a raw camera in: see the module docs).
 pub fn read_header(path: &Path) -> Result<ImageHeader, FileError> {
     use image::ImageDecoder;
     if raw_kind(path)?.is_some() {
@@ -436,15 +500,71 @@ pub struct LinearImage {
     pub width: u32,
     /// Height in pixels.
     pub height: u32,
-    /// Linear values `V` per pixel (1.0 = white level).
+    /// Linear values `V` per pixel (1.0 = white level); NaN in a channel a photosite image
+    /// did not measure there.
     pub rgb: Vec<[f32; 3]>,
-    /// True where any channel is at or above the saturation level.
+    /// True where any measured channel is at or above the saturation level.
     pub saturated: Vec<bool>,
     /// The stored format the values came from.
     pub format: StoredFormat,
+    /// A camera raw file loaded per photosite: its Bayer phase at pixel `(0, 0)`; pixel
+    /// `(x, y)` measures the channel `cfa.colour_at(x, y)` only. `None`: every pixel measures
+    /// all three channels.
+    pub cfa: Option<BayerPhase>,
 }
 
 impl LinearImage {
+    /// The channels pixel `(x, y)` measured: all three, or a photosite's own.
+    pub fn measured_channels(&self, x: u32, y: u32) -> [bool; 3] {
+        measured_channels(self.cfa, x, y)
+    }
+
+    /// A full-resolution single-channel image for geometry (target detection): the mean of
+    /// the channels of an RGB image; for a photosite image the green channel, measured at the
+    /// green photosites and at a red or blue photosite the mean of its green neighbours (its
+    /// four edge neighbours inside the image), so that every pixel keeps its own place.
+    pub fn geometry_grey(&self) -> Vec<f32> {
+        let Some(phase) = self.cfa else {
+            return self
+                .rgb
+                .iter()
+                .map(|p| (p[0] + p[1] + p[2]) / 3.0)
+                .collect();
+        };
+        const GREEN: usize = 1;
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut out = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let c = usize::from(phase.colour_at(x, y).dng_code());
+                if c == GREEN {
+                    out.push(self.rgb[y * w + x][GREEN]);
+                    continue;
+                }
+                let mut sum = 0.0f32;
+                let mut n = 0u8;
+                let mut add = |xx: usize, yy: usize| {
+                    sum += self.rgb[yy * w + xx][GREEN];
+                    n += 1;
+                };
+                if x > 0 {
+                    add(x - 1, y);
+                }
+                if x + 1 < w {
+                    add(x + 1, y);
+                }
+                if y > 0 {
+                    add(x, y - 1);
+                }
+                if y + 1 < h {
+                    add(x, y + 1);
+                }
+                out.push(if n > 0 { sum / f32::from(n) } else { f32::NAN });
+            }
+        }
+        out
+    }
+
     /// The pixel at column `x`, row `y`.
     pub fn get(&self, x: u32, y: u32) -> Option<[f32; 3]> {
         (x < self.width && y < self.height).then(|| self.rgb[(y * self.width + x) as usize])
@@ -456,14 +576,31 @@ impl LinearImage {
     }
 }
 
-/// Decodes a camera raw file with the level overrides of `lin` (see the module docs).
-pub fn load_raw_image(path: &Path, lin: &Linearization) -> Result<LinearImage, FileError> {
+/// The channels a pixel `(x, y)` of an image with mosaic `cfa` measured (see
+/// [`LinearImage::cfa`]).
+pub fn measured_channels(cfa: Option<BayerPhase>, x: u32, y: u32) -> [bool; 3] {
+    match cfa {
+        None => [true; 3],
+        Some(phase) => {
+            let c = usize::from(phase.colour_at(x as usize, y as usize).dng_code());
+            std::array::from_fn(|k| k == c)
+        }
+    }
+}
+
+/// Decodes a camera raw file in `mode` with the level overrides of `lin` (see the module
+/// docs).
+pub fn load_raw_image(
+    path: &Path,
+    lin: &Linearization,
+    mode: RawMode,
+) -> Result<LinearImage, FileError> {
     let opts = raw_options(lin).map_err(|(field, problem)| FileError::Invalid {
         path: path.to_path_buf(),
         field: format!("linearization.{field}"),
         problem,
     })?;
-    let f = skinbrdf_raw::decode_superpixel(path, &opts)?;
+    let f = skinbrdf_raw::decode_raw(path, &opts, mode.layout())?;
     Ok(LinearImage {
         width: f.width_px,
         height: f.height_px,
@@ -472,14 +609,19 @@ pub fn load_raw_image(path: &Path, lin: &Linearization) -> Result<LinearImage, F
         format: StoredFormat::Raw {
             bits: f.bits_per_sample,
         },
+        cfa: (mode == RawMode::Photosite).then_some(f.cfa),
     })
 }
 
-/// Reads an image and linearizes it: camera raw files (by content) with [`load_raw_image`],
-/// others (PNG, TIFF, JPEG, OpenEXR; grey or RGB, alpha ignored) with `lin`.
-pub fn load_linear_image(path: &Path, lin: &Linearization) -> Result<LinearImage, FileError> {
+/// Reads an image and linearizes it: camera raw files (by content) with [`load_raw_image`] in
+/// `raw_mode`, others (PNG, TIFF, JPEG, OpenEXR; grey or RGB, alpha ignored) with `lin`.
+pub fn load_linear_image(
+    path: &Path,
+    lin: &Linearization,
+    raw_mode: RawMode,
+) -> Result<LinearImage, FileError> {
     if raw_kind(path)?.is_some() {
-        return load_raw_image(path, lin);
+        return load_raw_image(path, lin, raw_mode);
     }
     let img = image::open(path).map_err(|source| FileError::Image {
         path: path.to_path_buf(),
@@ -530,6 +672,7 @@ pub fn load_linear_image(path: &Path, lin: &Linearization) -> Result<LinearImage
         rgb,
         saturated,
         format,
+        cfa: None,
     })
 }
 

@@ -16,7 +16,9 @@ use skinbrdf_core::Pose;
 use crate::capture::{CaptureRecord, ImageRole, CAPTURE_FORMAT_VERSION};
 use crate::error::{FileError, SessionErrors};
 use crate::format::*;
-use crate::linear::{load_linear_image, raw_options, LinearImage, Linearization, StoredFormat};
+use crate::linear::{
+    load_linear_image, raw_options, LinearImage, Linearization, RawMode, StoredFormat,
+};
 use crate::parse::{parse_session_toml, Stated};
 use crate::truth::Truth;
 
@@ -45,6 +47,9 @@ pub struct Session {
     /// (`skinbrdf process --truth FILE`: a session written by `ingest` scored against the
     /// synthetic session it came from).
     pub truth_file: Option<PathBuf>,
+    /// How raw images load; with [`RawMode::Photosite`] in a session of raw images,
+    /// `file.camera` is the photosite image's (see [`Session::set_raw_mode`]).
+    raw_mode: RawMode,
 }
 
 /// Where the session's default linearization (`[linearization]`) came from.
@@ -125,14 +130,88 @@ impl Session {
         } else {
             LinearizationSource::Unused
         };
-        errs.into_result(Session {
+        let mut session = Session {
             dir,
             file,
             capture,
             linearization_source,
             skipped_images: Vec::new(),
             truth_file: None,
-        })
+            raw_mode: RawMode::Superpixel,
+        };
+        session.set_raw_mode(RawMode::default());
+        errs.into_result(session)
+    }
+
+    /// A session from its parts, raw images loading as superpixels (for tools and tests that
+    /// build one in memory; [`Session::load`] reads one from its directory).
+    pub fn from_parts(dir: PathBuf, file: SessionFile, capture: Option<CaptureRecord>) -> Self {
+        Self {
+            dir,
+            file,
+            capture,
+            linearization_source: LinearizationSource::Stated,
+            skipped_images: Vec::new(),
+            truth_file: None,
+            raw_mode: RawMode::Superpixel,
+        }
+    }
+
+    /// How the session's raw images load: the mode asked for when every image is a camera
+    /// raw file; superpixels when the session mixes raw files with other images (its camera
+    /// then describes the superpixel image and the others alike).
+    pub fn raw_mode(&self) -> RawMode {
+        self.raw_mode
+    }
+
+    /// True when the session's images are all camera raw files (by name).
+    pub fn all_raw(&self) -> bool {
+        !self.file.images.is_empty() && self.file.images.iter().all(|i| is_raw_file(&i.file))
+    }
+
+    /// Loads raw images in `mode` from now on and converts `file.camera` to the image as
+    /// loaded: `session.toml` states a raw session's camera in superpixel units, and
+    /// photosite mode doubles its size and focal lengths and maps its principal point
+    /// `c -> 2 c + 0.5` ([`skinbrdf_raw::superpixel_camera_to_sensor`]). A session that is not
+    /// all raw stays in superpixels (see [`Session::raw_mode`]).
+    pub fn set_raw_mode(&mut self, mode: RawMode) {
+        let mode = if self.all_raw() {
+            mode
+        } else {
+            RawMode::Superpixel
+        };
+        if mode == self.raw_mode {
+            return;
+        }
+        self.file.camera = match mode {
+            RawMode::Photosite => photosite_camera(&self.file.camera),
+            RawMode::Superpixel => self.camera_as_stated(&self.file.camera),
+        };
+        self.raw_mode = mode;
+    }
+
+    /// A camera of the image as loaded in the units `session.toml` states it in (the inverse
+    /// of the conversion of [`Session::set_raw_mode`]): what a `[camera]` table written for
+    /// the session must hold.
+    pub fn camera_as_stated(&self, camera: &CameraSpec) -> CameraSpec {
+        match (self.raw_mode, camera) {
+            (RawMode::Superpixel, c) => *c,
+            (RawMode::Photosite, CameraSpec::Calibrated(m)) => {
+                CameraSpec::Calibrated(skinbrdf_raw::sensor_camera_to_superpixel(m))
+            }
+            (
+                RawMode::Photosite,
+                CameraSpec::ToBeCalibrated {
+                    width_px,
+                    height_px,
+                    focal_guess_px,
+                },
+            ) => CameraSpec::ToBeCalibrated {
+                width_px: width_px / 2,
+                height_px: height_px / 2,
+                focal_guess_px: focal_guess_px.map(skinbrdf_raw::sensor_to_superpixel_focal),
+            },
+        }
     }
 
     /// Parses and validates a `session.toml` text (no file checks; for tools and tests).
@@ -187,7 +266,11 @@ impl Session {
                 field: format!("images[{index}]"),
                 problem: format!("no such image (the session has {})", self.file.images.len()),
             })?;
-        let mut img = load_linear_image(&self.path(&entry.file), self.linearization(index))?;
+        let mut img = load_linear_image(
+            &self.path(&entry.file),
+            self.linearization(index),
+            self.raw_mode,
+        )?;
         if let Some(k) = entry.exposure_scale {
             let k = k as f32;
             img.rgb
@@ -213,13 +296,16 @@ impl Session {
             .par_iter()
             .enumerate()
             .filter_map(|(index, im)| {
-                image_problem(&self.path(&im.file), self.linearization(index)).map(|cause| {
-                    SkippedImage {
-                        index,
-                        file: im.file.clone(),
-                        role: im.role,
-                        cause,
-                    }
+                image_problem(
+                    &self.path(&im.file),
+                    self.linearization(index),
+                    self.raw_mode,
+                )
+                .map(|cause| SkippedImage {
+                    index,
+                    file: im.file.clone(),
+                    role: im.role,
+                    cause,
                 })
             })
             .collect();
@@ -282,9 +368,70 @@ impl Session {
     pub fn load_truth(&self) -> Option<Result<Truth, FileError>> {
         let p = self.truth_path();
         match &self.truth_file {
-            Some(_) => Some(Truth::load(&p).and_then(|t| t.keyed_to(&self.file.images, &p))),
-            None => p.exists().then(|| Truth::load(&p)),
+            Some(_) => Some(
+                Truth::load(&p)
+                    .and_then(|t| t.keyed_to(&self.file.images, &p))
+                    .map(|t| self.truth_in_image_units(t)),
+            ),
+            None => p
+                .exists()
+                .then(|| Truth::load(&p).map(|t| self.truth_in_image_units(t))),
         }
+    }
+
+    /// A truth stated for the superpixel image of a raw session scored against the photosite
+    /// image, or the other way round (a truth's camera is the image it was stated for):
+    /// its camera and target corners converted to the image as loaded. A truth of any other
+    /// size is left as it is.
+    fn truth_in_image_units(&self, mut t: Truth) -> Truth {
+        let loaded = self.file.camera.size_px();
+        let stated = (t.camera.width_px, t.camera.height_px);
+        let to_photosite = stated.0.saturating_mul(2) == loaded.0
+            && stated.1.saturating_mul(2) == loaded.1
+            && self.raw_mode == RawMode::Photosite;
+        let to_superpixel = stated.0 / 2 == loaded.0
+            && stated.1 / 2 == loaded.1
+            && stated.0 > loaded.0
+            && self.all_raw();
+        let map: fn(f64) -> f64 = if to_photosite {
+            skinbrdf_raw::superpixel_to_sensor_centre
+        } else if to_superpixel {
+            skinbrdf_raw::sensor_to_superpixel_centre
+        } else {
+            return t;
+        };
+        t.camera = if to_photosite {
+            skinbrdf_raw::superpixel_camera_to_sensor(&t.camera)
+        } else {
+            skinbrdf_raw::sensor_camera_to_superpixel(&t.camera)
+        };
+        for im in &mut t.images {
+            for tt in &mut im.targets {
+                for c in tt.corners_px.iter_mut().chain([&mut tt.centre_px]) {
+                    *c = glam::DVec2::new(map(c.x), map(c.y));
+                }
+            }
+        }
+        t
+    }
+}
+
+/// A raw session's camera as `session.toml` states it (superpixel units), converted to the
+/// photosite image (see [`Session::set_raw_mode`]).
+fn photosite_camera(camera: &CameraSpec) -> CameraSpec {
+    match camera {
+        CameraSpec::Calibrated(m) => {
+            CameraSpec::Calibrated(skinbrdf_raw::superpixel_camera_to_sensor(m))
+        }
+        CameraSpec::ToBeCalibrated {
+            width_px,
+            height_px,
+            focal_guess_px,
+        } => CameraSpec::ToBeCalibrated {
+            width_px: width_px.saturating_mul(2),
+            height_px: height_px.saturating_mul(2),
+            focal_guess_px: focal_guess_px.map(skinbrdf_raw::superpixel_to_sensor_focal),
+        },
     }
 }
 
@@ -1162,8 +1309,8 @@ fn is_float_file(name: &str) -> bool {
 }
 
 /// Why an image cannot be used (see [`Session::check_images`]), or `None` when it can.
-fn image_problem(path: &Path, lin: &Linearization) -> Option<String> {
-    let img = match load_linear_image(path, lin) {
+fn image_problem(path: &Path, lin: &Linearization, raw_mode: RawMode) -> Option<String> {
+    let img = match load_linear_image(path, lin, raw_mode) {
         Ok(img) => img,
         Err(FileError::Image { source, .. }) => {
             return Some(format!("cannot be decoded: {source}"))
@@ -1174,24 +1321,26 @@ fn image_problem(path: &Path, lin: &Linearization) -> Option<String> {
         }
         Err(e) => return Some(skinbrdf_core::error_text(&e)),
     };
-    let bad = img
-        .rgb
-        .iter()
-        .position(|p| !p.iter().all(|c| c.is_finite()));
+    let w = img.width as usize;
+    // A photosite image's unmeasured channels are NaN by design: only measured ones count.
+    let broken = |(i, p): (usize, &[f32; 3])| {
+        let measured = img.measured_channels((i % w.max(1)) as u32, (i / w.max(1)) as u32);
+        p.iter().zip(measured).any(|(c, m)| m && !c.is_finite())
+    };
+    let bad = img.rgb.iter().enumerate().position(broken);
     if let Some(first) = bad {
-        let n = img
-            .rgb
-            .iter()
-            .filter(|p| !p.iter().all(|c| c.is_finite()))
-            .count();
-        let w = img.width as usize;
+        let n = img.rgb.iter().enumerate().filter(|&p| broken(p)).count();
         return Some(format!(
             "{n} pixel(s) have non-finite values (inf or NaN; first at x = {}, y = {}): not a photograph's values",
             first % w.max(1),
             first / w.max(1)
         ));
     }
-    if img.rgb.iter().all(|p| p.iter().all(|&c| c <= 0.0)) {
+    if img
+        .rgb
+        .iter()
+        .all(|p| p.iter().all(|&c| c.is_nan() || c <= 0.0))
+    {
         return Some(format!(
             "no stored value is above the black level ({}): the image is black or the linearization's levels do not fit it",
             lin.black_level

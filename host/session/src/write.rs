@@ -200,7 +200,12 @@ mod tests {
         let p = dir.path().join("a.png");
         let rgb: Vec<u16> = (0..3 * 4 * 2).map(|i| (i * 2700) as u16).collect();
         write_png_rgb16(&p, 4, 2, &rgb).unwrap();
-        let img = load_linear_image(&p, &Linearization::LINEAR).unwrap();
+        let img = load_linear_image(
+            &p,
+            &Linearization::LINEAR,
+            crate::linear::RawMode::Superpixel,
+        )
+        .unwrap();
         for (i, px) in img.rgb.iter().enumerate() {
             for c in 0..3 {
                 let want = rgb[3 * i + c] as f32 / 65535.0;
@@ -216,7 +221,12 @@ mod tests {
         let p = dir.path().join("a.exr");
         let rgb: Vec<f32> = (0..3 * 3 * 2).map(|i| i as f32 * 0.37).collect();
         write_exr_rgb32f(&p, 3, 2, &rgb).unwrap();
-        let img = load_linear_image(&p, &Linearization::LINEAR).unwrap();
+        let img = load_linear_image(
+            &p,
+            &Linearization::LINEAR,
+            crate::linear::RawMode::Superpixel,
+        )
+        .unwrap();
         assert_eq!(img.rgb[5][1], rgb[16]);
         assert!(!img.saturated.iter().any(|&s| s));
     }

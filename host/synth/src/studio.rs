@@ -49,6 +49,14 @@
 //! black plus read noise. The superpixel image then has the camera's size, so the intrinsics of
 //! the PNG session are those of the loaded raw images (`docs/ingest.md`).
 //!
+//! With `[studio] mosaic = "photosite"` ([`Mosaic::Photosite`]) the render is the sensor's full
+//! resolution instead: rendered pixel `(x, y)` is active-area photosite `(x, y)`, holding its
+//! own filter's channel `c`, the same formula with `V_c` of that pixel. Each photosite's value
+//! then belongs to its own place (as on a camera's sensor), the PNG session holds the
+//! full-resolution images of the same renders, `camera.toml` states the camera in superpixel
+//! units (half the size, as a raw session states it) and `truth.json` the full-resolution
+//! camera (a session scores it in the units it loads its images in).
+//!
 //! # Camera clock
 //!
 //! The camera's clock runs off the controller's host clock by a scene-set offset and drift:
@@ -200,6 +208,24 @@ pub struct StudioScene {
     /// (`head.glb`), `ply` (`head-colours.ply`, vertex colours).
     #[serde(default = "default_scan_formats")]
     pub scan_formats: Vec<crate::textured_scan::ScanFormat>,
+    /// How the raw files are formed from the renders (see the module docs): `quad` (the
+    /// default) or `photosite`.
+    #[serde(default)]
+    pub mosaic: Mosaic,
+}
+
+/// How a render becomes the sensor's photosites (`[studio] mosaic`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mosaic {
+    /// Each rendered pixel becomes a 2x2 Bayer quad: the superpixel image has the scene
+    /// camera's size and every photosite of a quad holds the quad's value.
+    #[default]
+    Quad,
+    /// Each rendered pixel is one photosite holding its own filter's channel: the scene camera
+    /// is the sensor's full resolution (width and height multiples of 4), so a raw file loaded
+    /// per photosite sees every value where it was rendered, as a camera's sensor records it.
+    Photosite,
 }
 
 fn default_scan_formats() -> Vec<crate::textured_scan::ScanFormat> {
@@ -719,7 +745,22 @@ pub fn mosaic(
     })?;
     let b = st.masked_border_px as usize;
     let (w, h) = (r.width as usize, r.height as usize);
-    let (sw, sh) = (2 * w + 2 * b, 2 * h + 2 * b);
+    // Active-area photosites per rendered pixel, each way.
+    let per_px = match st.mosaic {
+        Mosaic::Quad => 2,
+        Mosaic::Photosite => {
+            if !(w.is_multiple_of(4) && h.is_multiple_of(4)) {
+                return Err(SynthError::Invalid {
+                    field: "studio.mosaic",
+                    problem: format!(
+                        "a photosite mosaic needs an image size in multiples of 4 (whole 2x2 quads, whole bytes per row), got {w}x{h}"
+                    ),
+                });
+            }
+            1
+        }
+    };
+    let (sw, sh) = (per_px * w + 2 * b, per_px * h + 2 * b);
     let black = f64::from(st.raw_black_level);
     let white = f64::from(st.raw_white_level);
     let span = white - black;
@@ -731,11 +772,11 @@ pub fn mosaic(
     data.par_chunks_mut(sw).enumerate().for_each(|(y, row)| {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ ((y as u64) << 24) ^ 0x0d96_5eed);
         for (x, px) in row.iter_mut().enumerate() {
-            let inside = x >= b && y >= b && x < b + 2 * w && y < b + 2 * h;
+            let inside = x >= b && y >= b && x < b + per_px * w && y < b + per_px * h;
             let mean = if inside {
                 let (ax, ay) = (x - b, y - b);
                 let c = usize::from(phase.colour_at(ax, ay).dng_code());
-                let v = f64::from(r.v[(ay / 2) * w + ax / 2][c]);
+                let v = f64::from(r.v[(ay / per_px) * w + ax / per_px][c]);
                 v * gains[c] * k
             } else {
                 0.0
@@ -751,8 +792,12 @@ pub fn mosaic(
         }
     });
     let mut img = DngImage::new(sw as u32, sh as u32, phase, st.raw_bits, data);
-    img.active_area =
-        (b > 0).then_some([b as u32, b as u32, (b + 2 * h) as u32, (b + 2 * w) as u32]);
+    img.active_area = (b > 0).then_some([
+        b as u32,
+        b as u32,
+        (b + per_px * h) as u32,
+        (b + per_px * w) as u32,
+    ]);
     img.black_levels = [st.raw_black_level; 4];
     img.white_level = st.raw_white_level;
     img.make = st.make.clone();
@@ -780,12 +825,21 @@ pub fn focal_length_mm(scene: &Scene) -> f64 {
     0.5 * scene.studio.sensor_width_mm / (0.5 * scene.camera.hfov_deg.to_radians()).tan()
 }
 
-/// The photosites' pitch, millimetres: the sensor's active area (`sensor_width_mm`) holds two
-/// photosites per pixel of the scene's image (a superpixel is a 2x2 quad). The DNG's
-/// focal-plane resolution states it, so `focal_length_mm / pitch / 2` is the scene camera's
-/// focal length in pixels, as a real camera's tags give it.
+/// The photosites' pitch, millimetres: the sensor's active area (`sensor_width_mm`) holds
+/// [`photosites_per_pixel`] photosites per pixel of the scene's image. The DNG's focal-plane
+/// resolution states it, so `focal_length_mm / pitch / 2` is the superpixel image's focal
+/// length in pixels, as a real camera's tags give it.
 pub fn photosite_pitch_mm(scene: &Scene) -> f64 {
-    scene.studio.sensor_width_mm / (2.0 * f64::from(scene.camera.width_px))
+    scene.studio.sensor_width_mm / (photosites_per_pixel(scene) * f64::from(scene.camera.width_px))
+}
+
+/// Active-area photosites per pixel of the scene's image, each way: 2 for a quad mosaic, 1 for
+/// a photosite mosaic ([`Mosaic`]).
+pub fn photosites_per_pixel(scene: &Scene) -> f64 {
+    match scene.studio.mosaic {
+        Mosaic::Quad => 2.0,
+        Mosaic::Photosite => 1.0,
+    }
 }
 
 /// The 35 mm equivalent focal length of the scene's lens on the studio's sensor, millimetres
@@ -793,8 +847,9 @@ pub fn photosite_pitch_mm(scene: &Scene) -> f64 {
 /// frame's diagonal over the active area's (square photosites, the image's aspect).
 pub fn focal_length_35mm_mm(scene: &Scene) -> f64 {
     let c = &scene.camera;
-    let diagonal_mm =
-        photosite_pitch_mm(scene) * 2.0 * f64::from(c.width_px).hypot(f64::from(c.height_px));
+    let diagonal_mm = photosite_pitch_mm(scene)
+        * photosites_per_pixel(scene)
+        * f64::from(c.width_px).hypot(f64::from(c.height_px));
     focal_length_mm(scene) * skinbrdf_raw::FULL_FRAME_DIAGONAL_MM / diagonal_mm
 }
 
@@ -1216,7 +1271,12 @@ pub fn write_studio_files(
             layout_text(scene, sheet)?.as_bytes(),
         )?;
     }
-    write_camera_file(&dir.join(CAMERA_FILE), &rig.camera)?;
+    // A session states a raw camera in superpixel units (`skinbrdf_session::linear`).
+    let stated_camera = match scene.studio.mosaic {
+        Mosaic::Quad => rig.camera,
+        Mosaic::Photosite => skinbrdf_raw::sensor_camera_to_superpixel(&rig.camera),
+    };
+    write_camera_file(&dir.join(CAMERA_FILE), &stated_camera)?;
     let scanner_from_head = scanner_from_head(scene);
     RigIo::write_file(
         &dir.join("rig-measured.toml"),

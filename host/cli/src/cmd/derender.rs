@@ -56,6 +56,10 @@ pub struct Args {
     /// Do not mask the projected printed targets.
     #[arg(long)]
     pub no_target_mask: bool,
+    /// How camera raw images load: `photosite` (default) or `superpixel`; must be the mode the
+    /// poses were estimated in (their camera is the images' as loaded).
+    #[arg(long, value_enum, default_value_t = super::RawModeArg::Photosite)]
+    pub raw_mode: super::RawModeArg,
     /// Output directory (default SESSION/out): samples.skbs, derender.json.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -154,8 +158,9 @@ fn config(args: &Args) -> anyhow::Result<DerenderConfig> {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mut cfg = config(&args)?;
-    let session = skinbrdf_session::Session::load(&args.session)
+    let mut session = skinbrdf_session::Session::load(&args.session)
         .with_context(|| format!("loading session {}", args.session.display()))?;
+    session.set_raw_mode(args.raw_mode.into());
     let plan_opts = PlanOptions::default();
     if args.shadows == Shadows::Plan {
         let plan = Plan::derive(&scene_facts(&session), &plan_opts);

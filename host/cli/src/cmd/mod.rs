@@ -18,6 +18,25 @@ pub mod targets;
 
 /// Prints `value` as pretty JSON on stdout (the commands' `--json`), through the checked writer
 /// ([`skinbrdf_core::json`]): a NaN or infinity is an error naming its field, never a `null`.
+/// How camera raw images load (`--raw-mode`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum RawModeArg {
+    /// One pixel per photosite, each its own channel and ray (full resolution).
+    #[default]
+    Photosite,
+    /// 2x2 superpixels (half resolution, faster).
+    Superpixel,
+}
+
+impl From<RawModeArg> for skinbrdf_session::RawMode {
+    fn from(a: RawModeArg) -> Self {
+        match a {
+            RawModeArg::Photosite => Self::Photosite,
+            RawModeArg::Superpixel => Self::Superpixel,
+        }
+    }
+}
+
 pub(crate) fn print_json<T: serde::Serialize + ?Sized>(value: &T) -> anyhow::Result<()> {
     let text = skinbrdf_core::json::to_string_pretty(std::path::Path::new("stdout"), value)?;
     println!("{text}");

@@ -52,6 +52,10 @@ pub struct Args {
     /// the stages after it do not run and the exit status is non-zero.
     #[arg(long)]
     pub accept_failed_checks: bool,
+    /// How camera raw images load: `photosite` (each photosite a sample of its own channel
+    /// along its own ray, full resolution) or `superpixel` (2x2 quads, half resolution, faster).
+    #[arg(long, value_enum, default_value_t = super::RawModeArg::Photosite)]
+    pub raw_mode: super::RawModeArg,
 }
 
 /// Validates the flags into a pipeline configuration.
@@ -78,6 +82,7 @@ pub fn config(args: &Args) -> anyhow::Result<ProcessConfig> {
     }
     cfg.truth_file = args.truth.clone();
     cfg.accept_failed_checks = args.accept_failed_checks;
+    cfg.raw_mode = args.raw_mode.into();
     Ok(cfg)
 }
 
