@@ -19,6 +19,7 @@ pub mod mesh;
 pub mod pose;
 pub mod sample;
 pub mod stats;
+pub mod untrusted;
 
 pub use angles::{BrdfAngles, ShadingFrame};
 pub use camera::{BrownConrady, CameraError, CameraModel};

@@ -259,13 +259,18 @@ fn percent_decode(uri: &str) -> Option<String> {
 pub(crate) enum UriTarget {
     /// `data:` (embedded, base64).
     Data,
-    /// A file, relative to the glTF file's folder (or absolute with `file:`).
+    /// A regular file inside the glTF file's folder.
     File(PathBuf),
+    /// A file path that is absolute, climbs out, leads out through a link, is not a regular
+    /// file or does not exist.
+    Refused(skinbrdf_core::untrusted::ConfineError),
     /// A scheme the loader does not read, or a malformed escape.
     Unsupported(String),
 }
 
-/// Resolves a buffer or image URI against the glTF file's folder.
+/// Resolves a buffer or image URI against the glTF file's folder: a file must be a regular
+/// file inside it ([`skinbrdf_core::untrusted::confine`], after `%`-decoding; a `file:` URI
+/// is held to the same rule, so `file:///etc/passwd` is refused as absolute).
 pub(crate) fn resolve_uri(dir: &Path, uri: &str) -> UriTarget {
     if uri.starts_with("data:") {
         return UriTarget::Data;
@@ -277,25 +282,23 @@ pub(crate) fn resolve_uri(dir: &Path, uri: &str) -> UriTarget {
     } else if uri.contains(':') {
         return UriTarget::Unsupported(format!("URI scheme of `{uri}` is not read"));
     } else {
-        return match percent_decode(uri) {
-            Some(p) => UriTarget::File(dir.join(p)),
-            None => UriTarget::Unsupported(format!("`{uri}` has a malformed %-escape")),
-        };
+        uri
     };
     match percent_decode(rest) {
-        Some(p) => UriTarget::File(PathBuf::from(p)),
+        Some(p) => match skinbrdf_core::untrusted::confine(dir, &p) {
+            Ok(file) => UriTarget::File(file),
+            Err(e) => UriTarget::Refused(e),
+        },
         None => UriTarget::Unsupported(format!("`{uri}` has a malformed %-escape")),
     }
 }
 
 /// The external files a `.gltf` refers to (buffers and images with a file URI), for copying a
-/// scan with what comes with it; a `.glb` normally has none. Each entry is the URI as written
-/// (decoded, relative to the glTF file's folder) and the resolved path.
+/// scan with what comes with it; a `.glb` normally has none. Each entry is the path relative to
+/// the glTF file's folder (decoded, `/`-separated) and the resolved path; a URI leading outside
+/// the folder, or to anything but a regular file, is refused ([`resolve_uri`]).
 pub fn gltf_external_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshError> {
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = skinbrdf_core::untrusted::read_bounded(path, skinbrdf_core::untrusted::SCAN_FILE)?;
     let doc = parse_document(path, &bytes)?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut uris: Vec<(&str, String)> = Vec::new();
@@ -314,10 +317,24 @@ pub fn gltf_external_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshEr
         match resolve_uri(&dir, u) {
             UriTarget::Data => {}
             UriTarget::File(p) => {
-                let rel = percent_decode(u).unwrap_or_else(|| u.to_string());
+                if what.starts_with("image") {
+                    crate::TextureImage::check_header(&p)?;
+                }
+                let rel = p
+                    .strip_prefix(&dir)
+                    .unwrap_or(&p)
+                    .to_string_lossy()
+                    .replace('\\', "/");
                 if !out.iter().any(|(_, q)| q == &p) {
                     out.push((rel, p));
                 }
+            }
+            UriTarget::Refused(reason) => {
+                return Err(MeshError::Refused {
+                    path: path.to_path_buf(),
+                    key: format!("{what} uri"),
+                    reason,
+                })
             }
             UriTarget::Unsupported(reason) => {
                 return Err(gltf_err(
@@ -346,7 +363,14 @@ fn read_uri(dir: &Path, uri: &str) -> Result<Vec<u8>, (Option<PathBuf>, String)>
                 .map(|d| d.0)
                 .map_err(|e| (None, format!("data URI: {e}")))
         }
-        UriTarget::File(p) => std::fs::read(&p).map_err(|e| (Some(p), e.to_string())),
+        UriTarget::File(p) => {
+            skinbrdf_core::untrusted::read_bounded(&p, skinbrdf_core::untrusted::SCAN_FILE)
+                .map_err(|e| (Some(p), skinbrdf_core::error_text(&e)))
+        }
+        UriTarget::Refused(skinbrdf_core::untrusted::ConfineError::Missing { path, .. }) => {
+            Err((Some(path), "it does not exist".into()))
+        }
+        UriTarget::Refused(e) => Err((None, e.to_string())),
         UriTarget::Unsupported(reason) => Err((None, reason)),
     }
 }
@@ -577,10 +601,7 @@ fn primitive_name(mesh: &::gltf::Mesh<'_>, p: usize) -> String {
 
 /// Reads a `.glb` or `.gltf` (see the module docs).
 pub(crate) fn read_gltf(path: &Path, detail: Detail) -> Result<GltfData, MeshError> {
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = skinbrdf_core::untrusted::read_bounded(path, skinbrdf_core::untrusted::SCAN_FILE)?;
     let ::gltf::Gltf {
         document: doc,
         blob,
@@ -844,18 +865,27 @@ fn material(
             (data.to_vec(), "embedded".to_string(), None)
         }
         ::gltf::image::Source::Uri { uri, .. } => match resolve_uri(dir, uri) {
-            UriTarget::File(p) if !p.is_file() => {
+            UriTarget::Refused(skinbrdf_core::untrusted::ConfineError::Missing {
+                path: p, ..
+            }) => {
                 return Err(MeshError::MissingTexture {
                     path: path.to_path_buf(),
                     material: name,
                     texture: p,
                 })
             }
+            UriTarget::Refused(reason) => {
+                return Err(MeshError::Refused {
+                    path: path.to_path_buf(),
+                    key: format!("image {img_index} uri (material `{name}`)"),
+                    reason,
+                })
+            }
             UriTarget::File(p) => {
-                let b = std::fs::read(&p).map_err(|source| MeshError::Io {
-                    path: p.clone(),
-                    source,
-                })?;
+                let b = skinbrdf_core::untrusted::read_bounded(
+                    &p,
+                    skinbrdf_core::untrusted::TEXTURE_FILE,
+                )?;
                 (b, format!("{}", p.display()), Some(p))
             }
             _ => {

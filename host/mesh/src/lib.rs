@@ -42,10 +42,40 @@ pub use ply::{
     write_ply_binary_in,
 };
 pub use shadow::{shadow_ray, ShadowScratch};
-pub use textured::{load_textured, Appearance, Material, TextureImage, TexturedMesh};
+pub use textured::{
+    load_textured, obj_companion_files, Appearance, Material, TextureImage, TexturedMesh,
+};
 pub use validate::{inspect, repair, repair_tracked, MeshReport, RepairMap, RepairPolicy};
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+
+impl From<skinbrdf_core::untrusted::ReadError> for MeshError {
+    /// A plain I/O failure stays [`MeshError::Io`]; a refusal (not a regular file, too large)
+    /// is [`MeshError::Read`].
+    fn from(e: skinbrdf_core::untrusted::ReadError) -> Self {
+        match e {
+            skinbrdf_core::untrusted::ReadError::Io { path, source } => Self::Io { path, source },
+            other => Self::Read(other),
+        }
+    }
+}
+
+/// Opens a scan file for reading: a regular file within [`skinbrdf_core::untrusted::SCAN_FILE`]
+/// (a device or FIFO is refused at once). Returns the file and its length.
+pub(crate) fn open_scan(path: &Path) -> Result<(std::fs::File, u64), MeshError> {
+    use skinbrdf_core::untrusted::{open_regular, ReadError, SCAN_FILE};
+    let (file, len) = open_regular(path)?;
+    if len > SCAN_FILE.max_bytes {
+        return Err(ReadError::TooLarge {
+            path: path.to_path_buf(),
+            kind: SCAN_FILE.kind,
+            size_bytes: len,
+            max_bytes: SCAN_FILE.max_bytes,
+        }
+        .into());
+    }
+    Ok((file, len))
+}
 
 /// Errors of the mesh crate. Each names the file (where there is one) and the problem.
 #[derive(Debug, thiserror::Error)]
@@ -139,6 +169,20 @@ pub enum MeshError {
         path: PathBuf,
         /// What is wrong.
         problem: gltf_scan::GltfProblem,
+    },
+    /// A file could not be read within its limits (not a regular file, or too large).
+    #[error(transparent)]
+    Read(skinbrdf_core::untrusted::ReadError),
+    /// A path a scan file names (an OBJ's `mtllib`, an MTL's `map_Kd`, a glTF's URI) leads
+    /// outside the scan's folder or to something other than a regular file.
+    #[error("{}: {key}: {reason}", path.display())]
+    Refused {
+        /// The file that names the path.
+        path: PathBuf,
+        /// Where in it (`line 3 mtllib`, `buffer 0 uri`).
+        key: String,
+        /// Why it is refused.
+        reason: skinbrdf_core::untrusted::ConfineError,
     },
     /// A file is malformed.
     #[error("{path}: {reason}")]

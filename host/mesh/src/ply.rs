@@ -314,11 +314,7 @@ fn parse_header<R: BufRead>(
 /// Vertex normals are kept when the file has `nx ny nz`. Does not validate beyond what parsing
 /// needs (indices are checked against the vertex count; see [`crate::validate`]).
 pub fn read_ply(path: &Path) -> Result<(TriMesh, PlyInfo), MeshError> {
-    let file = std::fs::File::open(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    read_ply_from(BufReader::with_capacity(1 << 20, file), path)
+    read_ply_coloured(path).map(|(m, i, _)| (m, i))
 }
 
 /// Reads PLY from any buffered reader; `path` names the source in errors.
@@ -336,19 +332,72 @@ pub type VertexColours = Vec<[f32; 3]>;
 pub fn read_ply_coloured(
     path: &Path,
 ) -> Result<(TriMesh, PlyInfo, Option<VertexColours>), MeshError> {
-    let file = std::fs::File::open(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    read_ply_coloured_from(BufReader::with_capacity(1 << 20, file), path)
+    let (file, len) = crate::open_scan(path)?;
+    read_ply_sized(BufReader::with_capacity(1 << 20, file), path, Some(len))
 }
 
 /// [`read_ply_coloured`] from any buffered reader; `path` names the source in errors.
 pub fn read_ply_coloured_from<R: BufRead>(
-    mut r: R,
+    r: R,
     path: &Path,
 ) -> Result<(TriMesh, PlyInfo, Option<VertexColours>), MeshError> {
+    read_ply_sized(r, path, None)
+}
+
+/// The fewest bytes one element can take: its scalars' sizes and its lists' counts in binary;
+/// in ASCII, a character and a separator per value.
+fn min_element_bytes(el: &Element, format: PlyFormat) -> u64 {
+    match format {
+        PlyFormat::Ascii => 2 * el.properties.len() as u64,
+        PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => el
+            .properties
+            .iter()
+            .map(|p| match p {
+                Property::Scalar { ty, .. } => ty.size() as u64,
+                Property::List { count, .. } => count.size() as u64,
+            })
+            .sum(),
+    }
+}
+
+/// Refuses a header whose element counts need more bytes than the file holds (before anything
+/// is allocated for them).
+fn check_counts_fit(
+    path: &Path,
+    format: PlyFormat,
+    elements: &[Element],
+    file_bytes: u64,
+) -> Result<(), MeshError> {
+    let mut need = 0u64;
+    for el in elements {
+        need = need.saturating_add((el.count as u64).saturating_mul(min_element_bytes(el, format)));
+        if need > file_bytes {
+            return Err(MeshError::Parse {
+                path: path.to_path_buf(),
+                reason: format!(
+                    "the header states {} `{}` elements, which need at least {need} bytes; the \
+                     file has {file_bytes}",
+                    el.count, el.name
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The most elements reserved ahead of reading them (more grow the vectors as they come, so a
+/// header's count alone never allocates).
+const MAX_RESERVED_ELEMENTS: usize = 1 << 20;
+
+fn read_ply_sized<R: BufRead>(
+    mut r: R,
+    path: &Path,
+    file_bytes: Option<u64>,
+) -> Result<(TriMesh, PlyInfo, Option<VertexColours>), MeshError> {
     let (format, elements, comments) = parse_header(&mut r, path)?;
+    if let Some(n) = file_bytes {
+        check_counts_fit(path, format, &elements, n)?;
+    }
     let mut rd = Reader {
         r,
         path,
@@ -405,7 +454,7 @@ pub fn read_ply_coloured_from<R: BufRead>(
                     _ => 1.0,
                 });
                 have_colours = rgb.iter().all(Option::is_some);
-                mesh.positions.reserve(el.count);
+                mesh.positions.reserve(el.count.min(MAX_RESERVED_ELEMENTS));
                 let mut vals = vec![0.0f64; el.properties.len()];
                 for i in 0..el.count {
                     rd.begin_element();
@@ -448,7 +497,7 @@ pub fn read_ply_coloured_from<R: BufRead>(
                         "element `face` has no list property `vertex_indices` or `vertex_index`",
                     ));
                 };
-                mesh.indices.reserve(el.count);
+                mesh.indices.reserve(el.count.min(MAX_RESERVED_ELEMENTS));
                 let mut corners: Vec<u32> = Vec::with_capacity(8);
                 for i in 0..el.count {
                     rd.begin_element();

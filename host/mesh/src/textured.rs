@@ -46,6 +46,7 @@ use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
 use glam::{Vec2, Vec3};
+use skinbrdf_core::untrusted::{self, confine, ConfineError};
 use skinbrdf_core::TriMesh;
 
 use crate::bvh::Hit;
@@ -68,9 +69,11 @@ pub struct TextureImage {
 }
 
 impl TextureImage {
-    /// Loads a PNG or JPEG (any pixel type; alpha is dropped).
+    /// Loads a PNG or JPEG (any pixel type; alpha is dropped): a regular file within
+    /// [`untrusted::TEXTURE_FILE`], decoded under the `image` crate's default memory limit.
     pub fn load(path: &Path) -> Result<Self, MeshError> {
-        let img = image::open(path).map_err(|e| MeshError::Texture {
+        let bytes = untrusted::read_bounded(path, untrusted::TEXTURE_FILE)?;
+        let img = image::load_from_memory(&bytes).map_err(|e| MeshError::Texture {
             path: path.to_path_buf(),
             reason: e.to_string(),
         })?;
@@ -78,6 +81,25 @@ impl TextureImage {
             path: path.to_path_buf(),
             reason,
         })
+    }
+
+    /// Checks that a texture file is an image the loader decodes, by its header (format and
+    /// size; the pixels are not decoded). Returns its width and height.
+    pub fn check_header(path: &Path) -> Result<(u32, u32), MeshError> {
+        let (file, _) = untrusted::open_regular(path)?;
+        let bad = |reason: String| MeshError::Texture {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let (w, h) = image::ImageReader::new(BufReader::new(file))
+            .with_guessed_format()
+            .map_err(|e| bad(e.to_string()))?
+            .into_dimensions()
+            .map_err(|e| bad(format!("not a PNG or JPEG image: {e}")))?;
+        if w == 0 || h == 0 {
+            return Err(bad("the image is empty".into()));
+        }
+        Ok((w, h))
     }
 
     /// Decodes an encoded PNG or JPEG held in memory (a glTF's embedded image) exactly as
@@ -251,21 +273,31 @@ pub(crate) fn read_obj_data(path: &Path) -> Result<ObjData, MeshError> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let file = std::fs::File::open(path).map_err(|source| MeshError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let (file, _) = crate::open_scan(path)?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let failed: RefCell<Vec<PathBuf>> = RefCell::new(Vec::new());
-    let (models, materials) = tobj::load_obj_buf(&mut BufReader::new(file), &opts, |mtl: &Path| {
-        let full = dir.join(mtl);
-        let r = tobj::load_mtl(&full);
-        if r.is_err() {
-            failed.borrow_mut().push(full);
+    let refused: RefCell<Option<MeshError>> = RefCell::new(None);
+    let loaded = tobj::load_obj_buf(&mut BufReader::new(file), &opts, |mtl: &Path| {
+        let written = mtl.to_string_lossy();
+        match material_library(path, &dir, &written, "mtllib") {
+            Ok((_, bytes)) => tobj::load_mtl_buf(&mut bytes.as_slice()),
+            Err(MeshError::Refused {
+                reason: ConfineError::Missing { path: full, .. },
+                ..
+            }) => {
+                failed.borrow_mut().push(full);
+                Err(tobj::LoadError::OpenFileFailed)
+            }
+            Err(e) => {
+                refused.borrow_mut().get_or_insert(e);
+                Err(tobj::LoadError::OpenFileFailed)
+            }
         }
-        r
-    })
-    .map_err(|e| MeshError::Parse {
+    });
+    if let Some(e) = refused.into_inner() {
+        return Err(e);
+    }
+    let (models, materials) = loaded.map_err(|e| MeshError::Parse {
         path: path.to_path_buf(),
         reason: format!("OBJ: {e}"),
     })?;
@@ -351,14 +383,33 @@ pub(crate) fn read_obj_data(path: &Path) -> Result<ObjData, MeshError> {
     Ok(out)
 }
 
-/// The texture file a material names: the `map_Kd` string as a path relative to `dir`; when
-/// that does not exist and the string has options before the name (`-bm 1.0 skin tone.png`),
-/// the first tail of it after a space that names an existing file (names may hold spaces),
-/// else its last word.
-fn texture_file(dir: &Path, map_kd: &str) -> PathBuf {
+/// An OBJ's material library named `written` on a line of the OBJ (`key` says where): a
+/// regular file inside the OBJ's folder ([`confine`]), read within
+/// [`untrusted::MATERIAL_LIBRARY`]. Returns the file and its bytes.
+fn material_library(
+    obj: &Path,
+    dir: &Path,
+    written: &str,
+    key: &str,
+) -> Result<(PathBuf, Vec<u8>), MeshError> {
+    let file = confine(dir, written).map_err(|reason| MeshError::Refused {
+        path: obj.to_path_buf(),
+        key: key.to_string(),
+        reason,
+    })?;
+    let bytes = untrusted::read_bounded(&file, untrusted::MATERIAL_LIBRARY)?;
+    Ok((file, bytes))
+}
+
+/// The texture file a material names: the `map_Kd` string as a path inside `dir`
+/// ([`confine`]: not absolute, no `..`, no link out, a regular file; Windows separators read
+/// as `/`); when that fails and the string has options before the name (`-bm 1.0 skin
+/// tone.png`), the first tail of it after a space that names such a file (names may hold
+/// spaces), else its last word.
+fn texture_file(dir: &Path, map_kd: &str) -> Result<PathBuf, ConfineError> {
     let map_kd = map_kd.trim();
-    let whole = dir.join(map_kd);
-    if whole.exists() || !map_kd.starts_with('-') {
+    let whole = confine(dir, map_kd);
+    if whole.is_ok() || !map_kd.starts_with('-') {
         return whole;
     }
     let tails = map_kd
@@ -368,16 +419,69 @@ fn texture_file(dir: &Path, map_kd: &str) -> PathBuf {
         .filter(|t| !t.is_empty() && !t.starts_with('-'));
     let mut last = None;
     for t in tails {
-        let p = dir.join(t);
-        if p.is_file() {
-            return p;
+        match confine(dir, t) {
+            Ok(p) => return Ok(p),
+            Err(e) => last = Some(e),
         }
-        last = Some(p);
     }
     match map_kd.split_whitespace().last() {
-        Some(w) => dir.join(w),
-        None => last.unwrap_or(whole),
+        Some(w) => confine(dir, w),
+        None => Err(last.unwrap_or(ConfineError::Empty {
+            written: map_kd.to_string(),
+        })),
     }
+}
+
+/// The files that come with an OBJ scan, for copying it with them: every `mtllib` anywhere
+/// in the OBJ and every `map_Kd` texture of those libraries, each a regular file inside the
+/// OBJ's folder (refused by file, line and path otherwise), each texture's header decoded (a
+/// file that is not a PNG or JPEG image is refused here, not when the scan's colours are
+/// needed). Each entry is the path relative to the OBJ's folder (`/`-separated) and the file.
+pub fn obj_companion_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshError> {
+    use std::io::BufRead;
+    let (file, _) = crate::open_scan(path)?;
+    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let relative = |p: &Path| {
+        p.strip_prefix(&dir)
+            .unwrap_or(p)
+            .to_string_lossy()
+            .replace('\\', "/")
+    };
+    let mut out: Vec<(String, PathBuf)> = Vec::new();
+    for (n, line) in BufReader::new(file).split(b'\n').enumerate() {
+        let line = line.map_err(|source| MeshError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let line = String::from_utf8_lossy(&line);
+        let mut words = line.split_whitespace();
+        if words.next() != Some("mtllib") {
+            continue;
+        }
+        let written = line.trim().split_once(' ').unwrap_or_default().1.trim();
+        let key = format!("line {} mtllib", n + 1);
+        let (mtl, bytes) = material_library(path, &dir, written, &key)?;
+        if !out.iter().any(|(_, q)| q == &mtl) {
+            out.push((relative(&mtl), mtl.clone()));
+        }
+        for (m, l) in String::from_utf8_lossy(&bytes).lines().enumerate() {
+            let l = l.trim();
+            if l.split_whitespace().next() != Some("map_Kd") {
+                continue;
+            }
+            let refused = |reason| MeshError::Refused {
+                path: mtl.clone(),
+                key: format!("line {} map_Kd", m + 1),
+                reason,
+            };
+            let tex = texture_file(&dir, l.get(6..).unwrap_or_default()).map_err(refused)?;
+            TextureImage::check_header(&tex)?;
+            if !out.iter().any(|(_, q)| q == &tex) {
+                out.push((relative(&tex), tex));
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// Loads a scan with its colours: `.obj` (with its MTL and textures), `.ply` (with vertex
@@ -426,14 +530,23 @@ pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, Me
             for m in materials {
                 let (texture, texture_path) = match &m.diffuse_texture {
                     Some(t) if !t.trim().is_empty() => {
-                        let file = texture_file(&dir, t);
-                        if !file.is_file() {
-                            return Err(MeshError::MissingTexture {
-                                path: path.to_path_buf(),
-                                material: m.name.clone(),
-                                texture: file,
-                            });
-                        }
+                        let file = match texture_file(&dir, t) {
+                            Ok(f) => f,
+                            Err(ConfineError::Missing { path: texture, .. }) => {
+                                return Err(MeshError::MissingTexture {
+                                    path: path.to_path_buf(),
+                                    material: m.name.clone(),
+                                    texture,
+                                })
+                            }
+                            Err(reason) => {
+                                return Err(MeshError::Refused {
+                                    path: path.to_path_buf(),
+                                    key: format!("material `{}` map_Kd", m.name),
+                                    reason,
+                                })
+                            }
+                        };
                         (Some(TextureImage::load(&file)?), Some(file))
                     }
                     _ => (None, None),

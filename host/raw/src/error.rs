@@ -50,6 +50,16 @@ pub enum RawError {
         /// The decoder's message.
         reason: String,
     },
+    /// The header states what the file cannot hold (a directory chain that loops, an image
+    /// larger than the file or than any camera's), or the file is not a regular file: refused
+    /// before a decoder reads it.
+    #[error("{path}: refused before decoding: {problem}")]
+    Implausible {
+        /// The file.
+        path: PathBuf,
+        /// What the header states and why it cannot be.
+        problem: String,
+    },
     /// The file is shorter than its own structure says.
     #[error("{path}: truncated: {what}")]
     Truncated {

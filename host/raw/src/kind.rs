@@ -8,8 +8,7 @@
 //! `Make` tag. Any other TIFF is a plain TIFF image.
 
 use std::fmt;
-use std::fs::File;
-use std::io::{BufReader, Read};
+use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 
 use rawler::formats::tiff::reader::TiffReader;
@@ -170,12 +169,14 @@ pub fn sniff(path: &Path) -> Result<FileKind, RawError> {
         path: path.to_path_buf(),
         source,
     };
-    let mut file = File::open(path).map_err(io)?;
+    let (mut file, _) = crate::limits::open_input(path)?;
     let mut head = Vec::with_capacity(HEAD_LEN);
     file.by_ref()
         .take(HEAD_LEN as u64)
         .read_to_end(&mut head)
         .map_err(io)?;
+    // A TIFF-based file's structure is checked before any decoder reads it.
+    crate::limits::check_tiff_structure(path)?;
     if let Some(kind) = sniff_magic(&head) {
         return Ok(kind);
     }
@@ -188,7 +189,7 @@ pub fn sniff(path: &Path) -> Result<FileKind, RawError> {
     if head.len() >= 10 && &head[8..10] == b"CR" {
         return Ok(FileKind::Cr2);
     }
-    let file = File::open(path).map_err(io)?;
+    file.seek(std::io::SeekFrom::Start(0)).map_err(io)?;
     let mut reader = BufReader::new(file);
     let tiff =
         GenericTiffReader::new(&mut reader, 0, 0, None, &[]).map_err(|e| RawError::Truncated {

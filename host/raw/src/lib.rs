@@ -52,7 +52,9 @@ mod bayer;
 mod decode;
 pub mod dng;
 mod error;
+mod isolate;
 mod kind;
+mod limits;
 mod meta;
 pub mod tiff;
 
@@ -64,7 +66,12 @@ pub use decode::{
     RawOptions,
 };
 pub use error::RawError;
+pub use isolate::{
+    decoded_size_with, read_metadata_with, worker_main, Isolation, WorkerOp,
+    DEFAULT_MAX_MEMORY_BYTES, DEFAULT_TIMEOUT, WORKER_REFUSED,
+};
 pub use kind::{check_extension, sniff, FileKind};
+pub use limits::{MAX_IFDS, MAX_IFD_ENTRIES, MAX_PIXELS};
 pub use meta::{
     focal_plane_unit_mm, read_metadata, CaptureTime, ExposureMeta, LocalDateTime,
     FULL_FRAME_DIAGONAL_MM,

@@ -50,7 +50,9 @@ use crate::error::RawError;
 use crate::kind::{sniff, FileKind};
 
 /// A naive (zone-less) calendar date and time of day, as EXIF stores it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[derive(
+    serde::Serialize, serde::Deserialize, Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash,
+)]
 pub struct LocalDateTime {
     /// Year (e.g. 2025).
     pub year: i32,
@@ -162,7 +164,7 @@ fn days_from_civil(y: i32, m: u32, d: u32) -> i64 {
 }
 
 /// When the shutter opened, as the camera's clock stated it.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(serde::Serialize, serde::Deserialize, Debug, Clone, PartialEq, Eq)]
 pub struct CaptureTime {
     /// `DateTimeOriginal`: the camera's local date and time, whole seconds.
     pub local: LocalDateTime,
@@ -202,7 +204,7 @@ impl CaptureTime {
 }
 
 /// What a file's metadata says about its exposure and the camera that made it.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(serde::Serialize, serde::Deserialize, Debug, Clone, PartialEq, Default)]
 pub struct ExposureMeta {
     /// `ExposureTime`, seconds.
     pub exposure_time_s: Option<f64>,
