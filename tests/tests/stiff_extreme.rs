@@ -685,6 +685,7 @@ fn run_derender(
             height: cam.height_px,
             rgb,
             saturated,
+            cfa: None,
         },
         world_from_camera: pose,
         world_from_head: Pose::IDENTITY,
