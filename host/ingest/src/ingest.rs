@@ -915,6 +915,8 @@ impl Owners<'_> {
                 "known.world_from_standard" => "standard.world_from_standard",
                 _ => field,
             }),
+            // The rig lists every group's targets in [[targets]] and [[sheets]].
+            "flash" | "standard" if field.contains(".targets") => rig("targets"),
             "flash" | "standard" | "roi" => rig(field),
             "geometry" => match &cfg.scan {
                 Some(scan) => (scan.clone(), String::new()),
@@ -1649,6 +1651,68 @@ mod tests {
             units_in_header("# units: metres\nv 0 0 0\n"),
             Some(LengthUnit::M)
         );
+    }
+
+    #[test]
+    fn a_problem_of_the_written_session_names_the_input_it_came_from() {
+        let mut cfg = IngestConfig::new(
+            "card".into(),
+            "in/capture.json".into(),
+            "in/rig.toml".into(),
+            PathBuf::from("in/head.obj"),
+            "out/S2".into(),
+        );
+        cfg.camera = Some("in/camera.toml".into());
+        let staging = Path::new("out/.S2.ingest-1");
+        let images = [PathBuf::from("card/A.DNG"), PathBuf::from("card/B.DNG")];
+        let camera = CameraSource::File {
+            path: "in/camera.toml".into(),
+        };
+        let owners = Owners {
+            cfg: &cfg,
+            staging,
+            camera: &camera,
+            rig_camera: false,
+            images: &images,
+        };
+        let mut errs = SessionErrors::default();
+        let toml = staging.join(SESSION_FILE);
+        for field in [
+            "images[1].file",
+            "images",
+            "camera.fx_px",
+            "flash.targets",
+            "known.light_position_m",
+            "targets.unplaced",
+            "geometry.file",
+            "linearization.white_level",
+        ] {
+            errs.push(&toml, field, "a problem");
+        }
+        errs.push(staging.join("capture.json"), "format_version", "a problem");
+        let mapped = owners.of(errs);
+        let got: Vec<(String, String)> = mapped
+            .problems
+            .iter()
+            .map(|p| (p.file.to_string_lossy().replace('\\', "/"), p.field.clone()))
+            .collect();
+        let want = [
+            ("card/B.DNG", ""),
+            ("in/capture.json", "exposures"),
+            ("in/camera.toml", "camera.fx_px"),
+            ("in/rig.toml", "targets"),
+            ("in/rig.toml", "flash.light_position_m"),
+            ("in/rig.toml", "targets"),
+            ("in/head.obj", ""),
+            ("out/S2/session.toml", "linearization.white_level"),
+            ("in/capture.json", "format_version"),
+        ];
+        let want: Vec<(String, String)> = want
+            .iter()
+            .map(|(f, k)| (f.to_string(), k.to_string()))
+            .collect();
+        assert_eq!(got, want);
+        assert!(!mapped.to_string().contains(".ingest-"), "{mapped}");
     }
 
     #[test]

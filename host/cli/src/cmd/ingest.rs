@@ -37,7 +37,8 @@ pub struct Args {
     /// motion (a scan whose unit is not trusted).
     #[arg(long)]
     pub similarity: bool,
-    /// A camera calibration: a TOML file with a `[camera]` table as in session.toml.
+    /// A camera calibration: a TOML file with a `[camera]` table as in session.toml; it wins
+    /// over the rig's `[camera]` (the summary says so).
     #[arg(long)]
     pub camera: Option<PathBuf>,
     /// The session directory to write.
