@@ -340,11 +340,7 @@ impl RunReport {
             .check_rows()
             .iter()
             .map(|r| {
-                let verdict = match r.verdict {
-                    Verdict::Passed => "passed".to_string(),
-                    Verdict::Failed(cause) => format!("**FAILED**: {cause}"),
-                    Verdict::NotChecked(why) => format!("not checked: {why}"),
-                };
+                let verdict = r.verdict.text("**FAILED**", |t| t.to_string());
                 let [stage, check, what, figure, bound] = &r.cells;
                 format!("| {stage} | {check} | {what} | {figure} | {bound} | {verdict} |\n")
             })
@@ -364,13 +360,9 @@ impl RunReport {
             .check_rows()
             .iter()
             .map(|r| {
-                let verdict = match r.verdict {
-                    Verdict::Passed => "passed".to_string(),
-                    Verdict::Failed(cause) => {
-                        format!("<span class=\"bad\">FAILED</span>: {}", html_escape(cause))
-                    }
-                    Verdict::NotChecked(why) => format!("not checked: {}", html_escape(why)),
-                };
+                let verdict = r
+                    .verdict
+                    .text("<span class=\"bad\">FAILED</span>", html_escape);
                 let [stage, check, what, figure, bound] = r.cells.each_ref().map(|c| html_escape(c));
                 format!(
                     "<tr><td>{stage}</td><td>{check}</td><td>{what}</td><td class=\"num\">{figure}</td><td class=\"num\">{bound}</td><td>{verdict}</td></tr>\n"
@@ -427,6 +419,18 @@ enum Verdict<'a> {
     Passed,
     Failed(&'a str),
     NotChecked(&'a str),
+}
+
+impl Verdict<'_> {
+    /// The verdict's cell: `failed` marks a failure up; `escape` makes the cause or reason
+    /// text safe for the format.
+    fn text(&self, failed: &str, escape: impl Fn(&str) -> String) -> String {
+        match self {
+            Self::Passed => "passed".to_string(),
+            Self::Failed(cause) => format!("{failed}: {}", escape(cause)),
+            Self::NotChecked(why) => format!("not checked: {}", escape(why)),
+        }
+    }
 }
 
 /// Escapes text for HTML.

@@ -443,8 +443,8 @@ fn survey_flash() {
 fn long_lens() {
     // The method's own optics (10 degrees across), no calibration file: the focal length the
     // files state starts the survey's calibration. At the full size: at half the pixels per
-    // axis the flash stand's panel (13 mm tags at 1.4 m) is placed to 2.3-2.9 mm sd, above its
-    // accuracy target, and left out (docs/photogrammetry.md, "The rig follows the lens").
+    // axis the flash stand's small panel tags are placed above their accuracy target and left
+    // out (docs/photogrammetry.md, "The rig follows the lens").
     run_scene_with(
         "long-lens",
         DEFAULT,

@@ -1012,9 +1012,6 @@ pub fn unmeasured_rig(
             scene.name
         ),
     );
-    if let Some(roi) = f.roi.as_mut() {
-        roi.centre_m = scanner_from_head.transform_point(roi.centre_m);
-    }
     let declared_sheet = |s: &PrintedSheet| {
         s.layout == Layout::Reference && s.rigid() && s.ids().iter().any(|id| origin.contains(id))
     };
@@ -1036,9 +1033,7 @@ pub fn unmeasured_rig(
         }
         let corners_m = match l {
             Layout::Reference => origin.contains(&t.id).then_some(t.corners_m),
-            Layout::Headdress => declared_head
-                .contains(&t.id)
-                .then(|| t.corners_m.map(|p| scanner_from_head.transform_point(p))),
+            Layout::Headdress => declared_head.contains(&t.id).then_some(t.corners_m),
             Layout::Flash | Layout::Standard => Some(t.corners_m),
         };
         f.targets.push(RigTarget {
@@ -1049,7 +1044,7 @@ pub fn unmeasured_rig(
             corners_m,
         });
     }
-    f
+    in_scanner_frame(f, scanner_from_head)
 }
 
 /// Every sheet's truth (`truth.json`'s `sheets`).
