@@ -83,10 +83,12 @@ pub enum PlanError {
 
 /// Reads, parses and validates a `plan.toml`.
 pub fn load_plan(path: &Path) -> Result<CapturePlan, PlanError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PlanError::Read {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text =
+        skinbrdf_core::untrusted::read_text_io(path, skinbrdf_core::untrusted::SETTINGS_FILE)
+            .map_err(|source| PlanError::Read {
+                path: path.to_path_buf(),
+                source,
+            })?;
     parse_plan(&text, path)
 }
 

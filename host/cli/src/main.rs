@@ -53,11 +53,18 @@ enum Command {
     Render(cmd::render::Args),
     /// Sweep accuracy/run-time settings and write the error-against-run-time table.
     Bench(cmd::bench::Args),
+    /// The raw decoder's child process (started by `ingest`).
+    #[command(name = "internal-decode", hide = true)]
+    InternalDecode(cmd::internal_decode::Args),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     init_logging(cli.verbose);
+    quiet_third_party_panics();
+    if let Command::InternalDecode(a) = cli.command {
+        return cmd::internal_decode::run(a);
+    }
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
@@ -67,6 +74,35 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// A panic inside a third-party crate (a decoder reaching `todo!()` on a damaged file) is
+/// caught where it is called and becomes one error naming the file; its own text and
+/// backtrace go to the log (`-v`), not to the terminal. A panic in skinbrdf's own code is a
+/// bug and is printed as usual.
+fn quiet_third_party_panics() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let third_party = info.location().is_some_and(|l| {
+            let f = l.file();
+            f.contains("/registry/src/") || f.contains("/git/checkouts/")
+        });
+        if third_party {
+            let what = info
+                .payload()
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_string())
+                .or_else(|| info.payload().downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            let at = info
+                .location()
+                .map(|l| format!("{}:{}", l.file(), l.line()))
+                .unwrap_or_default();
+            tracing::info!("a library panicked (caught; its error follows): {what} at {at}");
+        } else {
+            default(info);
+        }
+    }));
 }
 
 fn init_logging(verbose: u8) {
@@ -104,5 +140,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Process(a) => cmd::process::run(a),
         Command::Bench(a) => cmd::bench::run(a),
         Command::Render(a) => cmd::render::run(a),
+        Command::InternalDecode(a) => {
+            let _ = cmd::internal_decode::run(a);
+            Ok(())
+        }
     }
 }

@@ -11,8 +11,14 @@
 //! under the usual umask), the same as any other file the tools write: no output is more or less
 //! private than another.
 //!
+//! Only a regular file is replaced: a target that is a device (`/dev/full`), a FIFO, a
+//! directory or a symbolic link is refused before anything is written ([`check_replaceable`]).
+//!
 //! A run that dies between creating and renaming leaves its temporary file behind;
 //! [`remove_stale_temp_files`] removes those of processes that no longer exist.
+//!
+//! [`create_new_with_contents`] creates a file that must not exist yet with its contents in
+//! one step (a lock file holding its owner's process id: no reader ever sees it empty).
 
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -89,6 +95,7 @@ impl AtomicFile {
             path: path.to_path_buf(),
             source,
         };
+        check_replaceable(path).map_err(err)?;
         std::fs::create_dir_all(parent_dir(path)).map_err(err)?;
         let tmp = temp_path(path);
         let file = std::fs::File::create(&tmp).map_err(err)?;
@@ -123,6 +130,7 @@ impl AtomicFile {
             .ok_or_else(|| err(io::Error::other("already committed")))?;
         file.sync_all().map_err(err)?;
         drop(file);
+        check_replaceable(&self.target).map_err(err)?;
         std::fs::rename(&self.tmp, &self.target).map_err(err)?;
         sync_dir(parent_dir(&self.target)).map_err(err)
     }
@@ -151,6 +159,46 @@ impl Drop for AtomicFile {
             let _ = std::fs::remove_file(&self.tmp);
         }
     }
+}
+
+/// Whether the atomic writer may replace `path`: it does not exist, or it is a regular file
+/// (not a device, FIFO, socket, directory or symbolic link, which a rename would replace
+/// instead of writing to).
+pub fn check_replaceable(path: &Path) -> io::Result<()> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if !m.file_type().is_file() => Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!(
+                "it is {}, not a regular file: only a regular file is replaced",
+                crate::untrusted::file_type_words(m.file_type())
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// Creates `path` holding `bytes`, only if it does not exist, in one step: the contents go
+/// into a temporary file beside it, which is then hard-linked to `path` (a link never replaces
+/// an existing file) and removed. Returns `false` when `path` already exists. A reader sees
+/// either no file or the whole contents.
+pub fn create_new_with_contents(path: &Path, bytes: &[u8]) -> io::Result<bool> {
+    let tmp = temp_path(path);
+    let result = (|| {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        match std::fs::hard_link(&tmp, path) {
+            Ok(()) => Ok(true),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Ok(false),
+            Err(e) => Err(e),
+        }
+    })();
+    let _ = std::fs::remove_file(&tmp);
+    result
 }
 
 /// `fsync`s a directory so that a rename into it is durable (a no-op where directories cannot
@@ -295,6 +343,32 @@ mod tests {
             assert!(!dead.exists());
         }
         assert!(mine.exists() && other.exists());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn only_a_regular_file_is_replaced() {
+        let e = write_atomic(Path::new("/dev/full"), b"x").unwrap_err();
+        assert_eq!(e.path, Path::new("/dev/full"));
+        assert!(e.source.to_string().contains("a device"), "{}", e.source);
+        let d = tmpdir();
+        let e = write_atomic(&d, b"x").unwrap_err();
+        assert!(e.source.to_string().contains("a directory"), "{}", e.source);
+        std::os::unix::fs::symlink("/dev/null", d.join("link")).unwrap();
+        assert!(write_atomic(&d.join("link"), b"x").is_err());
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn a_new_file_appears_with_its_contents_or_not_at_all() {
+        let d = tmpdir();
+        let p = d.join(".lock");
+        assert!(create_new_with_contents(&p, b"123\n").unwrap());
+        assert!(!create_new_with_contents(&p, b"456\n").unwrap());
+        assert_eq!(std::fs::read(&p).unwrap(), b"123\n");
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1);
         std::fs::remove_dir_all(&d).unwrap();
     }
 

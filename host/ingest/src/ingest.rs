@@ -50,7 +50,7 @@
 //! card file's name); they are never converted.
 
 use std::collections::{BTreeMap, HashMap};
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -114,6 +114,10 @@ pub struct IngestConfig {
     pub matching: MatchOptions,
     /// A folder of survey images (see the module docs), searched recursively.
     pub survey_dir: Option<PathBuf>,
+    /// Where the raw decoder runs: in a child process per file under memory and time limits
+    /// (the CLI's choice: a file that makes the decoder abort or hang fails only itself), or
+    /// in this process (`None`).
+    pub decoder: Option<skinbrdf_raw::Isolation>,
 }
 
 impl IngestConfig {
@@ -140,6 +144,7 @@ impl IngestConfig {
             exposure: ExposurePolicy::Refuse,
             matching: MatchOptions::default(),
             survey_dir: None,
+            decoder: None,
         }
     }
 }
@@ -249,6 +254,10 @@ pub struct IngestReport {
     pub matching: Matching,
     /// Files on the card that are not photographs, with what they are.
     pub skipped_files: Vec<(String, String)>,
+    /// What loading the scan repairs (non-finite vertices, degenerate or duplicate triangles,
+    /// winding), when it repairs anything: `process` loads it the same way.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan_repair: Option<String>,
     /// Camera make and model, body serial, lens, focal length.
     pub camera_body: String,
     /// The lens and focal length.
@@ -344,6 +353,9 @@ pub enum IngestError {
         /// The mesh reader's error.
         source: skinbrdf_mesh::MeshError,
     },
+    /// A file could not be read within its limits (not a regular file, or too large).
+    #[error(transparent)]
+    Read(#[from] skinbrdf_core::untrusted::ReadError),
     /// The files could not be matched to the exposures.
     #[error("matching the card's files to {capture}")]
     Match {
@@ -396,6 +408,15 @@ pub enum IngestError {
         /// The exposure it was matched to.
         exposure_index: u32,
     },
+    /// Photographs that cannot be read (cut short, another format under a photograph's name,
+    /// unreadable) and could be exposures of the session that have no file.
+    #[error("{} photograph(s) on the card cannot be read and could be the session's missing exposure(s) {missing}:\n{}", .files.len(), .files.join("\n"))]
+    UnreadablePhotographs {
+        /// Each file with why it cannot be read.
+        files: Vec<String>,
+        /// The exposures without a file.
+        missing: String,
+    },
     /// The session written from the inputs does not load: each problem is named by the input
     /// file (and key) it comes from.
     #[error("the session written from these files does not load")]
@@ -425,9 +446,11 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     rig.check_needs().map_err(rig_error)?;
     let parts = rig.session_parts();
     let known_from_rig = known_in_words(&parts.known);
+    let mut scan_repair = None;
     let shape = match (&cfg.scan, &rig.file.geometry) {
         (Some(scan), None) => {
-            let (units, files) = check_scan(scan, cfg.scan_units)?;
+            let (units, files, repair) = check_scan(scan, cfg.scan_units)?;
+            scan_repair = repair;
             Shape::Scan {
                 path: scan.clone(),
                 units,
@@ -459,10 +482,11 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
                 problem: "registration points are corners on a scan, and no scan was given".into(),
             });
         }
-        skinbrdf_register::load_point_pairs(p).map_err(|e| IngestError::Input {
+        let points = skinbrdf_register::load_point_pairs(p).map_err(|e| IngestError::Input {
             path: p.clone(),
             problem: skinbrdf_core::error_text(&e),
         })?;
+        check_points_on_headdress(p, &points, &parts)?;
     }
     let camera_file = cfg.camera.as_deref().map(read_camera).transpose()?;
     if cfg.out_dir.join("session.toml").exists() && !cfg.overwrite {
@@ -472,7 +496,7 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     }
 
     // 2-3. The card.
-    let (photos, skipped_files) = list_card(&cfg.card_dir)?;
+    let (photos, skipped_files, unreadable) = list_card(&cfg.card_dir, cfg.decoder.as_ref())?;
     let shots: Vec<CameraShot> = photos
         .iter()
         .map(|p| camera_shot(&p.name, &p.meta))
@@ -495,10 +519,25 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
 
     check_roles(&cfg.capture, &matched)?;
 
+    // A photograph that cannot be read fails the ingest if it could be a missing exposure.
+    let (unreadable_errors, unreadable_skips) = sort_unreadable(unreadable, &m, &matched);
+    if !unreadable_errors.is_empty() {
+        return Err(IngestError::UnreadablePhotographs {
+            missing: m
+                .missing
+                .iter()
+                .map(u32::to_string)
+                .collect::<Vec<_>>()
+                .join(", "),
+            files: unreadable_errors,
+        });
+    }
+    let skipped_files: SkippedFiles = skipped_files.into_iter().chain(unreadable_skips).collect();
+
     // 5. One camera, the survey images' included.
     check_one_camera(&m, &matched, &shots)?;
     let (survey, survey_skipped) = match &cfg.survey_dir {
-        Some(dir) => survey_photos(dir, &matched)?,
+        Some(dir) => survey_photos(dir, &matched, cfg.decoder.as_ref())?,
         None => (Vec::new(), Vec::new()),
     };
     let mut skipped_files = skipped_files;
@@ -544,11 +583,11 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
     let t_decode = std::time::Instant::now();
     let sizes: Vec<(u32, u32)> = matched
         .par_iter()
-        .map(|(_, p)| decoded_size(&p.path))
+        .map(|(_, p)| decoded_size(&p.path, cfg.decoder.as_ref()))
         .collect::<Result<_, _>>()?;
     let survey_sizes: Vec<(u32, u32)> = survey
         .par_iter()
-        .map(|p| decoded_size(&p.path))
+        .map(|p| decoded_size(&p.path, cfg.decoder.as_ref()))
         .collect::<Result<_, _>>()?;
     let decode_s = t_decode.elapsed().as_secs_f64();
     let image_size_px = sizes.first().copied().unwrap_or((0, 0));
@@ -606,6 +645,7 @@ pub fn ingest(cfg: &IngestConfig) -> Result<IngestReport, IngestError> {
         survey_images,
         matching: m,
         skipped_files,
+        scan_repair,
         camera_body: body
             .map(|b| {
                 format!(
@@ -948,13 +988,115 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), IngestError> {
     })
 }
 
+/// The most exposures a capture record may hold (a session has about 30; a plan of thousands
+/// is a damaged or hostile file, and matching costs grow with the count).
+pub const MAX_EXPOSURES: usize = 10_000;
+
+/// The largest camera clock drift a capture record may state, parts per million (quartz
+/// oscillators drift tens of ppm; more is not a clock).
+pub const MAX_CLOCK_DRIFT_PPM: f64 = 1000.0;
+
+/// Every key path of a JSON `input` that `round_trip` (the parsed value serialised again)
+/// lacks: the keys the format does not have.
+fn json_unknown_keys(
+    input: &serde_json::Value,
+    round_trip: &serde_json::Value,
+    path: &str,
+    out: &mut Vec<String>,
+) {
+    use serde_json::Value;
+    let join = |k: &str| {
+        if path.is_empty() {
+            k.to_string()
+        } else {
+            format!("{path}.{k}")
+        }
+    };
+    match (input, round_trip) {
+        (Value::Object(a), Value::Object(b)) => {
+            for (k, v) in a {
+                match b.get(k) {
+                    None => out.push(join(k)),
+                    Some(w) => json_unknown_keys(v, w, &join(k), out),
+                }
+            }
+        }
+        (Value::Array(a), Value::Array(b)) if a.len() == b.len() => {
+            for (i, (v, w)) in a.iter().zip(b).enumerate() {
+                json_unknown_keys(v, w, &format!("{path}[{i}]"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Impossible values of a capture record: the first one found, as `(key, problem)`.
+fn capture_value_problem(rec: &CaptureRecord) -> Option<(String, String)> {
+    let c = &rec.clock;
+    if !(c.drift_ppm.is_finite() && c.drift_ppm.abs() <= MAX_CLOCK_DRIFT_PPM) {
+        return Some((
+            "clock.drift_ppm".into(),
+            format!(
+                "{} is not a clock's drift (at most {MAX_CLOCK_DRIFT_PPM} ppm either way)",
+                c.drift_ppm
+            ),
+        ));
+    }
+    if !c.host_ref_us.is_finite() {
+        return Some(("clock.host_ref_us".into(), "is not finite".into()));
+    }
+    if !(c.residual_rms_us.is_finite() && c.residual_rms_us >= 0.0) {
+        return Some((
+            "clock.residual_rms_us".into(),
+            format!("{} is not a residual", c.residual_rms_us),
+        ));
+    }
+    if rec.exposures.len() > MAX_EXPOSURES {
+        return Some((
+            "exposures".into(),
+            format!(
+                "{} exposures, more than the {MAX_EXPOSURES} a record may hold",
+                rec.exposures.len()
+            ),
+        ));
+    }
+    rec.exposures
+        .iter()
+        .enumerate()
+        .find(|(_, e)| !e.host_time_us.is_finite())
+        .map(|(i, _)| {
+            (
+                format!("exposures[{i}].host_time_us"),
+                "is not finite".into(),
+            )
+        })
+}
+
 fn read_capture(path: &Path) -> Result<CaptureRecord, IngestError> {
-    let bytes = std::fs::read(path).map_err(io(path))?;
-    let rec: CaptureRecord =
-        serde_json::from_slice(&bytes).map_err(|source| IngestError::Capture {
-            path: path.to_path_buf(),
-            source,
-        })?;
+    let bytes =
+        skinbrdf_core::untrusted::read_bounded(path, skinbrdf_core::untrusted::CAPTURE_RECORD)?;
+    let capture_err = |source| IngestError::Capture {
+        path: path.to_path_buf(),
+        source,
+    };
+    let value: serde_json::Value = serde_json::from_slice(&bytes).map_err(capture_err)?;
+    let rec: CaptureRecord = serde_json::from_value(value.clone()).map_err(capture_err)?;
+    let bad = |problem: String| IngestError::Input {
+        path: path.to_path_buf(),
+        problem,
+    };
+    let round_trip = serde_json::to_value(&rec).map_err(capture_err)?;
+    let mut unknown = Vec::new();
+    json_unknown_keys(&value, &round_trip, "", &mut unknown);
+    if !unknown.is_empty() {
+        return Err(bad(format!(
+            "unknown key(s) {} (not in the capture record's format)",
+            unknown.join(", ")
+        )));
+    }
+    if let Some((key, problem)) = capture_value_problem(&rec) {
+        return Err(bad(format!("`{key}`: {problem}")));
+    }
     if rec.format_version != skinbrdf_session::capture::CAPTURE_FORMAT_VERSION {
         return Err(IngestError::Input {
             path: path.to_path_buf(),
@@ -982,12 +1124,53 @@ struct ScanCompanion {
     relative: PathBuf,
 }
 
+/// Scan points name headdress targets of the rig (the targets on the scanned head): another
+/// id is refused naming the entry.
+fn check_points_on_headdress(
+    path: &Path,
+    points: &[skinbrdf_register::ScanPoint],
+    parts: &skinbrdf_session::SessionParts,
+) -> Result<(), IngestError> {
+    let t = &parts.targets;
+    let headdress: Vec<u32> = t
+        .headdress
+        .iter()
+        .map(|t| t.id)
+        .chain(
+            t.unplaced
+                .iter()
+                .filter(|u| u.group == skinbrdf_session::TargetGroup::Headdress)
+                .map(|u| u.id),
+        )
+        .collect();
+    match points
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !headdress.contains(&p.target))
+    {
+        Some((i, p)) => Err(IngestError::Input {
+            path: path.to_path_buf(),
+            problem: format!(
+                "`points[{i}].target`: {} is not a headdress target of the rig (its headdress \
+                 targets: {})",
+                p.target,
+                headdress
+                    .iter()
+                    .map(u32::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }),
+        None => Ok(()),
+    }
+}
+
 /// The scan's unit and the files that come with it (an OBJ's material library and textures, a
 /// glTF's external buffers and images).
 fn check_scan(
     path: &Path,
     units: Option<LengthUnit>,
-) -> Result<(LengthUnit, Vec<ScanCompanion>), IngestError> {
+) -> Result<(LengthUnit, Vec<ScanCompanion>, Option<String>), IngestError> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -998,54 +1181,36 @@ fn check_scan(
             problem: "a scan must be a .ply, .obj, .glb or .gltf file".into(),
         });
     }
-    skinbrdf_mesh::load_mesh(path, &skinbrdf_mesh::LoadOptions::default()).map_err(|source| {
-        IngestError::Scan {
+    let loaded = skinbrdf_mesh::load_mesh(path, &skinbrdf_mesh::LoadOptions::default()).map_err(
+        |source| IngestError::Scan {
             path: path.to_path_buf(),
             source,
-        }
+        },
+    )?;
+    let repair = (!loaded.report.is_clean()).then(|| loaded.report.summary());
+    // The files that come along: each a regular file inside the scan's folder (an absolute
+    // path, `..`, a link out or a device is refused naming the file, line and path).
+    let companions = match ext.as_deref() {
+        Some("glb" | "gltf") => skinbrdf_mesh::gltf_external_files(path),
+        Some("obj") => skinbrdf_mesh::obj_companion_files(path),
+        _ => Ok(Vec::new()),
+    }
+    .map_err(|source| IngestError::Scan {
+        path: path.to_path_buf(),
+        source,
     })?;
+    let extra: Vec<ScanCompanion> = companions
+        .into_iter()
+        .map(|(relative, source)| ScanCompanion {
+            source,
+            relative: PathBuf::from(relative),
+        })
+        .collect();
     if matches!(ext.as_deref(), Some("glb" | "gltf")) {
         // glTF states its unit: metres, unless the caller says the exporter did otherwise.
-        let mut extra = Vec::new();
-        let files =
-            skinbrdf_mesh::gltf_external_files(path).map_err(|source| IngestError::Scan {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        for (uri, file) in files {
-            let relative = PathBuf::from(&uri);
-            // A relative path below the scan's folder (not `file:` nor climbing out with `..`).
-            let inside = !uri.contains(':')
-                && relative
-                    .components()
-                    .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
-            if !inside {
-                return Err(IngestError::Input {
-                    path: path.to_path_buf(),
-                    problem: format!(
-                        "the glTF refers to `{uri}`, outside its folder: a session holds its \
-                         scan's files beside it (move the file next to the scan and edit the uri)"
-                    ),
-                });
-            }
-            if !file.is_file() {
-                return Err(IngestError::Input {
-                    path: path.to_path_buf(),
-                    problem: format!(
-                        "the glTF refers to `{}`, which does not exist",
-                        file.display()
-                    ),
-                });
-            }
-            extra.push(ScanCompanion {
-                source: file,
-                relative,
-            });
-        }
-        return Ok((units.unwrap_or(LengthUnit::M), extra));
+        return Ok((units.unwrap_or(LengthUnit::M), extra, repair));
     }
-    let head = std::fs::read(path).map_err(io(path))?;
-    let text = String::from_utf8_lossy(&head[..head.len().min(64 * 1024)]).into_owned();
+    let text = read_head(path, UNIT_COMMENT_BYTES)?;
     let stated = units.or_else(|| units_in_header(&text));
     let Some(units) = stated else {
         return Err(IngestError::Input {
@@ -1053,35 +1218,21 @@ fn check_scan(
             problem: "the scan's length unit is not stated in the file: give --scan-units (m, cm, mm or in)".into(),
         });
     };
-    let mut extra = Vec::new();
-    let beside = |p: &Path| ScanCompanion {
-        source: p.to_path_buf(),
-        relative: p.file_name().map(PathBuf::from).unwrap_or_default(),
-    };
-    if ext.as_deref() == Some("obj") {
-        let dir = path.parent().unwrap_or(Path::new("."));
-        for line in text.lines() {
-            if let Some(mtl) = line.strip_prefix("mtllib ") {
-                let mtl_path = dir.join(mtl.trim());
-                let mtl_text = std::fs::read_to_string(&mtl_path).map_err(io(&mtl_path))?;
-                extra.push(beside(&mtl_path));
-                for l in mtl_text.lines() {
-                    let l = l.trim();
-                    if let Some(rest) = l.strip_prefix("map_Kd ") {
-                        let tex = dir.join(rest.split_whitespace().last().unwrap_or(rest));
-                        if !tex.is_file() {
-                            return Err(IngestError::Input {
-                                path: mtl_path.clone(),
-                                problem: format!("texture `{}` does not exist", tex.display()),
-                            });
-                        }
-                        extra.push(beside(&tex));
-                    }
-                }
-            }
-        }
-    }
-    Ok((units, extra))
+    Ok((units, extra, repair))
+}
+
+/// How much of a PLY or OBJ is searched for its unit comment (the header's first lines).
+const UNIT_COMMENT_BYTES: u64 = 64 * 1024;
+
+/// The first `max_bytes` of a regular file, as text.
+fn read_head(path: &Path, max_bytes: u64) -> Result<String, IngestError> {
+    use std::io::Read;
+    let (file, _) = skinbrdf_core::untrusted::open_regular(path)?;
+    let mut head = Vec::new();
+    file.take(max_bytes)
+        .read_to_end(&mut head)
+        .map_err(io(path))?;
+    Ok(String::from_utf8_lossy(&head).into_owned())
 }
 
 /// The unit a PLY or OBJ header's comment names (`comment skinbrdf mesh, millimetres`,
@@ -1113,7 +1264,8 @@ fn units_in_header(text: &str) -> Option<LengthUnit> {
 }
 
 fn read_camera(path: &Path) -> Result<(PathBuf, CameraSpec), IngestError> {
-    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    let text =
+        skinbrdf_core::untrusted::read_bounded_text(path, skinbrdf_core::untrusted::SETTINGS_FILE)?;
     let bad = |problem: String| IngestError::Input {
         path: path.to_path_buf(),
         problem,
@@ -1123,9 +1275,26 @@ fn read_camera(path: &Path) -> Result<(PathBuf, CameraSpec), IngestError> {
     let camera = table
         .remove("camera")
         .ok_or_else(|| bad("no [camera] table (as in session.toml)".into()))?;
+    if let Some(k) = table.keys().next() {
+        return Err(bad(format!(
+            "unknown key `{k}` (a camera file holds a [camera] table only)"
+        )));
+    }
     let spec: CameraSpec = camera
+        .clone()
         .try_into()
         .map_err(|e: toml::de::Error| bad(format!("`camera`: {}", e.message())))?;
+    let unknown = skinbrdf_session::toml_unknown_keys(&camera, &spec);
+    if !unknown.is_empty() {
+        return Err(bad(format!(
+            "unknown key(s) {} (not in session.toml's [camera])",
+            unknown
+                .iter()
+                .map(|k| format!("`camera.{k}`"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        )));
+    }
     if let CameraSpec::Calibrated(m) = &spec {
         if let Err(e) = m.validate() {
             return Err(bad(format!("`camera`: {e}")));
@@ -1137,27 +1306,99 @@ fn read_camera(path: &Path) -> Result<(PathBuf, CameraSpec), IngestError> {
 /// Files on the card that are not photographs: name and what it is.
 type SkippedFiles = Vec<(String, String)>;
 
+/// A file named like a photograph that cannot be read or identified as one.
+#[derive(Debug, Clone)]
+struct UnreadablePhoto {
+    path: PathBuf,
+    name: String,
+    reason: String,
+}
+
+/// What a card holds: its photographs with their metadata, the files that are not
+/// photographs (with why), and those named like photographs that cannot be read.
+type CardListing = (Vec<CardPhoto>, SkippedFiles, Vec<UnreadablePhoto>);
+
+/// The regular files under `root` (its folders searched; a symbolic link is followed only to
+/// a regular file inside `root`), and the entries skipped with why (FIFOs, devices, sockets,
+/// links out of the folder or to folders).
+fn walk_folder(root: &Path) -> Result<(Vec<PathBuf>, SkippedFiles), IngestError> {
+    let root_real = std::fs::canonicalize(root).map_err(io(root))?;
+    let name_of = |p: &Path| {
+        p.strip_prefix(root)
+            .unwrap_or(p)
+            .to_string_lossy()
+            .replace('\\', "/")
+    };
+    let mut files = Vec::new();
+    let mut skipped = Vec::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).map_err(io(&dir))? {
+            let entry = entry.map_err(io(&dir))?;
+            let p = entry.path();
+            let t = entry.file_type().map_err(io(&p))?;
+            if t.is_dir() {
+                stack.push(p);
+            } else if t.is_file() {
+                files.push(p);
+            } else if t.is_symlink() {
+                match std::fs::canonicalize(&p) {
+                    Ok(real) if !real.starts_with(&root_real) => skipped.push((
+                        name_of(&p),
+                        format!(
+                            "a symbolic link to {}, outside the folder: not followed",
+                            real.display()
+                        ),
+                    )),
+                    Ok(real) if real.is_file() => files.push(p),
+                    Ok(real) => skipped.push((
+                        name_of(&p),
+                        format!(
+                            "a symbolic link to {}: not followed",
+                            skinbrdf_core::untrusted::file_type_words(
+                                std::fs::metadata(&real).map_err(io(&p))?.file_type()
+                            )
+                        ),
+                    )),
+                    Err(_) => skipped.push((name_of(&p), "a broken symbolic link".into())),
+                }
+            } else {
+                skipped.push((
+                    name_of(&p),
+                    format!(
+                        "{}, not a regular file: not read",
+                        skinbrdf_core::untrusted::file_type_words(t)
+                    ),
+                ));
+            }
+        }
+    }
+    files.sort();
+    Ok((files, skipped))
+}
+
+/// Whether a file's extension names a photograph (a camera raw format, JPEG or TIFF).
+fn named_like_photograph(p: &Path) -> bool {
+    let ext = p
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    FileKind::from_extension(&ext)
+        .is_some_and(|k| k.is_raw() || matches!(k, FileKind::Jpeg | FileKind::Tiff))
+}
+
 /// Every file under the card, photographs (with their metadata) and the rest.
-fn list_card(card: &Path) -> Result<(Vec<CardPhoto>, SkippedFiles), IngestError> {
+fn list_card(
+    card: &Path,
+    decoder: Option<&skinbrdf_raw::Isolation>,
+) -> Result<CardListing, IngestError> {
     if !card.is_dir() {
         return Err(IngestError::Input {
             path: card.to_path_buf(),
             problem: "not a directory (give the card's root or its DCIM folder)".into(),
         });
     }
-    let mut files = Vec::new();
-    let mut stack = vec![card.to_path_buf()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).map_err(io(&dir))? {
-            let p = entry.map_err(io(&dir))?.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else {
-                files.push(p);
-            }
-        }
-    }
-    files.sort();
+    let (files, mut skipped) = walk_folder(card)?;
     let name_of = |p: &Path| {
         p.strip_prefix(card)
             .unwrap_or(p)
@@ -1172,28 +1413,50 @@ fn list_card(card: &Path) -> Result<(Vec<CardPhoto>, SkippedFiles), IngestError>
         })
         .collect();
     let mut photos_paths = Vec::new();
-    let mut skipped = Vec::new();
+    let mut unreadable = Vec::new();
+    let mut cannot_read = |p: PathBuf, reason: String| {
+        unreadable.push(UnreadablePhoto {
+            name: name_of(&p),
+            path: p,
+            reason,
+        })
+    };
     for (p, kind) in kinds {
         match kind {
             Ok(k) if k.is_raw() || matches!(k, FileKind::Jpeg | FileKind::Tiff) => {
                 skinbrdf_raw::check_extension(&p, k)?;
                 photos_paths.push(p);
             }
+            Ok(k) if named_like_photograph(&p) => {
+                let e = skinbrdf_raw::check_extension(&p, k)
+                    .err()
+                    .map(|e| skinbrdf_core::error_text(&e))
+                    .unwrap_or_else(|| format!("its content is {}, not a photograph", k.name()));
+                cannot_read(p, e);
+            }
             Ok(k) => skipped.push((name_of(&p), format!("{} file, not a photograph", k.name()))),
+            Err(e) if named_like_photograph(&p) => cannot_read(p, skinbrdf_core::error_text(&e)),
             Err(_) => skipped.push((name_of(&p), "not an image file".to_string())),
         }
     }
-    let photos: Vec<CardPhoto> = photos_paths
+    let read: Vec<(PathBuf, Result<ExposureMeta, RawError>)> = photos_paths
         .into_par_iter()
         .map(|p| {
-            let meta = skinbrdf_raw::read_metadata(&p)?;
-            Ok(CardPhoto {
+            let meta = skinbrdf_raw::read_metadata_with(decoder, &p);
+            (p, meta)
+        })
+        .collect();
+    let mut photos = Vec::new();
+    for (p, meta) in read {
+        match meta {
+            Ok(meta) => photos.push(CardPhoto {
                 name: name_of(&p),
                 path: p,
                 meta,
-            })
-        })
-        .collect::<Result<_, RawError>>()?;
+            }),
+            Err(e) => cannot_read(p, skinbrdf_core::error_text(&e)),
+        }
+    }
     if photos.is_empty() {
         return Err(IngestError::Input {
             path: card.to_path_buf(),
@@ -1203,7 +1466,76 @@ fn list_card(card: &Path) -> Result<(Vec<CardPhoto>, SkippedFiles), IngestError>
             ),
         });
     }
-    Ok((photos, skipped))
+    Ok((photos, skipped, unreadable))
+}
+
+/// How far (seconds) a file's modification time may lie outside the session's files' and still
+/// say it could be one of them (a card's times are the camera's, good to a second).
+const SESSION_MTIME_SLACK_S: f64 = 600.0;
+
+/// Sorts the photographs that cannot be read: one that could be an exposure of the session
+/// (some exposure has no file, and the file's number lies among the session's file numbers,
+/// or its name has no number and its time lies within the session's) is returned as an error
+/// line; the others become listed skips, with why.
+fn sort_unreadable(
+    unreadable: Vec<UnreadablePhoto>,
+    m: &Matching,
+    matched: &[(&matching::MatchedPair, &CardPhoto)],
+) -> (Vec<String>, SkippedFiles) {
+    let numbers: Vec<u32> = matched
+        .iter()
+        .filter_map(|(_, p)| matching::file_number_from_name(&p.name))
+        .collect();
+    let k = m.missing.len() as u32;
+    let number_range = numbers
+        .iter()
+        .min()
+        .zip(numbers.iter().max())
+        .map(|(lo, hi)| (lo.saturating_sub(k), hi.saturating_add(k)));
+    let mtime_s = |p: &Path| {
+        std::fs::metadata(p)
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map(|d| d.as_secs_f64())
+    };
+    let times: Vec<f64> = matched
+        .iter()
+        .filter_map(|(_, p)| mtime_s(&p.path))
+        .collect();
+    let time_range = times
+        .iter()
+        .copied()
+        .reduce(f64::min)
+        .zip(times.iter().copied().reduce(f64::max));
+    let mut errors = Vec::new();
+    let mut skips = Vec::new();
+    for u in unreadable {
+        let by_name = matching::file_number_from_name(&u.name)
+            .zip(number_range)
+            .map(|(n, (lo, hi))| (lo..=hi).contains(&n));
+        let by_time = mtime_s(&u.path).zip(time_range).map(|(t, (lo, hi))| {
+            t >= lo - SESSION_MTIME_SLACK_S && t <= hi + SESSION_MTIME_SLACK_S
+        });
+        let could_be = k > 0 && by_name.or(by_time).unwrap_or(true);
+        if could_be {
+            errors.push(format!("  {}: {}", u.path.display(), u.reason));
+        } else {
+            let why = if k == 0 {
+                "every exposure has its file"
+            } else {
+                "its name and time are outside the session's files"
+            };
+            skips.push((
+                u.name,
+                format!(
+                    "cannot be read ({}); not one of the session's exposures: {why}",
+                    u.reason
+                ),
+            ));
+        }
+    }
+    (errors, skips)
 }
 
 fn sniff_raw(p: &Path) -> bool {
@@ -1323,8 +1655,15 @@ fn check_same_camera(photos: &[&CardPhoto]) -> Result<(), IngestError> {
 fn survey_photos(
     dir: &Path,
     matched: &[(&matching::MatchedPair, &CardPhoto)],
+    decoder: Option<&skinbrdf_raw::Isolation>,
 ) -> Result<(Vec<CardPhoto>, SkippedFiles), IngestError> {
-    let (mut photos, skipped) = list_card(dir)?;
+    let (mut photos, mut skipped, unreadable) = list_card(dir, decoder)?;
+    // Survey images are no exposures: one that cannot be read is a listed skip.
+    skipped.extend(
+        unreadable
+            .into_iter()
+            .map(|u| (u.name, format!("cannot be read: {}", u.reason))),
+    );
     let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
     for p in &photos {
         let c = canonical(&p.path);
@@ -1375,10 +1714,12 @@ fn taken_s(p: &CardPhoto) -> Option<f64> {
 }
 
 /// The size of a photograph as the session loads it (superpixels for raw files).
-fn decoded_size(path: &Path) -> Result<(u32, u32), IngestError> {
+fn decoded_size(
+    path: &Path,
+    decoder: Option<&skinbrdf_raw::Isolation>,
+) -> Result<(u32, u32), IngestError> {
     if sniff_raw(path) {
-        let f = skinbrdf_raw::decode_superpixel(path, &skinbrdf_raw::RawOptions::default())?;
-        Ok((f.width_px, f.height_px))
+        Ok(skinbrdf_raw::decoded_size_with(decoder, path)?)
     } else {
         let h = skinbrdf_session::read_header(path).map_err(|e| IngestError::Input {
             path: path.to_path_buf(),
@@ -1399,12 +1740,36 @@ fn staging_dir(out: &Path) -> Result<PathBuf, IngestError> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "session".into());
+    remove_dead_staging(&parent, &name);
     let staging = parent.join(format!(".{name}.ingest-{}", std::process::id()));
     if staging.exists() {
         std::fs::remove_dir_all(&staging).map_err(io(&staging))?;
     }
     std::fs::create_dir_all(&staging).map_err(io(&staging))?;
     Ok(staging)
+}
+
+/// Removes the staging directories (`.NAME.ingest-PID`, and `.NAME.ingest-PID.old` of a
+/// replaced session) that runs which no longer exist left beside `NAME`.
+fn remove_dead_staging(parent: &Path, name: &str) {
+    let prefix = format!(".{name}.ingest-");
+    let Ok(rd) = std::fs::read_dir(parent) else {
+        return;
+    };
+    for e in rd.filter_map(Result::ok) {
+        let file_name = e.file_name().to_string_lossy().into_owned();
+        let Some(rest) = file_name.strip_prefix(&prefix) else {
+            continue;
+        };
+        let pid = rest.strip_suffix(".old").unwrap_or(rest);
+        let Ok(pid) = pid.parse::<u32>() else {
+            continue;
+        };
+        let is_dir = e.file_type().is_ok_and(|t| t.is_dir());
+        if is_dir && pid != std::process::id() && !skinbrdf_core::fsio::process_alive(pid) {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
 }
 
 /// Moves the staged session to `out`, replacing what is there only once the new one is ready.

@@ -176,7 +176,7 @@ fn every_scan_format_is_ingested_with_its_files() {
     let out_bad = dir.path().join("S-bad");
     let e = ingest(&config(&studio, gltf.clone(), None, out_bad.clone())).expect_err("refused");
     let text = skinbrdf_core::error_text(&e);
-    assert!(matches!(e, IngestError::Input { .. }), "{text}");
+    assert!(matches!(e, IngestError::Scan { .. }), "{text}");
     assert!(
         text.contains("head.gltf") && text.contains("../outside.bin"),
         "{text}"

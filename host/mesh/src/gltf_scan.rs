@@ -333,7 +333,7 @@ pub fn gltf_external_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshEr
                 return Err(MeshError::Refused {
                     path: path.to_path_buf(),
                     key: format!("{what} uri"),
-                    reason,
+                    reason: Box::new(reason),
                 })
             }
             UriTarget::Unsupported(reason) => {
@@ -878,7 +878,7 @@ fn material(
                 return Err(MeshError::Refused {
                     path: path.to_path_buf(),
                     key: format!("image {img_index} uri (material `{name}`)"),
-                    reason,
+                    reason: Box::new(reason),
                 })
             }
             UriTarget::File(p) => {

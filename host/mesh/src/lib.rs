@@ -182,7 +182,7 @@ pub enum MeshError {
         /// Where in it (`line 3 mtllib`, `buffer 0 uri`).
         key: String,
         /// Why it is refused.
-        reason: skinbrdf_core::untrusted::ConfineError,
+        reason: Box<skinbrdf_core::untrusted::ConfineError>,
     },
     /// A file is malformed.
     #[error("{path}: {reason}")]

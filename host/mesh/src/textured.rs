@@ -281,13 +281,20 @@ pub(crate) fn read_obj_data(path: &Path) -> Result<ObjData, MeshError> {
         let written = mtl.to_string_lossy();
         match material_library(path, &dir, &written, "mtllib") {
             Ok((_, bytes)) => tobj::load_mtl_buf(&mut bytes.as_slice()),
-            Err(MeshError::Refused {
-                reason: ConfineError::Missing { path: full, .. },
-                ..
-            }) => {
-                failed.borrow_mut().push(full);
-                Err(tobj::LoadError::OpenFileFailed)
-            }
+            Err(MeshError::Refused { path, key, reason }) => match *reason {
+                ConfineError::Missing { path: full, .. } => {
+                    failed.borrow_mut().push(full);
+                    Err(tobj::LoadError::OpenFileFailed)
+                }
+                other => {
+                    refused.borrow_mut().get_or_insert(MeshError::Refused {
+                        path,
+                        key,
+                        reason: Box::new(other),
+                    });
+                    Err(tobj::LoadError::OpenFileFailed)
+                }
+            },
             Err(e) => {
                 refused.borrow_mut().get_or_insert(e);
                 Err(tobj::LoadError::OpenFileFailed)
@@ -395,7 +402,7 @@ fn material_library(
     let file = confine(dir, written).map_err(|reason| MeshError::Refused {
         path: obj.to_path_buf(),
         key: key.to_string(),
-        reason,
+        reason: Box::new(reason),
     })?;
     let bytes = untrusted::read_bounded(&file, untrusted::MATERIAL_LIBRARY)?;
     Ok((file, bytes))
@@ -472,7 +479,7 @@ pub fn obj_companion_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshEr
             let refused = |reason| MeshError::Refused {
                 path: mtl.clone(),
                 key: format!("line {} map_Kd", m + 1),
-                reason,
+                reason: Box::new(reason),
             };
             let tex = texture_file(&dir, l.get(6..).unwrap_or_default()).map_err(refused)?;
             TextureImage::check_header(&tex)?;
@@ -543,7 +550,7 @@ pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, Me
                                 return Err(MeshError::Refused {
                                     path: path.to_path_buf(),
                                     key: format!("material `{}` map_Kd", m.name),
-                                    reason,
+                                    reason: Box::new(reason),
                                 })
                             }
                         };

@@ -283,38 +283,50 @@ pub struct RunLock {
 }
 
 impl RunLock {
-    /// Takes the lock of `out_dir` or says which process holds it.
+    /// Takes the lock of `out_dir` or says which process holds it. The lock file appears with
+    /// the owner's process id in it (never empty: [`skinbrdf_core::fsio::create_new_with_contents`]);
+    /// a lock of a run that no longer exists is moved aside under a name of this run's own
+    /// before it is removed, so two runs taking over the same stale lock cannot remove each
+    /// other's.
     pub fn acquire(out_dir: &Path) -> Result<Self, LedgerError> {
-        use std::io::Write;
         let path = out_dir.join(".lock");
-        for _ in 0..2 {
-            match std::fs::OpenOptions::new()
-                .write(true)
-                .create_new(true)
-                .open(&path)
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| LedgerError::Io { path, source }
+        };
+        let me = std::process::id();
+        let holder_of = |p: &Path| {
+            std::fs::read_to_string(p)
+                .ok()
+                .and_then(|s| s.trim().parse::<u32>().ok())
+        };
+        let alive = |pid: u32| pid == me || skinbrdf_core::fsio::process_alive(pid);
+        for _ in 0..3 {
+            if skinbrdf_core::fsio::create_new_with_contents(&path, format!("{me}\n").as_bytes())
+                .map_err(io(&path))?
             {
-                Ok(mut f) => {
-                    let _ = writeln!(f, "{}", std::process::id());
-                    return Ok(Self { path });
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
-                    let holder = std::fs::read_to_string(&path)
-                        .ok()
-                        .and_then(|s| s.trim().parse::<u32>().ok());
-                    match holder {
-                        Some(pid)
-                            if pid == std::process::id()
-                                || skinbrdf_core::fsio::process_alive(pid) =>
-                        {
+                return Ok(Self { path });
+            }
+            match holder_of(&path) {
+                Some(pid) if alive(pid) => return Err(LedgerError::Locked { path, pid }),
+                // Gone (or removed meanwhile): take it over.
+                _ => {
+                    let aside = out_dir.join(format!(".lock.{me}.stale"));
+                    if std::fs::rename(&path, &aside).is_err() {
+                        continue;
+                    }
+                    match holder_of(&aside) {
+                        // Another run took the lock over in between: give it back.
+                        Some(pid) if alive(pid) => {
+                            let _ = std::fs::hard_link(&aside, &path);
+                            let _ = std::fs::remove_file(&aside);
                             return Err(LedgerError::Locked { path, pid });
                         }
-                        // The holder is gone (or wrote nothing): take the lock over.
                         _ => {
-                            let _ = std::fs::remove_file(&path);
+                            let _ = std::fs::remove_file(&aside);
                         }
                     }
                 }
-                Err(source) => return Err(LedgerError::Io { path, source }),
             }
         }
         Err(LedgerError::Locked { path, pid: 0 })

@@ -167,17 +167,18 @@ fn run_child(iso: &Isolation, op: WorkerOp, path: &Path) -> Result<String, RawEr
             Err(e) => return Err(child_failed(path, e.to_string())),
         }
     };
-    let out = stdout.join().unwrap_or_default();
-    let err = stderr.join().unwrap_or_default();
     let Some(status) = status else {
+        // The pipes' readers are left to finish on their own: a grandchild may hold them open.
         return Err(RawError::Decode {
             path: path.to_path_buf(),
             reason: format!(
-                "the decoder took longer than {} s and was stopped",
-                iso.timeout.as_secs()
+                "the decoder took longer than {:.1} s and was stopped",
+                iso.timeout.as_secs_f64()
             ),
         });
     };
+    let out = stdout.join().unwrap_or_default();
+    let err = stderr.join().unwrap_or_default();
     if status.success() {
         return Ok(out);
     }

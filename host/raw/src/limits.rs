@@ -323,9 +323,11 @@ pub(crate) fn check_tiff_structure(path: &Path) -> Result<(), RawError> {
 mod tests {
     use super::*;
 
-    /// A little-endian TIFF: header, then one directory per `(entries, next)`; entries are
-    /// `(tag, type, count, value)` with inline values.
-    fn tiff(dirs: &[(Vec<(u16, u16, u32, u32)>, u32)]) -> Vec<u8> {
+    /// A directory entry `(tag, type, count, inline value)`.
+    type Entry = (u16, u16, u32, u32);
+
+    /// A little-endian TIFF: header, then one directory per `(entries, next)`.
+    fn tiff(dirs: &[(Vec<Entry>, u32)]) -> Vec<u8> {
         let mut b = b"II*\0".to_vec();
         b.extend(8u32.to_le_bytes());
         for (entries, next) in dirs {

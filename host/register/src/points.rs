@@ -36,10 +36,12 @@ pub struct ScanPoint {
 
 /// Reads a points file (see the module docs).
 pub fn load_point_pairs(path: &Path) -> Result<Vec<ScanPoint>, RegisterError> {
-    let text = std::fs::read_to_string(path).map_err(|source| RegisterError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text =
+        skinbrdf_core::untrusted::read_text_io(path, skinbrdf_core::untrusted::SETTINGS_FILE)
+            .map_err(|source| RegisterError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
     parse_point_pairs(&text, path)
 }
 
@@ -150,7 +152,41 @@ pub fn parse_point_pairs(text: &str, path: &Path) -> Result<Vec<ScanPoint>, Regi
             ),
         ));
     }
+    if let Some(problem) = collinear(&out) {
+        return Err(err("points".into(), problem));
+    }
     Ok(out)
+}
+
+/// Points closer to a line than this fraction of their spread count as collinear: a rotation
+/// about that line is then not fixed (a picked corner is good to a millimetre over a spread of
+/// centimetres, so real picks are far above it).
+pub const COLLINEAR_REL_TOL: f64 = 1e-3;
+
+/// Why the points cannot fix a rotation (all on one spot or on one line), or `None`.
+fn collinear(points: &[ScanPoint]) -> Option<String> {
+    let a = points.first()?.scan_m;
+    let b = points
+        .iter()
+        .map(|p| p.scan_m)
+        .max_by(|p, q| p.distance(a).total_cmp(&q.distance(a)))?;
+    let spread_m = b.distance(a);
+    if spread_m <= 0.0 {
+        return Some(
+            "every point is at the same place: at least 3 non-collinear points are needed".into(),
+        );
+    }
+    let axis = (b - a) / spread_m;
+    let off_line_m = points
+        .iter()
+        .map(|p| (p.scan_m - a).cross(axis).length())
+        .fold(0.0, f64::max);
+    (off_line_m <= COLLINEAR_REL_TOL * spread_m).then(|| {
+        format!(
+            "the points lie on one line (at most {off_line_m:.2e} m from it over a spread of \
+             {spread_m:.3} m): at least 3 non-collinear points are needed"
+        )
+    })
 }
 
 /// Aligns the survey's corners to picked scan points (matched by target and corner), with the

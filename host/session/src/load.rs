@@ -107,10 +107,13 @@ impl Session {
         let dir = dir.as_ref().to_path_buf();
         let mut errs = SessionErrors::default();
         let toml_path = dir.join(SESSION_FILE);
-        let text = match std::fs::read_to_string(&toml_path) {
+        let text = match skinbrdf_core::untrusted::read_bounded_text(
+            &toml_path,
+            skinbrdf_core::untrusted::SETTINGS_FILE,
+        ) {
             Ok(t) => t,
             Err(e) => {
-                errs.push(&toml_path, "", format!("cannot read: {e}"));
+                errs.push(&toml_path, "", e.reason());
                 return Err(errs);
             }
         };
@@ -483,27 +486,26 @@ fn check_relative_file(
     field: &str,
     errs: &mut SessionErrors,
 ) -> bool {
-    let p = Path::new(rel);
     if rel.is_empty() {
         errs.push(file, field, "empty file name");
         return false;
     }
-    if p.is_absolute()
-        || p.components()
-            .any(|c| matches!(c, std::path::Component::ParentDir))
-    {
-        errs.push(
-            file,
-            field,
-            format!("`{rel}` must be a path inside the session directory"),
-        );
-        return false;
+    // Inside the session directory (no absolute path, `..` or link out), a regular file.
+    match skinbrdf_core::untrusted::confine(dir, rel) {
+        Ok(_) => true,
+        Err(skinbrdf_core::untrusted::ConfineError::Missing { .. }) => {
+            errs.push(file, field, format!("file `{rel}` does not exist"));
+            false
+        }
+        Err(e) => {
+            errs.push(
+                file,
+                field,
+                format!("must be a regular file inside the session directory: {e}"),
+            );
+            false
+        }
     }
-    if !dir.join(p).is_file() {
-        errs.push(file, field, format!("file `{rel}` does not exist"));
-        return false;
-    }
-    true
 }
 
 /// A target's id (a tag36h11 code) and printed size (positive); false when the size is not

@@ -91,6 +91,7 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use skinbrdf_brdf::BrdfModel;
+use skinbrdf_core::untrusted;
 use skinbrdf_core::{CameraModel, Pose};
 
 use crate::error::SessionErrors;
@@ -338,10 +339,10 @@ impl Rig {
     /// Reads and validates a rig file and its layout files, reporting every problem.
     pub fn load(path: &Path) -> Result<Self, SessionErrors> {
         let mut errs = SessionErrors::default();
-        let text = match std::fs::read_to_string(path) {
+        let text = match untrusted::read_bounded_text(path, untrusted::SETTINGS_FILE) {
             Ok(t) => t,
             Err(e) => {
-                errs.push(path, "", format!("cannot read: {e}"));
+                errs.push(path, "", e.reason());
                 return Err(errs);
             }
         };
@@ -793,10 +794,15 @@ fn validate(
             }
         }
         let Some(rel) = &s.layout else { continue };
-        let lp = base.join(rel);
-        let layout = std::fs::read_to_string(&lp)
-            .map_err(|e| format!("cannot read `{}`: {e}", lp.display()))
-            .and_then(|t| {
+        // Inside the rig's folder, a regular file of bounded size.
+        let layout = untrusted::confine(base, rel)
+            .map_err(|e| e.to_string())
+            .and_then(|lp| {
+                untrusted::read_bounded_text(&lp, untrusted::LAYOUT_FILE)
+                    .map(|t| (lp, t))
+                    .map_err(|e| skinbrdf_core::error_text(&e))
+            })
+            .and_then(|(lp, t)| {
                 toml::from_str::<LayoutFile>(&t).map_err(|e| {
                     format!("`{}` is not a layout file: {}", lp.display(), e.message())
                 })

@@ -120,6 +120,9 @@ pub fn config(args: &Args) -> IngestConfig {
         ..MatchOptions::default()
     };
     cfg.survey_dir = args.survey.clone();
+    // Each raw file is decoded in a child process: one that makes the decoder abort or hang
+    // fails only itself.
+    cfg.decoder = super::internal_decode::isolation();
     cfg
 }
 
@@ -197,6 +200,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     for (f, what) in &r.skipped_files {
         println!("skipped: {f}: {what}");
+    }
+    if let Some(repair) = &r.scan_repair {
+        println!("scan: repaired when loaded (process loads it the same way): {repair}");
     }
     match &r.camera {
         skinbrdf_ingest::ingest::CameraSource::File { path } => {

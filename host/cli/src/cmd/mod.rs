@@ -7,6 +7,7 @@ pub mod demo;
 pub mod derender;
 pub mod fit;
 pub mod ingest;
+pub mod internal_decode;
 pub mod ports;
 pub mod poses;
 pub mod process;
