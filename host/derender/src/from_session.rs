@@ -329,8 +329,10 @@ pub fn write_samples(
     let mut header = skinbrdf_samples::SampleHeader::new(
         &format!("skinbrdf derender {}", session.dir.display()),
         &format!(
-            "C = {:?}, grazing limit {}°, noise floor {}, poses from {:?}",
-            run.report.c,
+            "C = {} {} {}, grazing limit {}°, noise floor {}, poses from {}",
+            run.report.c[0],
+            run.report.c[1],
+            run.report.c[2],
             run.report.config.grazing_limit_deg,
             run.report.config.noise_floor,
             run.report.pose_source

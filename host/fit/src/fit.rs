@@ -104,7 +104,7 @@ pub enum FitError {
         cost: f64,
     },
     /// With `strict`, the data do not determine some parameters.
-    #[error("channel {channel}: the samples do not determine {params:?} (condition number {condition_number:.3e})")]
+    #[error("channel {channel}: the samples do not determine {} (condition number {condition_number:.3e})", .params.join(", "))]
     IllConditioned {
         /// RGB channel.
         channel: usize,
@@ -855,8 +855,8 @@ pub fn fit_data(
     for (c, (fit, res)) in fits.into_iter().enumerate() {
         if !fit.unidentified.is_empty() {
             warnings.push(format!(
-                "channel {c}: the samples do not determine {:?} (condition number {}); their values are arbitrary within a valley of equal cost",
-                fit.unidentified,
+                "channel {c}: the samples do not determine {} (condition number {}); their values are arbitrary within a valley of equal cost",
+                fit.unidentified.join(", "),
                 condition_text(fit.condition_number)
             ));
         }

@@ -99,6 +99,26 @@ pub enum LmStatus {
     MaxIterations,
 }
 
+impl std::fmt::Display for LmStatus {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::CostConverged => "cost converged",
+            Self::GradientConverged => "gradient converged",
+            Self::StepConverged => "step converged",
+            Self::MaxIterations => "iteration limit",
+        })
+    }
+}
+
+impl std::fmt::Display for ResidualKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Log { floor_rho } => write!(f, "log, floor {floor_rho} 1/sr"),
+            Self::CosineWeighted => f.write_str("cosine-weighted"),
+        }
+    }
+}
+
 impl LmStatus {
     /// True for the converged states.
     pub fn converged(self) -> bool {

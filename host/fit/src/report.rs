@@ -285,10 +285,12 @@ pub fn markdown(r: &FitReport) -> String {
     let _ = writeln!(s, "# BRDF fit: {}\n", r.input);
     let _ = writeln!(
         s,
-        "- samples: {}\n- model: `{}`\n- residual: {:?}\n- fit time: {:.3} s\n",
+        "- samples: {}\n- model: `{}`\n- residual: {}\n- fit time: {:.3} s\n",
         r.n_samples,
         f.model_name,
-        f.residuals.first(),
+        f.residuals
+            .first()
+            .map_or_else(|| "none".to_string(), |k| k.to_string()),
         f.fit_time_s
     );
     let _ = writeln!(s, "## Parameters (per channel, value ± standard error)\n");
@@ -308,7 +310,7 @@ pub fn markdown(r: &FitReport) -> String {
     for (c, ch) in f.channels.iter().enumerate() {
         let _ = writeln!(
             s,
-            "| {} | {:.4} | {:.4} | {} | {:?} | {} |",
+            "| {} | {:.4} | {:.4} | {} | {} | {} |",
             ["R", "G", "B"][c],
             ch.error.log_rmse,
             ch.error.median_rel_err,

@@ -12,8 +12,10 @@
 //! |---|---|---|---|
 //! | camera calibration | `focal_vs_files` | calibrated fx against the focal length the files state | more than [`FOCAL_VS_FILES_MAX_REL`] apart |
 //! | camera poses | `reprojection_chi2` | median over images of `(rms / sigma)²`, the per-image reprojection RMS against the median stated corner sigma | above [`REPROJECTION_CHI2_MAX`] |
+//! | camera poses | `worst_image_chi2` | the largest over images of the same figure (the failure names the image) | above [`WORST_IMAGE_CHI2_MAX`] |
 //! | placement survey | `survey_chi2` | the survey adjustment's reduced chi-square (variance factor) | above [`REPROJECTION_CHI2_MAX`] |
 //! | camera poses | `bundle_chi2` | the joint pose adjustment's reduced chi-square over all images | above [`REPROJECTION_CHI2_MAX`] |
+//! | camera poses | `camera_arc_steps` | the largest angle between neighbouring measurement cameras round their aim point, over the median one | above [`CAMERA_ARC_STEP_RATIO_MAX`] |
 //! | camera poses | `camera_distance_spread` | relative sd of the measurement cameras' distances to the point their optical axes meet | above [`CAMERA_DISTANCE_SPREAD_MAX`] |
 //! | flash triangulation | `flash_sigma` | the flash position's stated sd | above [`FLASH_SIGMA_MAX_MM`] |
 //! | radiometric calibration (in derender) | `c_spread` | C's relative spread over the standard | above [`C_SPREAD_MAX_PCT`] |
@@ -40,10 +42,24 @@ pub const FOCAL_VS_FILES_MAX_REL: f64 = 0.25;
 /// systematic residual many times larger.
 pub const REPROJECTION_CHI2_MAX: f64 = 25.0;
 
+/// The largest over images of `(reprojection rms / stated corner sigma)²`. Where the camera
+/// model fits, every image's figure is near 1 (the worst of forty a little above 2); one image
+/// whose pose rests on a misread or moved target, or on a blurred or partly hidden one, stands
+/// out by an order of magnitude. A bound four times the median's lets an image with an
+/// optimistic detector sigma pass.
+pub const WORST_IMAGE_CHI2_MAX: f64 = 4.0 * REPROJECTION_CHI2_MAX;
+
 /// Relative standard deviation of the measurement cameras' distances to the point their
 /// optical axes meet. The method places the camera on one circle around the subject, aimed at
 /// the forehead; an operator's aim and position vary by centimetres at 2 m.
 pub const CAMERA_DISTANCE_SPREAD_MAX: f64 = 0.15;
+
+/// The largest angle between neighbouring measurement cameras round their common aim point,
+/// over the median angle. The method moves the camera in even steps along one arc, placed by
+/// eye (a step varies by about a third); one or two missed positions make a step two or three
+/// times the median. A larger gap leaves a band of angles unmeasured, or comes from poses that
+/// are wrong.
+pub const CAMERA_ARC_STEP_RATIO_MAX: f64 = 3.5;
 
 /// The flash position's stated sd, mm: beyond this the incident direction at the forehead is
 /// uncertain by more than a third of a degree at 1.5 m.
@@ -203,6 +219,7 @@ pub fn pose_checks(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Vec<(St
     vec![
         (Stage::CameraCalibration, focal_vs_files(poses, inputs)),
         (Stage::CameraPoses, reprojection_chi2(poses)),
+        (Stage::CameraPoses, worst_image_chi2(poses)),
         (
             Stage::CameraPoses,
             adjustment_chi2(
@@ -214,6 +231,7 @@ pub fn pose_checks(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Vec<(St
             ),
         ),
         (Stage::CameraPoses, camera_distance_spread(poses)),
+        (Stage::CameraPoses, camera_arc_steps(poses)),
         (Stage::FlashTriangulation, flash_sigma(poses)),
     ]
 }
@@ -255,10 +273,10 @@ fn focal_vs_files(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Check {
     }
 }
 
-fn reprojection_chi2(poses: &SessionPoses) -> Check {
-    const NAME: &str = "reprojection_chi2";
-    const WHAT: &str = "the median over images of (reprojection rms / stated corner sigma)²";
-    let per_image: Vec<f64> = poses
+/// Each image with an estimated camera pose: its file and `(reprojection rms / median stated
+/// corner sigma)²` over its reference targets.
+fn per_image_chi2(poses: &SessionPoses) -> Vec<(&str, f64)> {
+    poses
         .images
         .iter()
         .filter_map(|img| {
@@ -273,9 +291,16 @@ fn reprojection_chi2(poses: &SessionPoses) -> Check {
                 .flat_map(|d| d.corner_sigma_px)
                 .filter(|s| s.is_finite() && *s > 0.0)
                 .collect();
-            (!sigmas.is_empty()).then(|| (cam.rms_px / median(&sigmas)).powi(2))
+            (!sigmas.is_empty())
+                .then(|| (img.file.as_str(), (cam.rms_px / median(&sigmas)).powi(2)))
         })
-        .collect();
+        .collect()
+}
+
+fn reprojection_chi2(poses: &SessionPoses) -> Check {
+    const NAME: &str = "reprojection_chi2";
+    const WHAT: &str = "the median over images of (reprojection rms / stated corner sigma)²";
+    let per_image: Vec<f64> = per_image_chi2(poses).into_iter().map(|(_, c)| c).collect();
     if per_image.is_empty() {
         return Check::not_checked(
             NAME,
@@ -293,6 +318,32 @@ fn reprojection_chi2(poses: &SessionPoses) -> Check {
         REPROJECTION_CHI2_MAX,
         "the camera model does not fit the reference field: wrong intrinsics or distortion, or \
          reference targets placed wrongly (moved since the survey)",
+    )
+}
+
+fn worst_image_chi2(poses: &SessionPoses) -> Check {
+    const NAME: &str = "worst_image_chi2";
+    const WHAT: &str = "the largest over images of (reprojection rms / stated corner sigma)²";
+    let per_image = per_image_chi2(poses);
+    let Some((file, worst)) = per_image.iter().max_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return Check::not_checked(
+            NAME,
+            WHAT,
+            "",
+            WORST_IMAGE_CHI2_MAX,
+            "no camera pose was estimated from the images",
+        );
+    };
+    Check::at_most(
+        NAME,
+        WHAT,
+        *worst,
+        "",
+        WORST_IMAGE_CHI2_MAX,
+        &format!(
+            "the camera pose of {file} does not fit its targets: a target misread or moved in \
+             that image, motion blur, or a target that is partly hidden"
+        ),
     )
 }
 
@@ -314,11 +365,9 @@ fn adjustment_chi2(name: &str, variance_factor: Option<f64>, likely_cause: &str)
     }
 }
 
-fn camera_distance_spread(poses: &SessionPoses) -> Check {
-    const NAME: &str = "camera_distance_spread";
-    const WHAT: &str =
-        "the relative sd of the measurement cameras' distances to their common aim point";
-    let axes: Vec<(DVec3, DVec3)> = poses
+/// The measurement cameras' optical axes, `(centre, unit direction)`.
+fn measurement_axes(poses: &SessionPoses) -> Vec<(DVec3, DVec3)> {
+    poses
         .images
         .iter()
         .filter(|i| i.role == ImageRole::Measurement)
@@ -326,7 +375,14 @@ fn camera_distance_spread(poses: &SessionPoses) -> Check {
             let p = &i.world_from_camera.as_ref()?.pose;
             Some((p.translation_m, p.rotation * DVec3::Z))
         })
-        .collect();
+        .collect()
+}
+
+fn camera_distance_spread(poses: &SessionPoses) -> Check {
+    const NAME: &str = "camera_distance_spread";
+    const WHAT: &str =
+        "the relative sd of the measurement cameras' distances to their common aim point";
+    let axes = measurement_axes(poses);
     let aim = if axes.len() >= 3 {
         aim_point(&axes)
     } else {
@@ -353,6 +409,92 @@ fn camera_distance_spread(poses: &SessionPoses) -> Check {
         "the cameras are not on one circle around the forehead they aim at: wrong intrinsics \
          scale each image's distance by how much of the reference field it sees",
     )
+}
+
+fn camera_arc_steps(poses: &SessionPoses) -> Check {
+    const NAME: &str = "camera_arc_steps";
+    const WHAT: &str = "the largest angle between neighbouring measurement cameras round their \
+                        aim point, over the median angle";
+    let axes = measurement_axes(poses);
+    let figure = if axes.len() >= 4 {
+        aim_point(&axes).and_then(|aim| {
+            let directions: Vec<DVec3> = axes
+                .iter()
+                .filter_map(|(c, _)| (*c - aim).try_normalize())
+                .collect();
+            arc_step_ratio(&directions)
+        })
+    } else {
+        None
+    };
+    let Some(ratio) = figure else {
+        return Check::not_checked(
+            NAME,
+            WHAT,
+            "",
+            CAMERA_ARC_STEP_RATIO_MAX,
+            "fewer than four measurement images have camera poses, or they do not span an arc",
+        );
+    };
+    Check::at_most(
+        NAME,
+        WHAT,
+        ratio,
+        "",
+        CAMERA_ARC_STEP_RATIO_MAX,
+        "the arc has a gap: positions missed or skipped, or camera poses that are wrong",
+    )
+}
+
+/// For unit directions from an aim point to cameras on one arc: the largest angle between
+/// neighbours along the arc over the median angle. The arc's plane is the one through the aim
+/// point that the directions lie closest to (normal `n`: the eigenvector of `Σ u uᵀ` with the
+/// smallest eigenvalue); each direction's azimuth in that plane is sorted, and the cyclic
+/// steps between neighbours lose their largest one (the open side of the arc). `None` when the
+/// directions do not determine a plane or coincide.
+fn arc_step_ratio(directions: &[DVec3]) -> Option<f64> {
+    let n = least_direction(directions)?;
+    let e1 = directions
+        .first()?
+        .reject_from_normalized(n)
+        .try_normalize()?;
+    let e2 = n.cross(e1);
+    let mut azimuth_rad: Vec<f64> = directions
+        .iter()
+        .map(|u| u.dot(e2).atan2(u.dot(e1)))
+        .collect();
+    azimuth_rad.sort_by(f64::total_cmp);
+    let mut steps_rad: Vec<f64> = azimuth_rad.windows(2).map(|w| w[1] - w[0]).collect();
+    steps_rad.push(std::f64::consts::TAU - (azimuth_rad.last()? - azimuth_rad.first()?));
+    steps_rad.sort_by(f64::total_cmp);
+    steps_rad.pop();
+    let median_step_rad = median(&steps_rad);
+    (median_step_rad > 1e-9).then(|| steps_rad.last().copied().unwrap_or(0.0) / median_step_rad)
+}
+
+/// The unit vector `n` minimising `Σ (u·n)²`: the eigenvector of `M = Σ u uᵀ` with the
+/// smallest eigenvalue. `None` when that eigenvalue is not clearly below the middle one (the
+/// directions do not lie near one plane through the aim point) or the middle one is zero (they
+/// lie on a line).
+fn least_direction(directions: &[DVec3]) -> Option<DVec3> {
+    /// The smallest eigenvalue must be below this fraction of the middle one: directions on
+    /// an arc placed by eye lie within a few degrees of their plane.
+    const PLANARITY_MAX: f64 = 0.25;
+    let m = directions
+        .iter()
+        .fold(nalgebra::Matrix3::<f64>::zeros(), |acc, u| {
+            let v = nalgebra::Vector3::new(u.x, u.y, u.z);
+            acc + v * v.transpose()
+        });
+    let eigen = nalgebra::SymmetricEigen::new(m);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|a, b| eigen.eigenvalues[*a].total_cmp(&eigen.eigenvalues[*b]));
+    let (smallest, middle) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]]);
+    if !(middle > 0.0 && smallest < PLANARITY_MAX * middle) {
+        return None;
+    }
+    let n = eigen.eigenvectors.column(order[0]);
+    DVec3::new(n[0], n[1], n[2]).try_normalize()
 }
 
 /// The point closest, in least squares, to every camera's optical axis (`(centre, direction)`,
@@ -516,6 +658,43 @@ mod tests {
             adjustment_chi2("bundle_chi2", None, "cause").outcome,
             Outcome::NotChecked { .. }
         ));
+    }
+
+    /// Unit directions at these azimuths (degrees) in a plane tilted off the axes.
+    fn arc(azimuths_deg: &[f64]) -> Vec<DVec3> {
+        let tilt = glam::DQuat::from_axis_angle(DVec3::new(1.0, 0.3, 0.0).normalize(), 0.4);
+        azimuths_deg
+            .iter()
+            .map(|a| tilt * DVec3::new(a.to_radians().cos(), 0.0, a.to_radians().sin()))
+            .collect()
+    }
+
+    #[test]
+    fn an_even_arc_has_step_ratio_one_and_a_gap_shows() {
+        let even: Vec<f64> = (0..30).map(|i| -30.0 + 3.7 * f64::from(i)).collect();
+        let ratio = arc_step_ratio(&arc(&even)).expect("an arc");
+        assert!((ratio - 1.0).abs() < 1e-6, "{ratio}");
+        let mut gap = even.clone();
+        gap.drain(10..15);
+        let ratio = arc_step_ratio(&arc(&gap)).expect("an arc");
+        assert!((ratio - 6.0).abs() < 1e-6, "{ratio}");
+        assert!(ratio > CAMERA_ARC_STEP_RATIO_MAX);
+        let around: Vec<f64> = (0..12).map(|i| 170.0 + 30.0 * f64::from(i)).collect();
+        let ratio = arc_step_ratio(&arc(&around)).expect("a full circle");
+        assert!((ratio - 1.0).abs() < 1e-6, "{ratio}");
+    }
+
+    #[test]
+    fn directions_off_any_plane_have_no_arc() {
+        let spread = [
+            DVec3::X,
+            DVec3::Y,
+            DVec3::Z,
+            DVec3::NEG_X,
+            DVec3::NEG_Y,
+            DVec3::NEG_Z,
+        ];
+        assert_eq!(arc_step_ratio(&spread), None);
     }
 
     #[test]

@@ -230,8 +230,9 @@ fn problems(img: &DngImage) -> Vec<String> {
     }
     if img.black_levels.iter().any(|&b| b >= img.white_level) {
         out.push(format!(
-            "black levels {:?} must be below the white level {}",
-            img.black_levels, img.white_level
+            "black levels {} must be below the white level {}",
+            list_in_words(&img.black_levels),
+            img.white_level
         ));
     }
     if let Some([t, l, b, r]) = img.active_area {
@@ -273,8 +274,8 @@ fn problems(img: &DngImage) -> Vec<String> {
         .any(|&v| !(v.is_finite() && v > 0.0 && v <= 1.0))
     {
         out.push(format!(
-            "as_shot_neutral {:?} must be in (0, 1]",
-            img.as_shot_neutral
+            "as_shot_neutral {} must be in (0, 1]",
+            list_in_words(&img.as_shot_neutral)
         ));
     }
     if img.color_matrix.iter().any(|v| !v.is_finite()) {
@@ -283,7 +284,9 @@ fn problems(img: &DngImage) -> Vec<String> {
     if let Some(t) = &img.capture_time {
         if let Some(d) = &t.subsec_digits {
             if d.is_empty() || d.len() > 9 || !d.bytes().all(|c| c.is_ascii_digit()) {
-                out.push(format!("subsec_digits {d:?} must be 1 to 9 decimal digits"));
+                out.push(format!(
+                    "subsec_digits \"{d}\" must be 1 to 9 decimal digits"
+                ));
             }
         }
         if let Some(o) = t.utc_offset_min {
@@ -488,6 +491,15 @@ pub fn write_dng(path: &Path, img: &DngImage) -> Result<(), RawError> {
     let bytes = encode_dng(path, img)?;
     skinbrdf_core::fsio::write_atomic(path, &bytes)?;
     Ok(())
+}
+
+/// Numbers in words: `1, 2, 3`.
+fn list_in_words<T: std::fmt::Display>(values: &[T]) -> String {
+    values
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 #[cfg(test)]

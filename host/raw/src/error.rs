@@ -85,7 +85,7 @@ pub enum RawError {
         problem: String,
     },
     /// An EXIF field that is present but cannot be read as its type (never guessed).
-    #[error("{path}: EXIF {tag} = {value:?} cannot be read: {problem}")]
+    #[error("{path}: EXIF {tag} = \"{value}\" cannot be read: {problem}")]
     BadExif {
         /// The file.
         path: PathBuf,

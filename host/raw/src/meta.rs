@@ -261,7 +261,7 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
     let mut raw_ifd: Option<IFD> = None;
     let (exif, root): (Exif, Option<IFD>) = match kind {
         FileKind::Jpeg => {
-            let jfif = Jfif::new(&src).map_err(|e| structure(format!("{e:?}")))?;
+            let jfif = Jfif::new(&src).map_err(|e| structure(e.to_string()))?;
             match jfif.exif_ifd() {
                 Some(ifd) => (
                     Exif::new(ifd).map_err(|e| structure(e.to_string()))?,

@@ -110,6 +110,18 @@ pub enum ToneCurve {
     Table,
 }
 
+impl ToneCurve {
+    /// The curve's name as session.toml writes it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Linear => "linear",
+            Self::Srgb => "srgb",
+            Self::Gamma => "gamma",
+            Self::Table => "table",
+        }
+    }
+}
+
 /// A measured camera response: normalised code values and the linear values they stand for.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -246,7 +258,7 @@ impl Linearization {
                     if v > max {
                         out.push((
                             field,
-                            format!("{v} exceeds the {format:?} full scale {max}"),
+                            format!("{v} exceeds the {} full scale {max}", format.describe()),
                         ));
                     }
                 }
@@ -355,6 +367,19 @@ pub enum StoredFormat {
     },
 }
 
+/// An image pixel layout in words ("8-bit grey", "16-bit RGBA", ...).
+fn color_type_in_words(color: image::ColorType) -> String {
+    let channels = match color.channel_count() {
+        1 => "grey",
+        2 => "grey with alpha",
+        3 => "RGB",
+        4 => "RGBA",
+        _ => "multi-channel",
+    };
+    let bits = color.bits_per_pixel() / u16::from(color.channel_count().max(1));
+    format!("{bits}-bit {channels}")
+}
+
 impl StoredFormat {
     /// Full-scale code for integer formats.
     pub const fn max_code(self) -> Option<f64> {
@@ -422,8 +447,8 @@ pub fn raw_options(
         return Err((
             "curve",
             format!(
-                "{:?} on a camera raw file: raw values are linear, only curve = \"linear\" applies",
-                lin.curve
+                "curve = \"{}\" on a camera raw file: raw values are linear, only curve = \"linear\" applies",
+                lin.curve.name()
             ),
         ));
     }
@@ -484,7 +509,7 @@ pub fn read_header(path: &Path) -> Result<ImageHeader, FileError> {
     let format = StoredFormat::of(color).ok_or_else(|| FileError::Invalid {
         path: path.to_path_buf(),
         field: "pixel format".into(),
-        problem: format!("unsupported channel type ({color:?})"),
+        problem: format!("unsupported pixel layout ({})", color_type_in_words(color)),
     })?;
     Ok(ImageHeader {
         width,
@@ -633,7 +658,7 @@ pub fn load_linear_image(
         return Err(FileError::Invalid {
             path: path.to_path_buf(),
             field: "pixel format".into(),
-            problem: format!("unsupported channel type ({color:?})"),
+            problem: format!("unsupported pixel layout ({})", color_type_in_words(color)),
         });
     };
     let raw: Vec<[f32; 3]> = match format {

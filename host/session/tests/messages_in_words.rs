@@ -9,19 +9,7 @@
 use std::path::{Path, PathBuf};
 
 /// Files that still format with debug formatting, with the reason they are not fixed here.
-const PENDING: &[(&str, &str)] = &[
-    ("session/src/linear.rs", OTHER_WORK),
-    ("raw/src/dng.rs", OTHER_WORK),
-    ("raw/src/error.rs", OTHER_WORK),
-    ("raw/src/meta.rs", OTHER_WORK),
-    ("derender/src/from_session.rs", OTHER_WORK),
-    ("fit/src/fit.rs", OTHER_WORK),
-    ("fit/src/report.rs", OTHER_WORK),
-];
-
-/// Why a file is pending.
-const OTHER_WORK: &str = "the per-photosite raw work changes this file at the same time; its \
-                          messages are to be put in words there";
+const PENDING: &[(&str, &str)] = &[];
 
 /// Lines where debug formatting is not shown to anyone: a cache fingerprint's key.
 const NOT_SHOWN: &[&str] = &[".value(\"model\", &format!(\"{:?}\", ctx.cfg.fit.model))"];
