@@ -93,7 +93,7 @@ fn poses_then_derender_equals_process() {
     ok(&["poses", s_str]);
     let text = ok(&["derender", s_str]);
     assert!(
-        text.contains("Estimated"),
+        text.contains("poses from the pose stage"),
         "derender used the pose stage's poses:\n{text}"
     );
     let by_stage = samples(&s.join("out/samples.skbs"));

@@ -85,7 +85,7 @@ fn check(dir: &Path, studio: &Path, truth: f64, label: &str) {
     assert!(g.notes.is_empty(), "{label}: the two sources disagree: {g}");
     let session = Session::load(&out).expect("the session loads");
     assert_eq!(
-        session.file.camera,
+        session.camera_as_stated(&session.file.camera),
         CameraSpec::ToBeCalibrated {
             width_px: r.image_size_px.0,
             height_px: r.image_size_px.1,
@@ -188,7 +188,7 @@ fn a_rig_states_the_camera_and_a_calibration_file_wins_over_it() {
     assert_eq!(r.camera, CameraSource::ToBeCalibrated);
     let session = Session::load(dir.path().join("focal")).expect("the session loads");
     assert!(matches!(
-        session.file.camera,
+        session.camera_as_stated(&session.file.camera),
         CameraSpec::ToBeCalibrated { focal_guess_px: Some(f), .. } if f == stated
     ));
 

@@ -52,7 +52,8 @@ fn state_focal_guess(session: &Path, focal_px: f64) {
 
 fn true_focal_px(session: &Path) -> f64 {
     let loaded = Session::load(session).expect("session");
-    let CameraSpec::ToBeCalibrated { width_px, .. } = loaded.file.camera else {
+    let CameraSpec::ToBeCalibrated { width_px, .. } = loaded.camera_as_stated(&loaded.file.camera)
+    else {
         panic!("the camera is to be calibrated");
     };
     let scene = Scene::load("default").expect("default scene");
