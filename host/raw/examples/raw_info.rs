@@ -22,8 +22,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{json, Value};
 use skinbrdf_raw::{
-    check_extension, decode_photosites, read_metadata, read_raw_header, sniff, RawFrame,
-    RawOptions,
+    check_extension, decode_photosites, read_metadata, read_raw_header, sniff, RawFrame, RawOptions,
 };
 
 fn main() {
