@@ -17,6 +17,9 @@
 //! * Panasonic's RW2 states its sensor in tags 2 and 3: at least a bit per photosite must be
 //!   in the file.
 //!
+//! Reading metadata only (`read_metadata`) skips the checks that the image data is in the file
+//! (the last two), as it reads no image.
+//!
 //! Only a regular file is opened (a FIFO or device is refused at once, naming it).
 
 use std::collections::HashSet;

@@ -1,5 +1,9 @@
 //! Exposure metadata (EXIF) of raw, TIFF and JPEG files.
 //!
+//! A TIFF-based file's directories are checked before rawler reads them (chains, entry counts,
+//! value arrays, pixel count), but not whether its image data is in the file: a file stripped
+//! of its image, or cut short after its directories, still gives its metadata.
+//!
 //! Every field is read as the file states it; a missing field is `None`, never guessed or
 //! derived from another. The capture time is kept as the camera wrote it ([`CaptureTime`]): the
 //! naive local `DateTimeOriginal`, the `SubSecTimeOriginal` digits and the `OffsetTimeOriginal`
