@@ -163,8 +163,19 @@ impl fmt::Display for FileKind {
 /// How many leading bytes the magic-number checks look at.
 const HEAD_LEN: usize = 64;
 
-/// The file's kind from its content (see the module docs).
+/// The file's kind from its content (see the module docs). A TIFF-based file's structure is
+/// checked first, its image data included (see `limits`): a file this returns is safe to decode.
 pub fn sniff(path: &Path) -> Result<FileKind, RawError> {
+    sniff_checked(path, true)
+}
+
+/// [`sniff`] checking a TIFF-based file's directories only, not whether its image data is in
+/// the file: for reading metadata, which a file stripped of its image still holds.
+pub(crate) fn sniff_for_metadata(path: &Path) -> Result<FileKind, RawError> {
+    sniff_checked(path, false)
+}
+
+fn sniff_checked(path: &Path, image_data: bool) -> Result<FileKind, RawError> {
     let io = |source| RawError::Io {
         path: path.to_path_buf(),
         source,
@@ -176,7 +187,11 @@ pub fn sniff(path: &Path) -> Result<FileKind, RawError> {
         .read_to_end(&mut head)
         .map_err(io)?;
     // A TIFF-based file's structure is checked before any decoder reads it.
-    crate::limits::check_tiff_structure(path)?;
+    if image_data {
+        crate::limits::check_tiff_structure(path)?;
+    } else {
+        crate::limits::check_tiff_directories(path)?;
+    }
     if let Some(kind) = sniff_magic(&head) {
         return Ok(kind);
     }

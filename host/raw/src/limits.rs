@@ -17,6 +17,9 @@
 //! * Panasonic's RW2 states its sensor in tags 2 and 3: at least a bit per photosite must be
 //!   in the file.
 //!
+//! Reading metadata only (`read_metadata`) skips the checks that the image data is in the file
+//! (the last two), as it reads no image.
+//!
 //! Only a regular file is opened (a FIFO or device is refused at once, naming it).
 
 use std::collections::HashSet;
@@ -222,8 +225,16 @@ impl Walker<'_> {
     }
 
     /// Checks what one directory states against the file.
-    fn check_image(&self, at: u64, t: &ImageTags, rw2: bool) -> Result<(), RawError> {
-        if rw2 {
+    /// With `image_data` false, only what bounds a reader of the directories themselves (the
+    /// pixel count) is checked, not whether the image data is in the file.
+    fn check_image(
+        &self,
+        at: u64,
+        t: &ImageTags,
+        rw2: bool,
+        image_data: bool,
+    ) -> Result<(), RawError> {
+        if rw2 && image_data {
             if let (Some(w), Some(h)) = (t.rw2_width, t.rw2_height) {
                 let px = w.saturating_mul(h);
                 if px > MAX_PIXELS || px > self.len.saturating_mul(8) {
@@ -245,7 +256,7 @@ impl Walker<'_> {
                  pixels any camera takes"
             )));
         }
-        let Some(data) = t.data_bytes else {
+        let Some(data) = t.data_bytes.filter(|_| image_data) else {
             return Ok(());
         };
         if data > self.len {
@@ -277,6 +288,17 @@ impl Walker<'_> {
 /// Checks a TIFF-based file's structure (see the module docs); a file that is not TIFF-based
 /// passes untouched.
 pub(crate) fn check_tiff_structure(path: &Path) -> Result<(), RawError> {
+    walk_tiff(path, true)
+}
+
+/// Checks a TIFF-based file's directories (chains, entry counts, value arrays, pixel count) but
+/// not whether its image data is in the file: enough before reading its metadata, which a file
+/// stripped of its image data (or cut short) still holds.
+pub(crate) fn check_tiff_directories(path: &Path) -> Result<(), RawError> {
+    walk_tiff(path, false)
+}
+
+fn walk_tiff(path: &Path, image_data: bool) -> Result<(), RawError> {
     let (mut file, len) = open_input(path)?;
     let mut head = [0u8; 8];
     if len < 8 || file.read_exact(&mut head).is_err() {
@@ -312,7 +334,7 @@ pub(crate) fn check_tiff_structure(path: &Path) -> Result<(), RawError> {
             return Err(w.bad(format!("more than {MAX_IFDS} directories")));
         }
         let (tags, children, next) = w.directory(at)?;
-        w.check_image(at, &tags, magic == MAGIC_RW2)?;
+        w.check_image(at, &tags, magic == MAGIC_RW2, image_data)?;
         pending.push(next);
         pending.extend(children);
     }

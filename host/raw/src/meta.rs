@@ -1,5 +1,9 @@
 //! Exposure metadata (EXIF) of raw, TIFF and JPEG files.
 //!
+//! A TIFF-based file's directories are checked before rawler reads them (chains, entry counts,
+//! value arrays, pixel count), but not whether its image data is in the file: a file stripped
+//! of its image, or cut short after its directories, still gives its metadata.
+//!
 //! Every field is read as the file states it; a missing field is `None`, never guessed or
 //! derived from another. The capture time is kept as the camera wrote it ([`CaptureTime`]): the
 //! naive local `DateTimeOriginal`, the `SubSecTimeOriginal` digits and the `OffsetTimeOriginal`
@@ -47,7 +51,7 @@ use rawler::tags::{DngTag, ExifTag, TiffCommonTag};
 
 use crate::decode::loader;
 use crate::error::RawError;
-use crate::kind::{sniff, FileKind};
+use crate::kind::{sniff_for_metadata, FileKind};
 
 /// A naive (zone-less) calendar date and time of day, as EXIF stores it.
 #[derive(
@@ -218,9 +222,12 @@ pub struct ExposureMeta {
     pub lens_make: Option<String>,
     /// `LensModel`.
     pub lens_model: Option<String>,
-    /// `Make` (as written, trimmed).
+    /// `Make` as written (trimmed) in a file with a TIFF structure (DNG, CR2, NEF, ARW, ...);
+    /// for other containers (CR3, CRW, MRW, RAF, X3F) the decoder's normalised camera make.
     pub camera_make: Option<String>,
-    /// `Model` (as written, trimmed).
+    /// `Model` as written (trimmed) in a file with a TIFF structure; for other containers the
+    /// decoder's normalised camera model (e.g. `EOS Digital Rebel` for a CRW whose `Model` is
+    /// `Canon EOS DIGITAL REBEL`).
     pub camera_model: Option<String>,
     /// The body's serial number (see the module docs).
     pub body_serial: Option<String>,
@@ -247,7 +254,7 @@ pub struct ExposureMeta {
 
 /// Reads a raw, TIFF or JPEG file's exposure metadata (see the module docs).
 pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
-    let kind = sniff(path)?;
+    let kind = sniff_for_metadata(path)?;
     let io = |source| RawError::Io {
         path: path.to_path_buf(),
         source,
@@ -290,11 +297,14 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
             let md = crate::decode::guarded(path, || {
                 decoder.raw_metadata(&src, &RawDecodeParams::default())
             })?;
+            // rawler exposes a DNG's root directory only; other TIFF-based formats' root is read
+            // here, so `Make` and `Model` come as written rather than as rawler's clean names.
             let root = decoder
                 .ifd(WellKnownIFD::Root)
                 .ok()
                 .flatten()
-                .map(|r| (*r).clone());
+                .map(|r| (*r).clone())
+                .or_else(|| tiff_root(&src));
             if kind == FileKind::Dng {
                 raw_ifd = decoder
                     .ifd(WellKnownIFD::Raw)
@@ -343,6 +353,15 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
         focal_plane_tags(&mut extra, root, raw_ifd.as_ref());
     }
     finish(path, extra, &exif, make, model)
+}
+
+/// The root directory of a file with a TIFF structure (CR2, NEF, ARW, PEF, ORF, RW2, ...),
+/// `None` for other containers (CR3, CRW, MRW, RAF, X3F) or an unreadable structure.
+fn tiff_root(src: &RawSource) -> Option<IFD> {
+    let tiff = GenericTiffReader::new(&mut src.reader(), 0, 0, None, &[]).ok()?;
+    let root = tiff.root_ifd();
+    root.get_entry(TiffCommonTag::Make)?;
+    Some(root.clone())
 }
 
 /// The diagonal of the 36 x 24 mm frame `FocalLengthIn35mmFilm` refers to, millimetres:
