@@ -208,7 +208,7 @@ impl ProcessConfig {
             skip_bad_images: false,
             truth_file: None,
             accept_failed_checks: false,
-            raw_mode: RawMode::Superpixel,
+            raw_mode: RawMode::Photosite,
         }
     }
 }

@@ -11,11 +11,16 @@
 //! Each test renders its scene with the scene's own camera (field of view, distortion), geometry,
 //! BRDF, noise and anti-aliasing, with two stated reductions to keep CI affordable (run with
 //! `cargo test --release`): [`MEASUREMENT_IMAGES`] measurement images instead of 30 (plus the 6
-//! calibration images), and half the scene's pixels per axis (762 x 506 for the default 1524 x
-//! 1012; same field of view). One ray per pixel instead is not a valid reduction: a real sensor
-//! integrates over each pixel, and point-sampled (aliased) target edges move the detected
-//! corners (the measurement is in `docs/benchmarks-poses.md`). `skinbrdf process` on the full
-//! scenes is recorded in `docs/benchmarks.md`.
+//! calibration images), and a sensor of half the scene's pixels per axis (762 x 506 superpixels
+//! for the default 1524 x 1012; same field of view). The cards are formed per photosite
+//! (`[studio] mosaic = "photosite"`): the render has the scene's pixel count, one rendered pixel
+//! per photosite, as a camera's sensor records it, since `process` loads raw files per photosite
+//! by default. A card formed from 2x2 quads of one rendered pixel (`mosaic = "quad"`) holds no
+//! photosite's own value: loaded per photosite, its target corners carry the quads' blocks
+//! (`docs/derender.md`, "Photosites on quad-formed cards"). One ray per pixel instead is not a
+//! valid reduction: a real sensor integrates over each pixel, and point-sampled (aliased) target
+//! edges move the detected corners (the measurement is in `docs/benchmarks-poses.md`).
+//! `skinbrdf process` on the full scenes is recorded in `docs/benchmarks.md`.
 //!
 //! In a debug build the tests are ignored (rendering takes minutes there).
 //!
@@ -30,7 +35,7 @@ use skinbrdf_pipeline::plan::Action;
 use skinbrdf_pipeline::process::{process, Event, ProcessConfig};
 use skinbrdf_pipeline::report::{MetricKind, StageStatus};
 use skinbrdf_pipeline::Stage;
-use skinbrdf_synth::studio::STUDIO_DIR;
+use skinbrdf_synth::studio::{Mosaic, STUDIO_DIR};
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
 /// Measurement images per test session (the scenes have 30).
@@ -85,7 +90,7 @@ enum Camera {
 struct Run {
     /// The camera's calibration: stated or calibrated by the session.
     camera: Camera,
-    /// Render at the scene's full size instead of half the pixels per axis.
+    /// A sensor of the scene's full size instead of half its pixels per axis.
     full_size: bool,
 }
 
@@ -108,10 +113,13 @@ fn run_scene_with(name: &str, bounds: Bounds, expect_skipped: &[Stage], run: Run
     let session = dir.path().join("session");
     let mut scene = Scene::load(name).expect("built-in scene");
     scene.session.measurement_images = MEASUREMENT_IMAGES;
+    scene.studio.mosaic = Mosaic::Photosite;
+    // One rendered pixel per photosite: the scene's pixel count is a sensor of half its size
+    // in superpixels.
     let size = if run.full_size {
-        (scene.camera.width_px, scene.camera.height_px)
+        (2 * scene.camera.width_px, 2 * scene.camera.height_px)
     } else {
-        (scene.camera.width_px / 2, scene.camera.height_px / 2)
+        (scene.camera.width_px, scene.camera.height_px)
     };
     generate(
         &scene,
@@ -442,18 +450,11 @@ fn survey_flash() {
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn long_lens() {
     // The method's own optics (10 degrees across), no calibration file: the focal length the
-    // files state starts the survey's calibration. At the full size: at half the pixels per
-    // axis the flash stand's small panel tags are placed above their accuracy target and left
-    // out (docs/photogrammetry.md, "The rig follows the lens").
-    run_scene_with(
-        "long-lens",
-        DEFAULT,
-        &[],
-        Run {
-            full_size: true,
-            ..Run::DEFAULT
-        },
-    );
+    // files state starts the survey's calibration. The half-size sensor read per photosite
+    // detects at the scene's pixel count, as superpixels of the full-size sensor do: read as
+    // superpixels, the flash stand's small panel tags are placed above their accuracy target
+    // and left out (docs/photogrammetry.md, "The rig follows the lens").
+    run_scene("long-lens", DEFAULT, &[]);
 }
 
 #[test]

@@ -21,7 +21,7 @@
 //! is decoded with `V = (raw - black_c) / (white - black_c)` per CFA position with the file's
 //! own levels, in one of two [`RawMode`]s:
 //!
-//! * **`photosite`**: one pixel per photosite of the active area, at full
+//! * **`photosite`** (the default): one pixel per photosite of the active area, at full
 //!   resolution ([`skinbrdf_raw::decode_photosites`]). Each pixel holds its own channel (the
 //!   colour of its filter) with its own CFA position's levels; its other two channels are NaN,
 //!   not interpolated: the derender makes of each photosite a sample of one channel, with the
@@ -29,7 +29,7 @@
 //!   [`LinearImage::geometry_grey`] gives target detection a full-resolution image (green,
 //!   interpolated at the red and blue photosites). Saturated where the photosite itself is at
 //!   or above the white level.
-//! * **`superpixel`** (the default for now; faster, a quarter of the pixels): 2x2 superpixels at half resolution
+//! * **`superpixel`** (faster, a quarter of the pixels): 2x2 superpixels at half resolution
 //!   ([`skinbrdf_raw::decode_superpixel`]): red, the mean of the greens and blue of each quad,
 //!   saturated where any photosite of the quad is at or above the white level. Red and blue
 //!   were measured half a photosite from the superpixel's centre in x and y.
@@ -58,9 +58,9 @@ pub use skinbrdf_raw::{BayerPhase, RawLayout};
 #[serde(rename_all = "kebab-case")]
 pub enum RawMode {
     /// One pixel per photosite, its own channel only, full resolution.
+    #[default]
     Photosite,
     /// One RGB pixel per 2x2 quad, half resolution.
-    #[default]
     Superpixel,
 }
 

@@ -56,9 +56,9 @@ pub struct Args {
     /// Do not mask the projected printed targets.
     #[arg(long)]
     pub no_target_mask: bool,
-    /// How camera raw images load: `photosite` or `superpixel` (default); must be the mode the
+    /// How camera raw images load: `photosite` (default) or `superpixel`; must be the mode the
     /// poses were estimated in (their camera is the images' as loaded).
-    #[arg(long, value_enum, default_value_t = super::RawModeArg::Superpixel)]
+    #[arg(long, value_enum, default_value_t = super::RawModeArg::Photosite)]
     pub raw_mode: super::RawModeArg,
     /// Output directory (default SESSION/out): samples.skbs, derender.json.
     #[arg(long)]

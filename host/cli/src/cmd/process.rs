@@ -54,7 +54,7 @@ pub struct Args {
     pub accept_failed_checks: bool,
     /// How camera raw images load: `photosite` (each photosite a sample of its own channel
     /// along its own ray, full resolution) or `superpixel` (2x2 quads, half resolution, faster).
-    #[arg(long, value_enum, default_value_t = super::RawModeArg::Superpixel)]
+    #[arg(long, value_enum, default_value_t = super::RawModeArg::Photosite)]
     pub raw_mode: super::RawModeArg,
 }
 
