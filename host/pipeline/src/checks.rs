@@ -512,8 +512,9 @@ fn arc_step_ratio(directions: &[DVec3]) -> Option<f64> {
     steps_rad.push(std::f64::consts::TAU - (azimuth_rad.last()? - azimuth_rad.first()?));
     steps_rad.sort_by(f64::total_cmp);
     steps_rad.pop();
+    let largest_step_rad = *steps_rad.last()?;
     let median_step_rad = median(&steps_rad);
-    (median_step_rad > 1e-9).then(|| steps_rad.last().copied().unwrap_or(0.0) / median_step_rad)
+    (median_step_rad > 1e-9).then(|| largest_step_rad / median_step_rad)
 }
 
 /// The unit vector `n` minimising `Σ (u·n)²`: the eigenvector of `M = Σ u uᵀ` with the
