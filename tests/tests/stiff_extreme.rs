@@ -232,19 +232,28 @@ fn lambertian_at_89_degrees_is_finite_and_exact() {
 }
 
 #[test]
-fn sample_with_nan_value_is_a_typed_fit_error() {
+fn sample_with_infinite_or_no_value_is_a_typed_fit_error() {
     let truth = BrdfModel::Lambertian { albedo: [0.5; 3] };
-    let mut samples: Vec<BrdfSample> = (0..20)
+    let model = ModelSpec::Lambertian.channel_model();
+    let samples: Vec<BrdfSample> = (0..20)
         .map(|i| sample_of(&truth, deg(i as f64 * 4.0), deg(30.0), 1.0))
         .collect();
-    samples[7].rho[1] = f32::NAN;
-    let err = fit_rgb(
-        ModelSpec::Lambertian.channel_model().as_ref(),
-        &samples,
-        &FitConfig::default(),
-    )
-    .expect_err("NaN sample must be refused");
-    assert!(matches!(err, FitError::BadSample { index: 7, .. }), "{err}");
+    // NaN marks a channel the sample did not measure (a photosite's other two): the sample
+    // is kept, and that channel is fitted to the others.
+    let mut partial = samples.clone();
+    partial[7].rho[1] = f32::NAN;
+    let fit = fit_rgb(model.as_ref(), &partial, &FitConfig::default())
+        .expect("a partial sample is fitted");
+    assert_eq!(fit.channels[1].error.count, 19);
+    assert_eq!(fit.channels[0].error.count, 20);
+    // An infinite value, or no channel measured, is refused by its index.
+    for bad in [[0.1, f32::INFINITY, 0.1], [f32::NAN; 3]] {
+        let mut broken = samples.clone();
+        broken[7].rho = bad;
+        let err = fit_rgb(model.as_ref(), &broken, &FitConfig::default())
+            .expect_err("the sample must be refused");
+        assert!(matches!(err, FitError::BadSample { index: 7, .. }), "{err}");
+    }
 }
 
 fn check_angles(a: &BrdfAngles) {

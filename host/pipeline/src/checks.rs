@@ -11,6 +11,7 @@
 //! | stage | check | figure | fails when |
 //! |---|---|---|---|
 //! | camera calibration | `focal_vs_files` | calibrated fx against the focal length the files state | more than [`FOCAL_VS_FILES_MAX_REL`] apart |
+//! | camera calibration | `principal_point_offset` | the calibrated principal point's distance from the image centre over the half-diagonal | above [`PRINCIPAL_POINT_OFFSET_MAX`] |
 //! | camera poses | `reprojection_chi2` | median over images of `(rms / sigma)²`, the per-image reprojection RMS against the median stated corner sigma | above [`REPROJECTION_CHI2_MAX`] |
 //! | camera poses | `worst_image_chi2` | the largest over images of the same figure (the failure names the image) | above [`WORST_IMAGE_CHI2_MAX`] |
 //! | placement survey | `survey_chi2` | the survey adjustment's reduced chi-square (variance factor) | above [`REPROJECTION_CHI2_MAX`] |
@@ -35,6 +36,13 @@ use crate::report::StageReport;
 /// lens's nominal focal length: focused at 2 m a 200 mm lens images at `f (1 + f / (d - f))`,
 /// 11 % further, and zoom markings are rounded. A start from the wrong lens is off by a factor.
 pub const FOCAL_VS_FILES_MAX_REL: f64 = 0.25;
+
+/// The calibrated principal point's distance from the image centre, over the image's
+/// half-diagonal. A lens is centred on its sensor to a few percent of the frame (sensor-shift
+/// stabilisation moves it by a few more); a calibration that puts the principal point further
+/// out is trading it against the camera's orientation or the distortion, which the images do
+/// not tell apart (too few views, or all from one roll angle).
+pub const PRINCIPAL_POINT_OFFSET_MAX: f64 = 0.1;
 
 /// Median over images of `(reprojection rms / stated corner sigma)²`. The detector's corner
 /// sigmas are its own estimate from the edge fit; a camera model that fits the reference
@@ -218,6 +226,10 @@ pub fn survey_checks(survey: &skinbrdf_poses::Survey) -> Vec<(Stage, Check)> {
 pub fn pose_checks(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Vec<(Stage, Check)> {
     vec![
         (Stage::CameraCalibration, focal_vs_files(poses, inputs)),
+        (
+            Stage::CameraCalibration,
+            principal_point_offset(poses, inputs),
+        ),
         (Stage::CameraPoses, reprojection_chi2(poses)),
         (Stage::CameraPoses, worst_image_chi2(poses)),
         (
@@ -271,6 +283,38 @@ fn focal_vs_files(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Check {
              (state `focal_guess_px`), or the wrong files' focal length",
         ),
     }
+}
+
+fn principal_point_offset(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Check {
+    const NAME: &str = "principal_point_offset";
+    const WHAT: &str =
+        "the calibrated principal point's distance from the image centre over the half-diagonal";
+    if let CameraSpec::Calibrated(_) = inputs.stated_camera {
+        return Check::not_checked(
+            NAME,
+            WHAT,
+            "",
+            PRINCIPAL_POINT_OFFSET_MAX,
+            "the camera is calibrated in session.toml",
+        );
+    }
+    Check::at_most(
+        NAME,
+        WHAT,
+        principal_point_offset_rel(&poses.camera),
+        "",
+        PRINCIPAL_POINT_OFFSET_MAX,
+        "the calibration traded the principal point against the camera's orientation or \
+         distortion: survey images from more directions, some with the camera turned 90 degrees \
+         about its axis, separate them",
+    )
+}
+
+/// `|c - centre| / (diagonal / 2)` for a camera's principal point `c`.
+fn principal_point_offset_rel(camera: &skinbrdf_core::CameraModel) -> f64 {
+    let (w, h) = (f64::from(camera.width_px), f64::from(camera.height_px));
+    let offset_px = (camera.cx_px - 0.5 * w).hypot(camera.cy_px - 0.5 * h);
+    offset_px / (0.5 * w.hypot(h))
 }
 
 /// Each image with an estimated camera pose: its file and `(reprojection rms / median stated
@@ -468,8 +512,9 @@ fn arc_step_ratio(directions: &[DVec3]) -> Option<f64> {
     steps_rad.push(std::f64::consts::TAU - (azimuth_rad.last()? - azimuth_rad.first()?));
     steps_rad.sort_by(f64::total_cmp);
     steps_rad.pop();
+    let largest_step_rad = *steps_rad.last()?;
     let median_step_rad = median(&steps_rad);
-    (median_step_rad > 1e-9).then(|| steps_rad.last().copied().unwrap_or(0.0) / median_step_rad)
+    (median_step_rad > 1e-9).then(|| largest_step_rad / median_step_rad)
 }
 
 /// The unit vector `n` minimising `Σ (u·n)²`: the eigenvector of `M = Σ u uᵀ` with the
@@ -695,6 +740,17 @@ mod tests {
             DVec3::NEG_Z,
         ];
         assert_eq!(arc_step_ratio(&spread), None);
+    }
+
+    #[test]
+    fn a_principal_point_at_the_centre_is_offset_zero_and_one_at_the_corner_is_one() {
+        let mut cam = skinbrdf_core::CameraModel::from_fov(400, 300, 0.3);
+        cam.cx_px = 200.0;
+        cam.cy_px = 150.0;
+        assert!(principal_point_offset_rel(&cam).abs() < 1e-12);
+        cam.cx_px = 400.0;
+        cam.cy_px = 300.0;
+        assert!((principal_point_offset_rel(&cam) - 1.0).abs() < 1e-12);
     }
 
     #[test]

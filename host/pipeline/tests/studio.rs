@@ -105,6 +105,21 @@ fn ingest_config(s: &Path, out: &Path, rig: &str) -> IngestConfig {
     )
 }
 
+/// A camera file (`[camera]` only, as `poses` writes camera.toml) holding the calibration of
+/// the session in `session`.
+fn camera_file_of(session: &Path, dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(session.join("session.toml")).expect("session.toml");
+    let doc: toml::Table = toml::from_str(&text).expect("toml");
+    let mut camera = toml::Table::new();
+    camera.insert(
+        "camera".into(),
+        doc.get("camera").expect("[camera]").clone(),
+    );
+    let path = dir.join("camera.toml");
+    std::fs::write(&path, toml::to_string(&camera).expect("toml")).expect("write");
+    path
+}
+
 #[test]
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
@@ -117,7 +132,7 @@ fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
     // writes it in camera.toml), so that both sessions' poses rest on the same intrinsics.
     // Without one the session calibrates itself (the done-criteria run in docs/benchmarks.md).
     let mut cfg = ingest_config(&s, &s2, "rig-measured.toml");
-    cfg.camera = Some(s.join("session.toml"));
+    cfg.camera = Some(camera_file_of(&s, dir.path()));
     let report = ingest(&cfg).expect("ingest");
     // Every exposure matched; the test shot left out; the clock offset found.
     assert_eq!(report.images.len(), 36);

@@ -67,13 +67,7 @@ fn metadata(path: &Path) -> Value {
     match read_metadata(path) {
         Err(e) => json!({ "error": e.to_string() }),
         Ok(m) => {
-            let time = m.capture_time.as_ref().map(|t| {
-                let l = &t.local;
-                format!(
-                    "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
-                    l.year, l.month, l.day, l.hour, l.minute, l.second
-                )
-            });
+            let time = m.capture_time.as_ref().map(|t| t.local.exif_text());
             json!({
                 "make": m.camera_make,
                 "model": m.camera_model,

@@ -400,14 +400,7 @@ pub fn directory(path: &Path, img: &DngImage) -> Result<Directory, RawError> {
         exif.set(0xa405, TagValue::Short(vec![f]));
     }
     if let Some(t) = &img.capture_time {
-        let d = t.local;
-        exif.set(
-            0x9003,
-            TagValue::Ascii(format!(
-                "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
-                d.year, d.month, d.day, d.hour, d.minute, d.second
-            )),
-        );
+        exif.set(0x9003, TagValue::Ascii(t.local.exif_text()));
         if let Some(s) = &t.subsec_digits {
             exif.set(0x9291, TagValue::Ascii(s.clone()));
         }

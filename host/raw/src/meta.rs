@@ -73,6 +73,14 @@ pub struct LocalDateTime {
 }
 
 impl LocalDateTime {
+    /// The EXIF text, `YYYY:MM:DD HH:MM:SS` (what [`LocalDateTime::parse_exif`] reads).
+    pub fn exif_text(&self) -> String {
+        format!(
+            "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
+            self.year, self.month, self.day, self.hour, self.minute, self.second
+        )
+    }
+
     /// Parses EXIF's `YYYY:MM:DD HH:MM:SS` (also accepts `-` between date fields and `T`
     /// between date and time). `Ok(None)` for the "unknown" forms (blanks, all zeros).
     pub fn parse_exif(s: &str) -> Result<Option<Self>, &'static str> {

@@ -128,13 +128,7 @@ fn ours(path: &Path) -> BTreeMap<&'static str, Ours> {
     let text = |e: skinbrdf_raw::RawError| skinbrdf_core::error_text(&e);
     match read_metadata(path) {
         Ok(m) => {
-            let time = m.capture_time.as_ref().map(|t| {
-                let l = &t.local;
-                format!(
-                    "{:04}:{:02}:{:02} {:02}:{:02}:{:02}",
-                    l.year, l.month, l.day, l.hour, l.minute, l.second
-                )
-            });
+            let time = m.capture_time.as_ref().map(|t| t.local.exif_text());
             out.insert("make", Ok(m.camera_make.map(Value::from)));
             out.insert("model", Ok(m.camera_model.map(Value::from)));
             out.insert("exposure_time_s", Ok(m.exposure_time_s.map(Value::from)));
