@@ -11,13 +11,14 @@
 //! Each test renders its scene with the scene's own camera (field of view, distortion), geometry,
 //! BRDF, noise and anti-aliasing, with two stated reductions to keep CI affordable (run with
 //! `cargo test --release`): [`MEASUREMENT_IMAGES`] measurement images instead of 30 (plus the 6
-//! calibration images), and a sensor of half the scene's pixels per axis (762 x 506 superpixels
-//! for the default 1524 x 1012; same field of view). The cards are formed per photosite
-//! (`[studio] mosaic = "photosite"`): the render has the scene's pixel count, one rendered pixel
-//! per photosite, as a camera's sensor records it, since `process` loads raw files per photosite
-//! by default. A card formed from 2x2 quads of one rendered pixel (`mosaic = "quad"`) holds no
+//! calibration images), and a sensor of half the scene's pixels per axis, rounded down to whole
+//! quads and whole bytes per 14-bit row (760 x 504 photosites for the default 1524 x 1012; same
+//! field of view). The cards are formed per photosite (`[studio] mosaic = "photosite"`: one
+//! rendered pixel per photosite, as a camera's sensor records it), since `process` loads raw
+//! files per photosite by default: target detection then sees as many pixels as the sensor has
+//! photosites. A card formed from 2x2 quads of one rendered pixel (`mosaic = "quad"`) holds no
 //! photosite's own value: loaded per photosite, its target corners carry the quads' blocks
-//! (`docs/derender.md`, "Photosites on quad-formed cards"). One ray per pixel instead is not a
+//! (`docs/derender.md`, "Why photosites are the default"). One ray per pixel instead is not a
 //! valid reduction: a real sensor integrates over each pixel, and point-sampled (aliased) target
 //! edges move the detected corners (the measurement is in `docs/benchmarks-poses.md`).
 //! `skinbrdf process` on the full scenes is recorded in `docs/benchmarks.md`.
@@ -90,7 +91,7 @@ enum Camera {
 struct Run {
     /// The camera's calibration: stated or calibrated by the session.
     camera: Camera,
-    /// A sensor of the scene's full size instead of half its pixels per axis.
+    /// A sensor of the scene's full pixel count (photosites) instead of half per axis.
     full_size: bool,
 }
 
@@ -100,6 +101,13 @@ impl Run {
         camera: Camera::SelfCalibrated,
         full_size: false,
     };
+}
+
+/// Half of a scene's image size per axis, rounded down to multiples of 4: a photosite mosaic
+/// needs whole 2x2 quads and whole bytes per 14-bit row.
+fn half_sensor(width_px: u32, height_px: u32) -> (u32, u32) {
+    let half = |n: u32| n / 2 / 4 * 4;
+    (half(width_px), half(height_px))
 }
 
 fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
@@ -114,12 +122,10 @@ fn run_scene_with(name: &str, bounds: Bounds, expect_skipped: &[Stage], run: Run
     let mut scene = Scene::load(name).expect("built-in scene");
     scene.session.measurement_images = MEASUREMENT_IMAGES;
     scene.studio.mosaic = Mosaic::Photosite;
-    // One rendered pixel per photosite: the scene's pixel count is a sensor of half its size
-    // in superpixels.
     let size = if run.full_size {
-        (2 * scene.camera.width_px, 2 * scene.camera.height_px)
-    } else {
         (scene.camera.width_px, scene.camera.height_px)
+    } else {
+        half_sensor(scene.camera.width_px, scene.camera.height_px)
     };
     generate(
         &scene,
@@ -450,11 +456,18 @@ fn survey_flash() {
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn long_lens() {
     // The method's own optics (10 degrees across), no calibration file: the focal length the
-    // files state starts the survey's calibration. The half-size sensor read per photosite
-    // detects at the scene's pixel count, as superpixels of the full-size sensor do: read as
-    // superpixels, the flash stand's small panel tags are placed above their accuracy target
-    // and left out (docs/photogrammetry.md, "The rig follows the lens").
-    run_scene("long-lens", DEFAULT, &[]);
+    // files state starts the survey's calibration. At the full size: at half the pixels per
+    // axis the flash stand's small panel tags are placed above their accuracy target and left
+    // out (docs/photogrammetry.md, "The rig follows the lens").
+    run_scene_with(
+        "long-lens",
+        DEFAULT,
+        &[],
+        Run {
+            full_size: true,
+            ..Run::DEFAULT
+        },
+    );
 }
 
 #[test]

@@ -17,8 +17,12 @@ use skinbrdf_ingest::{ingest, ExposurePolicy, IngestConfig, IngestError};
 use skinbrdf_pipeline::process::bounds;
 use skinbrdf_pipeline::process::{process, ProcessConfig};
 use skinbrdf_session::Session;
-use skinbrdf_synth::studio::{ExposureChange, STUDIO_DIR};
+use skinbrdf_synth::studio::{ExposureChange, Mosaic, CAMERA_FILE, STUDIO_DIR};
 use skinbrdf_synth::{generate, Scene, SynthOptions};
+
+/// The sensor's photosites: the default scene's half resolution rounded down to whole quads and
+/// whole bytes per 14-bit row (multiples of 4).
+const HALF_SENSOR: (u32, u32) = (760, 504);
 
 /// The studio session's sample median relative error may differ from the PNG session's by at
 /// most this many percentage points (issue's bound): the raw files carry the same renders with
@@ -105,34 +109,21 @@ fn ingest_config(s: &Path, out: &Path, rig: &str) -> IngestConfig {
     )
 }
 
-/// A camera file (`[camera]` only, as `poses` writes camera.toml) holding the calibration of
-/// the session in `session`.
-fn camera_file_of(session: &Path, dir: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(session.join("session.toml")).expect("session.toml");
-    let doc: toml::Table = toml::from_str(&text).expect("toml");
-    let mut camera = toml::Table::new();
-    camera.insert(
-        "camera".into(),
-        doc.get("camera").expect("[camera]").clone(),
-    );
-    let path = dir.join("camera.toml");
-    std::fs::write(&path, toml::to_string(&camera).expect("toml")).expect("write");
-    path
-}
-
 #[test]
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let scene = studio_scene(30, |_| {});
-    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
-    let s = synthesize(&scene, dir.path(), half);
+    // The card formed per photosite, as a camera's sensor records it and as `process` loads
+    // it by default, on a sensor of half the scene's pixels per axis.
+    let scene = studio_scene(30, |sc| sc.studio.mosaic = Mosaic::Photosite);
+    let s = synthesize(&scene, dir.path(), HALF_SENSOR);
     let s2 = dir.path().join("S2");
-    // The studio's camera calibration: the PNG session's (a `[camera]` table, as `poses`
-    // writes it in camera.toml), so that both sessions' poses rest on the same intrinsics.
-    // Without one the session calibrates itself (the done-criteria run in docs/benchmarks.md).
+    // The studio's camera calibration: the PNG session's intrinsics (a `[camera]` table, as
+    // `poses` writes it in camera.toml, in the superpixel units a raw session states its
+    // camera in), so that both sessions' poses rest on the same intrinsics. Without one the
+    // session calibrates itself (the done-criteria run in docs/benchmarks.md).
     let mut cfg = ingest_config(&s, &s2, "rig-measured.toml");
-    cfg.camera = Some(camera_file_of(&s, dir.path()));
+    cfg.camera = Some(s.join(STUDIO_DIR).join(CAMERA_FILE));
     let report = ingest(&cfg).expect("ingest");
     // Every exposure matched; the test shot left out; the clock offset found.
     assert_eq!(report.images.len(), 36);

@@ -162,10 +162,7 @@ fn a_dng_session_loads_and_matches_its_png_twin() {
         (hd.width, hd.height, hd.format),
         (W, H, StoredFormat::Raw { bits: 14 })
     );
-    // Superpixels are the default; in photosite mode each photosite is its own channel and
-    // the camera is the photosite image's.
-    assert_eq!(raw.raw_mode(), RawMode::Superpixel);
-    raw.set_raw_mode(RawMode::Photosite);
+    // Photosites (the default): each its own channel, the camera the photosite image's.
     assert_eq!(raw.raw_mode(), RawMode::Photosite);
     assert_eq!(raw.file.camera.size_px(), (2 * W, 2 * H));
     let stated = CameraModel::from_fov(W, H, 0.8);

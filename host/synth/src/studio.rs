@@ -221,7 +221,7 @@ pub enum Mosaic {
     /// Each rendered pixel becomes a 2x2 Bayer quad: the superpixel image has the scene
     /// camera's size and every photosite of a quad holds the quad's value. A card for reading
     /// as superpixels: read per photosite, its photosites hold no value of their own place
-    /// (`docs/derender.md`, "Photosites on quad-formed cards").
+    /// (`docs/derender.md`, "Why photosites are the default").
     #[default]
     Quad,
     /// Each rendered pixel is one photosite holding its own filter's channel: the scene camera

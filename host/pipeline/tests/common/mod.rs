@@ -6,17 +6,24 @@ use std::path::{Path, PathBuf};
 
 use skinbrdf_ingest::ingest;
 use skinbrdf_pipeline::demo::studio_ingest_config;
+use skinbrdf_synth::studio::Mosaic;
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
-/// Synthesizes `scene` into `dir/S` at half its image size, with the studio's files and the
-/// generator's own session (for the layout-given comparisons); returns `dir/S`.
+/// Synthesizes `scene` into `dir/S` with the studio's files and the generator's own session
+/// (for the layout-given comparisons); returns `dir/S`. The card is formed per photosite, as a
+/// camera's sensor records it and as `process` loads it by default (`[studio] mosaic =
+/// "photosite"`), on a sensor of half the scene's pixels per axis rounded down to whole quads
+/// and whole bytes per 14-bit row (760 x 504 photosites for the default scene).
 pub fn half_resolution_studio(dir: &Path, scene: &Scene) -> PathBuf {
     let s = dir.join("S");
-    let half = (scene.camera.width_px / 2, scene.camera.height_px / 2);
+    let mut scene = scene.clone();
+    scene.studio.mosaic = Mosaic::Photosite;
+    let half = |n: u32| n / 2 / 4 * 4;
+    let size = (half(scene.camera.width_px), half(scene.camera.height_px));
     generate(
-        scene,
+        &scene,
         &SynthOptions {
-            resolution: Some(half),
+            resolution: Some(size),
             studio: true,
             ..SynthOptions::default()
         },
