@@ -183,6 +183,14 @@ pub const MAX_SIGMA_HEADDRESS_MM: f64 = 0.5;
 /// is far from the cage, linked to it only through a chain of survey shots).
 pub const MAX_SIGMA_FLASH_ONLY_MM: f64 = 1.5;
 
+/// The chained start's gate, as a fraction of the image's diagonal (40 px of a 762 x 506
+/// image). Its error (the guessed intrinsics' missing distortion, single-view placements from
+/// a tag's few pixels) and a flipped view's offset both scale with the image's pixel count,
+/// which doubles per axis when raw files are read per photosite rather than as superpixels: a
+/// gate in pixels would leave out, read per photosite, the far corners of a strongly
+/// distorting lens that the same card read as superpixels keeps.
+pub const START_GATE_DIAGONAL_FRACTION: f64 = 0.044;
+
 /// Settings of [`survey`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SurveyConfig {
@@ -200,9 +208,10 @@ pub struct SurveyConfig {
     pub min_views: usize,
     /// Estimate each sheet's print-scale factor.
     pub estimate_print_scale: bool,
-    /// A target of an image whose start is off by more than this many pixels is left out of
-    /// that image (the chained start is within a few pixels; a flipped view is far off).
-    pub start_gate_px: f64,
+    /// A target of an image whose start is off by more than this fraction of the image's
+    /// diagonal is left out of that image (the chained start is close; a flipped view is far
+    /// off). See [`START_GATE_DIAGONAL_FRACTION`].
+    pub start_gate_diagonal_fraction: f64,
     /// A body is "moved" when it disagrees in at least this many images ...
     pub moved_min_images: usize,
     /// ... and in at least this fraction of the images that see it.
@@ -249,7 +258,7 @@ impl SurveyConfig {
         consensus_angle_deg: 8.0,
         min_views: 2,
         estimate_print_scale: true,
-        start_gate_px: 40.0,
+        start_gate_diagonal_fraction: START_GATE_DIAGONAL_FRACTION,
         moved_min_images: 2,
         moved_min_fraction: 0.2,
         change_point_chi2: CHANGE_POINT_CHI2,
@@ -1461,6 +1470,8 @@ fn survey_with(
             .collect()
     };
     let mut left_out: HashSet<usize> = HashSet::new();
+    let start_gate_px = cfg.start_gate_diagonal_fraction
+        * f64::from(camera.width_px).hypot(f64::from(camera.height_px));
     let build = |left_out: &HashSet<usize>| -> (BundleProblem, Vec<usize>) {
         let mut images = Vec::new();
         let mut index = Vec::new();
@@ -1526,7 +1537,7 @@ fn survey_with(
                                 .map_or(f64::INFINITY, |px| px.distance(d.corners_px[q]))
                         })
                         .fold(0.0, f64::max);
-                    if off > cfg.start_gate_px {
+                    if off > start_gate_px {
                         continue;
                     }
                     pts.extend(points(*id, c, d).into_iter().map(|p| (frame, p)));
