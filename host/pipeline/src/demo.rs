@@ -6,7 +6,8 @@
 //!    2 standard-position) through the host capture client, exactly as a board would.
 //! 2. **Synthesis**: the generator renders one image per recorded exposure of the default scene
 //!    into `generated/`, and with it what a studio holds after the shoot (`generated/studio/`:
-//!    the camera's raw files on a card, the controller's record, a rig file stating only the
+//!    the camera's raw files on a card, formed as the session reads them ([`card_mosaic`]: one
+//!    rendered pixel per photosite by default), the controller's record, a rig file stating only the
 //!    declared origin and the printed flash ring and standard frame, the textured head scan in
 //!    its scanner's frame) and the ground truth for scoring.
 //! 3. **Ingest**: [`skinbrdf_ingest::ingest()`] matches the card's raw files to the controller's
@@ -34,7 +35,8 @@ use std::time::{Duration, Instant};
 use skinbrdf_capture::{parse_plan, run_capture, CaptureOptions, SerialConnector, Unattended};
 use skinbrdf_ingest::{ingest, IngestConfig, IngestReport};
 use skinbrdf_session::capture::{CaptureRecord, ShotOutcome};
-use skinbrdf_synth::studio::STUDIO_DIR;
+use skinbrdf_session::RawMode;
+use skinbrdf_synth::studio::{Mosaic, STUDIO_DIR};
 use skinbrdf_synth::{generate, Scene, SynthOptions, SynthSummary};
 
 use crate::ledger::write_atomic;
@@ -185,7 +187,8 @@ pub fn run_demo(
     } else {
         "synthesis: rendering one image per exposure, and the studio's card, rig and scan"
     }));
-    let scene = Scene::load(&cfg.scene)?;
+    let mut scene = Scene::load(&cfg.scene)?;
+    scene.studio.mosaic = card_mosaic(cfg.process.raw_mode);
     let synth = generate(
         &scene,
         &SynthOptions {
@@ -258,6 +261,18 @@ pub fn run_demo(
         report_path,
         total_s,
     })
+}
+
+/// How the studio forms its card for the raw mode the session is read in: per photosite, as a
+/// camera's sensor records it, when it is read per photosite (the default; the scene's image
+/// size is then the sensor's photosites); from 2x2 quads of one rendered pixel, exactly the
+/// render, when it is read as superpixels. A quad card read per photosite holds no photosite's
+/// own value (`docs/derender.md`, "Why photosites are the default").
+pub fn card_mosaic(raw_mode: RawMode) -> Mosaic {
+    match raw_mode {
+        RawMode::Photosite => Mosaic::Photosite,
+        RawMode::Superpixel => Mosaic::Quad,
+    }
 }
 
 /// The ingest of a synthetic studio from what a studio holds: the card, the controller's

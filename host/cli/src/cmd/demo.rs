@@ -14,7 +14,8 @@ pub struct Args {
     /// Scene name or scene file.
     #[arg(long, default_value = "default")]
     pub scene: String,
-    /// Image size WxH (default: the scene's, about 1524x1012).
+    /// Image size WxH (default: the scene's, about 1524x1012): the sensor's photosites, so
+    /// multiples of 4 (whole 2x2 quads, whole bytes per 14-bit row).
     #[arg(long)]
     pub resolution: Option<String>,
     /// Simulated device time per host time during the capture.
