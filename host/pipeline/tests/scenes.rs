@@ -11,14 +11,16 @@
 //! Each test renders its scene with the scene's own camera (field of view, distortion), geometry,
 //! BRDF, noise and anti-aliasing, with two stated reductions to keep CI affordable (run with
 //! `cargo test --release`): [`MEASUREMENT_IMAGES`] measurement images instead of 30 (plus the 6
-//! calibration images), and a sensor of half the scene's pixels per axis, rounded down to whole
-//! quads and whole bytes per 14-bit row (760 x 504 photosites for the default 1524 x 1012; same
-//! field of view). The cards are formed per photosite (`[studio] mosaic = "photosite"`: one
-//! rendered pixel per photosite, as a camera's sensor records it), since `process` loads raw
-//! files per photosite by default: target detection then sees as many pixels as the sensor has
-//! photosites. A card formed from 2x2 quads of one rendered pixel (`mosaic = "quad"`) holds no
+//! calibration images), and a sensor of half the scene's pixels per axis (762 x 506 superpixels
+//! for the default 1524 x 1012; same field of view). The cards are formed per photosite
+//! (`[studio] mosaic = "photosite"`): the render has the scene's pixel count, one rendered pixel
+//! per photosite, as a camera's sensor records it, since `process` loads raw files per photosite
+//! by default. A card formed from 2x2 quads of one rendered pixel (`mosaic = "quad"`) holds no
 //! photosite's own value: loaded per photosite, its target corners carry the quads' blocks
-//! (`docs/derender.md`, "Why photosites are the default"). One ray per pixel instead is not a
+//! (`docs/derender.md`, "Why photosites are the default"). Half the scene's pixel count in
+//! photosites (the quad cards' rays) is not enough: detection then sees green interpolated at
+//! red and blue on a quarter of the pixels, and three scenes miss their bounds (the same
+//! document). One ray per pixel instead is not a
 //! valid reduction: a real sensor integrates over each pixel, and point-sampled (aliased) target
 //! edges move the detected corners (the measurement is in `docs/benchmarks-poses.md`).
 //! `skinbrdf process` on the full scenes is recorded in `docs/benchmarks.md`.
@@ -91,7 +93,7 @@ enum Camera {
 struct Run {
     /// The camera's calibration: stated or calibrated by the session.
     camera: Camera,
-    /// A sensor of the scene's full pixel count (photosites) instead of half per axis.
+    /// A sensor of the scene's full size in superpixels instead of half its pixels per axis.
     full_size: bool,
 }
 
@@ -101,13 +103,6 @@ impl Run {
         camera: Camera::SelfCalibrated,
         full_size: false,
     };
-}
-
-/// Half of a scene's image size per axis, rounded down to multiples of 4: a photosite mosaic
-/// needs whole 2x2 quads and whole bytes per 14-bit row.
-fn half_sensor(width_px: u32, height_px: u32) -> (u32, u32) {
-    let half = |n: u32| n / 2 / 4 * 4;
-    (half(width_px), half(height_px))
 }
 
 fn run_scene(name: &str, bounds: Bounds, expect_skipped: &[Stage]) {
@@ -122,10 +117,12 @@ fn run_scene_with(name: &str, bounds: Bounds, expect_skipped: &[Stage], run: Run
     let mut scene = Scene::load(name).expect("built-in scene");
     scene.session.measurement_images = MEASUREMENT_IMAGES;
     scene.studio.mosaic = Mosaic::Photosite;
+    // One rendered pixel per photosite: the scene's pixel count is a sensor of half its size
+    // in superpixels.
     let size = if run.full_size {
-        (scene.camera.width_px, scene.camera.height_px)
+        (2 * scene.camera.width_px, 2 * scene.camera.height_px)
     } else {
-        half_sensor(scene.camera.width_px, scene.camera.height_px)
+        (scene.camera.width_px, scene.camera.height_px)
     };
     generate(
         &scene,
@@ -399,19 +396,7 @@ fn oily() {
 #[test]
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn strong_distortion() {
-    // At the full size: on the half-size sensor read per photosite (its detection image green
-    // interpolated at red and blue) the camera comes out at the 1 mm bound, where the half-size
-    // quad card read as superpixels (the same rays) was well within it (docs/derender.md, "Why
-    // photosites are the default").
-    run_scene_with(
-        "strong-distortion",
-        DEFAULT,
-        &[Stage::CameraCalibration],
-        Run {
-            full_size: true,
-            ..Run::DEFAULT
-        },
-    );
+    run_scene("strong-distortion", DEFAULT, &[Stage::CameraCalibration]);
 }
 
 #[test]
@@ -468,18 +453,11 @@ fn survey_flash() {
 #[cfg_attr(debug_assertions, ignore = "renders a session: run with --release")]
 fn long_lens() {
     // The method's own optics (10 degrees across), no calibration file: the focal length the
-    // files state starts the survey's calibration. At the full size: at half the pixels per
-    // axis the flash stand's small panel tags are placed above their accuracy target and left
-    // out (docs/photogrammetry.md, "The rig follows the lens").
-    run_scene_with(
-        "long-lens",
-        DEFAULT,
-        &[],
-        Run {
-            full_size: true,
-            ..Run::DEFAULT
-        },
-    );
+    // files state starts the survey's calibration. The half-size sensor read per photosite
+    // detects at the scene's pixel count, as superpixels of the full-size sensor do: read as
+    // superpixels, the flash stand's small panel tags are placed above their accuracy target
+    // and left out (docs/photogrammetry.md, "The rig follows the lens").
+    run_scene("long-lens", DEFAULT, &[]);
 }
 
 #[test]

@@ -20,10 +20,6 @@ use skinbrdf_session::Session;
 use skinbrdf_synth::studio::{ExposureChange, Mosaic, CAMERA_FILE, STUDIO_DIR};
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
-/// The sensor's photosites: the default scene's half resolution rounded down to whole quads and
-/// whole bytes per 14-bit row (multiples of 4).
-const HALF_SENSOR: (u32, u32) = (760, 504);
-
 /// The studio session's sample median relative error may differ from the PNG session's by at
 /// most this many percentage points (issue's bound): the raw files carry the same renders with
 /// their own noise (per photosite, through the channel gains) and quantisation.
@@ -114,9 +110,14 @@ fn ingest_config(s: &Path, out: &Path, rig: &str) -> IngestConfig {
 fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
     let dir = tempfile::tempdir().expect("tempdir");
     // The card formed per photosite, as a camera's sensor records it and as `process` loads
-    // it by default, on a sensor of half the scene's pixels per axis.
+    // it by default: one rendered pixel per photosite at the scene's pixel count, a sensor of
+    // half the scene's size in superpixels.
     let scene = studio_scene(30, |sc| sc.studio.mosaic = Mosaic::Photosite);
-    let s = synthesize(&scene, dir.path(), HALF_SENSOR);
+    let s = synthesize(
+        &scene,
+        dir.path(),
+        (scene.camera.width_px, scene.camera.height_px),
+    );
     let s2 = dir.path().join("S2");
     // The studio's camera calibration: the PNG session's intrinsics (a `[camera]` table, as
     // `poses` writes it in camera.toml, in the superpixel units a raw session states its

@@ -12,14 +12,15 @@ use skinbrdf_synth::{generate, Scene, SynthOptions};
 /// Synthesizes `scene` into `dir/S` with the studio's files and the generator's own session
 /// (for the layout-given comparisons); returns `dir/S`. The card is formed per photosite, as a
 /// camera's sensor records it and as `process` loads it by default (`[studio] mosaic =
-/// "photosite"`), on a sensor of half the scene's pixels per axis rounded down to whole quads
-/// and whole bytes per 14-bit row (760 x 504 photosites for the default scene).
+/// "photosite"`), one rendered pixel per photosite at the scene's pixel count: a sensor of half
+/// the scene's size in superpixels (762 x 506 for the default scene). Half the pixel count in
+/// photosites is not enough for the scenes' bounds (`docs/derender.md`, "Why photosites are the
+/// default").
 pub fn half_resolution_studio(dir: &Path, scene: &Scene) -> PathBuf {
     let s = dir.join("S");
     let mut scene = scene.clone();
     scene.studio.mosaic = Mosaic::Photosite;
-    let half = |n: u32| n / 2 / 4 * 4;
-    let size = (half(scene.camera.width_px), half(scene.camera.height_px));
+    let size = (scene.camera.width_px, scene.camera.height_px);
     generate(
         &scene,
         &SynthOptions {
