@@ -123,10 +123,12 @@ pub enum GltfProblem {
         /// What is wrong.
         reason: String,
     },
-    /// The node hierarchy has a cycle.
-    #[error("node {node} is its own ancestor")]
+    /// A node is reached twice from the scene: the hierarchy has a cycle, or a node has two
+    /// parents or is listed twice (glTF's nodes form trees; a node drawn many times would
+    /// multiply the mesh held in memory).
+    #[error("node {node} is reached twice: a cycle, or a node with two parents (glTF's nodes form trees)")]
     NodeCycle {
-        /// A node on the cycle.
+        /// The node reached twice.
         node: usize,
     },
 }
@@ -298,6 +300,27 @@ pub(crate) fn resolve_uri(dir: &Path, uri: &str) -> UriTarget {
 /// the glTF file's folder (decoded, `/`-separated) and the resolved path; a URI leading outside
 /// the folder, or to anything but a regular file, is refused ([`resolve_uri`]).
 pub fn gltf_external_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshError> {
+    guarded(path, || external_files(path))
+}
+
+/// Runs a reader of the `gltf` crate's document and turns a panic inside that crate into this
+/// file's error: its validation and accessors index unchecked on some malformed documents (a
+/// primitive's attribute naming an accessor that does not exist, an image with no source).
+fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T, MeshError>) -> Result<T, MeshError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
+        let what = panic
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "an index it did not check".into());
+        Err(gltf_err(
+            path,
+            GltfProblem::Document(format!("the glTF reader gave up ({what})")),
+        ))
+    })
+}
+
+fn external_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshError> {
     let bytes = skinbrdf_core::untrusted::read_bounded(path, skinbrdf_core::untrusted::SCAN_FILE)?;
     let doc = parse_document(path, &bytes)?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
@@ -565,19 +588,22 @@ fn scene_primitives<'a>(
             doc.nodes().filter(|n| !child[n.index()]).collect()
         }
     };
-    let n_nodes = doc.nodes().len();
+    let mut reached = vec![false; doc.nodes().len()];
     let mut out = Vec::new();
-    let mut stack: Vec<(::gltf::Node<'a>, DMat4, usize)> = roots
+    let mut stack: Vec<(::gltf::Node<'a>, DMat4)> = roots
         .into_iter()
         .rev()
-        .map(|n| (n, DMat4::IDENTITY, 0))
+        .map(|n| (n, DMat4::IDENTITY))
         .collect();
-    while let Some((node, parent, depth)) = stack.pop() {
-        if depth > n_nodes {
-            return Err(gltf_err(
-                path,
-                GltfProblem::NodeCycle { node: node.index() },
-            ));
+    while let Some((node, parent)) = stack.pop() {
+        match reached.get_mut(node.index()) {
+            Some(r) if !*r => *r = true,
+            _ => {
+                return Err(gltf_err(
+                    path,
+                    GltfProblem::NodeCycle { node: node.index() },
+                ))
+            }
         }
         let m = node.transform().matrix().map(|c| c.map(f64::from));
         let world = parent * DMat4::from_cols_array_2d(&m);
@@ -586,7 +612,7 @@ fn scene_primitives<'a>(
         }
         let children: Vec<_> = node.children().collect();
         for c in children.into_iter().rev() {
-            stack.push((c, world, depth + 1));
+            stack.push((c, world));
         }
     }
     Ok(out)
@@ -601,6 +627,10 @@ fn primitive_name(mesh: &::gltf::Mesh<'_>, p: usize) -> String {
 
 /// Reads a `.glb` or `.gltf` (see the module docs).
 pub(crate) fn read_gltf(path: &Path, detail: Detail) -> Result<GltfData, MeshError> {
+    guarded(path, || read_gltf_unguarded(path, detail))
+}
+
+fn read_gltf_unguarded(path: &Path, detail: Detail) -> Result<GltfData, MeshError> {
     let bytes = skinbrdf_core::untrusted::read_bounded(path, skinbrdf_core::untrusted::SCAN_FILE)?;
     let ::gltf::Gltf {
         document: doc,
