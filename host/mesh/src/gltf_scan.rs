@@ -123,6 +123,32 @@ pub enum GltfProblem {
         /// What is wrong.
         reason: String,
     },
+    /// The primitives read more vertices and triangles than the buffers can hold without
+    /// reusing accessors many times (a small file drawing one mesh a million times).
+    #[error(
+        "{at}: the primitives read so far take {bytes} bytes of vertices and triangles, more than \
+         {max} ({READ_BYTES_PER_BUFFER_BYTE} times the buffers' bytes): accessors reused many times"
+    )]
+    TooMuchGeometry {
+        /// Mesh and primitive where the limit was passed.
+        at: String,
+        /// Bytes the primitives take as read.
+        bytes: u64,
+        /// The limit.
+        max: u64,
+    },
+    /// The materials' textures hold more texels together than one texture may have.
+    #[error(
+        "material {material}: the materials' textures hold {texels} texels together, more than \
+         the {max} one texture may have (one image used by many materials?)",
+        max = crate::textured::MAX_TEXTURE_TEXELS
+    )]
+    TooManyTexels {
+        /// The material where the limit was passed.
+        material: usize,
+        /// Texels so far.
+        texels: u64,
+    },
     /// A node is reached twice from the scene: the hierarchy has a cycle, or a node has two
     /// parents or is listed twice (glTF's nodes form trees; a node drawn many times would
     /// multiply the mesh held in memory).
@@ -132,6 +158,14 @@ pub enum GltfProblem {
         node: usize,
     },
 }
+
+/// How many bytes of vertices and triangles the primitives may take as read, per byte of the
+/// buffers (plus [`READ_BYTES_SLACK`]): each accessor read once takes about as much as it
+/// stores (more for 8- and 16-bit indices, widened to 32 bits), so only accessors reused many
+/// times pass it.
+pub const READ_BYTES_PER_BUFFER_BYTE: u64 = 8;
+/// Bytes of geometry allowed beyond [`READ_BYTES_PER_BUFFER_BYTE`] times the buffers' bytes.
+const READ_BYTES_SLACK: u64 = 16 << 20;
 
 /// A glTF scan's geometry with per-triangle appearance, before units and repair.
 #[derive(Debug, Clone, Default)]
@@ -642,11 +676,29 @@ fn read_gltf_unguarded(path: &Path, detail: Detail) -> Result<GltfData, MeshErro
     let mut out = GltfData::default();
     let mut images: HashMap<usize, TextureImage> = HashMap::new();
     if detail == Detail::Appearance {
+        let mut texels = 0u64;
         for m in doc.materials() {
-            out.materials
-                .push(material(path, &dir, &buffers, &m, &mut images)?);
+            let made = material(path, &dir, &buffers, &m, &mut images)?;
+            if let Some(t) = &made.texture {
+                texels += u64::from(t.width) * u64::from(t.height);
+                if texels > crate::textured::MAX_TEXTURE_TEXELS {
+                    return Err(gltf_err(
+                        path,
+                        GltfProblem::TooManyTexels {
+                            material: m.index().unwrap_or(0),
+                            texels,
+                        },
+                    ));
+                }
+            }
+            out.materials.push(made);
         }
     }
+    let buffer_bytes: u64 = buffers.iter().map(|b| b.len() as u64).sum();
+    let max_read_bytes = buffer_bytes
+        .saturating_mul(READ_BYTES_PER_BUFFER_BYTE)
+        .saturating_add(READ_BYTES_SLACK);
+    let mut read_bytes = 0u64;
     let bad = |at: &str, attribute: &str, reason: String| {
         gltf_err(
             path,
@@ -684,6 +736,20 @@ fn read_gltf_unguarded(path: &Path, detail: Detail) -> Result<GltfData, MeshErro
             )
             .map_err(|r| bad(&at, "POSITION", r))?;
             let n = pos_acc.count();
+            // What this primitive takes once read (positions, and triangles as three u32),
+            // checked before it is read.
+            let corners = prim.indices().map_or(n, |a| a.count()) as u64;
+            read_bytes = read_bytes.saturating_add(12 * n as u64 + 4 * corners);
+            if read_bytes > max_read_bytes {
+                return Err(gltf_err(
+                    path,
+                    GltfProblem::TooMuchGeometry {
+                        at,
+                        bytes: read_bytes,
+                        max: max_read_bytes,
+                    },
+                ));
+            }
             let positions: Vec<[f32; 3]> = reader
                 .read_positions()
                 .ok_or_else(|| bad(&at, "POSITION", "unreadable".into()))?
