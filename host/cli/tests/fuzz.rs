@@ -870,7 +870,7 @@ fn raw_case(rng: &mut Rng, seeds: &Seeds) -> Case {
                 let dir_bytes = b[d0.at..d0.next_at + 4].to_vec();
                 let mut prev = d0.next_at;
                 for _ in 0..copies {
-                    while b.len() % 2 == 1 {
+                    while !b.len().is_multiple_of(2) {
                         b.push(0);
                     }
                     let at = b.len();
@@ -1700,11 +1700,11 @@ fn glb_chunks(glb: &[u8]) -> (serde_json::Value, Vec<u8>) {
 /// A GLB of these chunks, lengths and padding correct.
 fn glb_pack(json: &[u8], bin: &[u8]) -> Vec<u8> {
     let mut j = json.to_vec();
-    while j.len() % 4 != 0 {
+    while !j.len().is_multiple_of(4) {
         j.push(b' ');
     }
     let mut bn = bin.to_vec();
-    while bn.len() % 4 != 0 {
+    while !bn.len().is_multiple_of(4) {
         bn.push(0);
     }
     let total = 12 + 8 + j.len() + 8 + bn.len();
@@ -1731,7 +1731,7 @@ fn gltf_case(rng: &mut Rng, seeds: &Seeds) -> Case {
             let bomb = png_of_zeros(w, h);
             let mut j = json.clone();
             let mut bin = bin.clone();
-            while bin.len() % 4 != 0 {
+            while !bin.len().is_multiple_of(4) {
                 bin.push(0);
             }
             let views = j["bufferViews"].as_array_mut().unwrap();
@@ -1782,7 +1782,7 @@ fn gltf_case(rng: &mut Rng, seeds: &Seeds) -> Case {
                 }
                 1 => {
                     let at = *rng.pick(&[16usize, 24 + j]);
-                    let t: &[u8; 4] = *rng.pick(&[b"BIN\0", b"JSON", b"\0\0\0\0"]);
+                    let t = *rng.pick(&[b"BIN\0", b"JSON", b"\0\0\0\0"]);
                     b[at..at + 4].copy_from_slice(t);
                     format!("chunk type at byte {at} changed")
                 }

@@ -280,7 +280,7 @@ fn glb_edited(edit: impl Fn(&mut serde_json::Value)) -> Vec<u8> {
     edit(&mut json);
     let bin = &glb[20 + json_len..];
     let mut j = serde_json::to_vec(&json).expect("json");
-    while j.len() % 4 != 0 {
+    while !j.len().is_multiple_of(4) {
         j.push(b' ');
     }
     let mut out = b"glTF".to_vec();
@@ -296,7 +296,8 @@ fn glb_edited(edit: impl Fn(&mut serde_json::Value)) -> Vec<u8> {
 #[test]
 fn gltf_documents_that_make_the_gltf_crate_index_unchecked_are_errors_not_panics() {
     let d = tempfile::tempdir().expect("tempdir");
-    let cases: [(&str, &dyn Fn(&mut serde_json::Value)); 4] = [
+    type Edit<'a> = &'a dyn Fn(&mut serde_json::Value);
+    let cases: [(&str, Edit<'_>); 4] = [
         ("accessor", &|j| {
             j["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = 4_294_967_295u64.into()
         }),
