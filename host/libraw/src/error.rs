@@ -51,6 +51,32 @@ pub enum LibRawError {
     Sizes { path: PathBuf, detail: String },
 }
 
+impl LibRawError {
+    /// The file the error is about.
+    pub fn path(&self) -> &std::path::Path {
+        match self {
+            LibRawError::Io { path, .. }
+            | LibRawError::TooLarge { path, .. }
+            | LibRawError::Init { path }
+            | LibRawError::Open { path, .. }
+            | LibRawError::Unpack { path, .. }
+            | LibRawError::CorruptData { path, .. }
+            | LibRawError::NotMosaic { path, .. }
+            | LibRawError::Sizes { path, .. } => path,
+        }
+    }
+
+    /// The error in words without the file's name (for a message that names it already).
+    pub fn reason(&self) -> String {
+        let text = self.to_string();
+        let prefix = format!("{}: ", self.path().display());
+        match text.strip_prefix(&prefix) {
+            Some(rest) => rest.to_string(),
+            None => text,
+        }
+    }
+}
+
 /// A data error in words.
 fn data_problem(count: u32, first_offset: Option<i64>) -> String {
     let first = match first_offset {
