@@ -57,6 +57,7 @@ mod kind;
 mod limits;
 mod meta;
 pub mod tiff;
+mod via_libraw;
 
 pub use bayer::{BayerPhase, CfaColour};
 pub use decode::{
