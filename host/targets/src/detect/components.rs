@@ -35,105 +35,9 @@ impl Components {
     /// Labels the dark pixels (union-find, 4-connected), then joins the small components that
     /// touch diagonally.
     pub(crate) fn new(dark: &[bool], w: usize, h: usize) -> Self {
-        let mut labels: Vec<u32> = dark
-            .iter()
-            .enumerate()
-            .map(|(i, &d)| if d { i as u32 } else { u32::MAX })
-            .collect();
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                if labels[i] == u32::MAX {
-                    continue;
-                }
-                if x > 0 && labels[i - 1] != u32::MAX {
-                    union(&mut labels, i as u32, (i - 1) as u32);
-                }
-                if y > 0 && labels[i - w] != u32::MAX {
-                    union(&mut labels, i as u32, (i - w) as u32);
-                }
-            }
-        }
-        for i in 0..w * h {
-            if labels[i] != u32::MAX {
-                labels[i] = find(&mut labels, i as u32);
-            }
-        }
-        // Compact indices, in place: a root is its component's first pixel in raster order, so
-        // the scan converts it (root pixel -> component index) before any other pixel of the
-        // component reads it.
-        let mut stats: Vec<CompStats> = Vec::new();
-        for y in 0..h {
-            for x in 0..w {
-                let i = y * w + x;
-                let r = labels[i];
-                if r == u32::MAX {
-                    continue;
-                }
-                let k = if r as usize == i {
-                    stats.push(CompStats {
-                        root: i as u32,
-                        count: 0,
-                        x0: x,
-                        x1: x,
-                        y0: y,
-                        y1: y,
-                    });
-                    stats.len() - 1
-                } else {
-                    labels[r as usize] as usize
-                };
-                labels[i] = k as u32;
-                let e = &mut stats[k];
-                e.count += 1;
-                e.x0 = e.x0.min(x);
-                e.x1 = e.x1.max(x);
-                e.y1 = y;
-            }
-        }
-        let comp_of = labels;
-        // Diagonal joins of small components (union-find over component indices).
-        let mut group_of: Vec<u32> = (0..stats.len() as u32).collect();
-        // One byte per component: the join pass reads it for every dark pixel.
-        let small_flag: Vec<bool> = stats.iter().map(|c| c.count <= MAX_JOIN_PX).collect();
-        let small = |k: u32| small_flag[k as usize];
-        let mut any = false;
-        for y in 1..h {
-            for x in 0..w {
-                let i = y * w + x;
-                let a = comp_of[i];
-                if a == u32::MAX || !small(a) {
-                    continue;
-                }
-                for j in [x.checked_sub(1), (x + 1 < w).then_some(x + 1)]
-                    .into_iter()
-                    .flatten()
-                    .map(|xj| i - w - x + xj)
-                {
-                    let c = comp_of[j];
-                    if c != u32::MAX && c != a && small(c) {
-                        union(&mut group_of, a, c);
-                        any = true;
-                    }
-                }
-            }
-        }
-        let mut groups: Vec<CompStats> = Vec::new();
-        if any {
-            let mut slot = vec![u32::MAX; stats.len()];
-            for k in 0..stats.len() {
-                let g = find(&mut group_of, k as u32) as usize;
-                group_of[k] = g as u32;
-                if g == k {
-                    continue;
-                }
-                if slot[g] == u32::MAX {
-                    slot[g] = groups.len() as u32;
-                    groups.push(stats[g]);
-                }
-                groups[slot[g] as usize].join(&stats[k]);
-            }
-        }
+        let mut comp_of = root_labels(dark, w, h);
+        let stats = compact_labels(&mut comp_of, w, h);
+        let (group_of, groups) = diagonal_groups(&comp_of, &stats, w, h);
         Self {
             comp_of,
             stats,
@@ -192,6 +96,126 @@ impl Components {
         let k = self.comp_of[i];
         k != u32::MAX && self.group_of[k as usize] == g
     }
+}
+
+/// Per pixel, the root pixel of its 4-connected component of dark pixels (union-find; the
+/// root is the component's first pixel in raster order), `u32::MAX` for pixels that are not
+/// dark.
+fn root_labels(dark: &[bool], w: usize, h: usize) -> Vec<u32> {
+    let mut labels: Vec<u32> = dark
+        .iter()
+        .enumerate()
+        .map(|(i, &d)| if d { i as u32 } else { u32::MAX })
+        .collect();
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if labels[i] == u32::MAX {
+                continue;
+            }
+            if x > 0 && labels[i - 1] != u32::MAX {
+                union(&mut labels, i as u32, (i - 1) as u32);
+            }
+            if y > 0 && labels[i - w] != u32::MAX {
+                union(&mut labels, i as u32, (i - w) as u32);
+            }
+        }
+    }
+    for i in 0..w * h {
+        if labels[i] != u32::MAX {
+            labels[i] = find(&mut labels, i as u32);
+        }
+    }
+    labels
+}
+
+/// Turns root labels into component indices, in place, and returns each component's pixel
+/// count and bounding box. A root is its component's first pixel in raster order, so the scan
+/// converts it (root pixel -> component index) before any other pixel of the component reads
+/// it.
+fn compact_labels(labels: &mut [u32], w: usize, h: usize) -> Vec<CompStats> {
+    let mut stats: Vec<CompStats> = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let r = labels[i];
+            if r == u32::MAX {
+                continue;
+            }
+            let k = if r as usize == i {
+                stats.push(CompStats {
+                    root: i as u32,
+                    count: 0,
+                    x0: x,
+                    x1: x,
+                    y0: y,
+                    y1: y,
+                });
+                stats.len() - 1
+            } else {
+                labels[r as usize] as usize
+            };
+            labels[i] = k as u32;
+            let e = &mut stats[k];
+            e.count += 1;
+            e.x0 = e.x0.min(x);
+            e.x1 = e.x1.max(x);
+            e.y1 = y;
+        }
+    }
+    stats
+}
+
+/// Diagonal joins of small components (union-find over component indices): per component, the
+/// first component of its 8-connected group, and the groups of more than one component.
+fn diagonal_groups(
+    comp_of: &[u32],
+    stats: &[CompStats],
+    w: usize,
+    h: usize,
+) -> (Vec<u32>, Vec<CompStats>) {
+    let mut group_of: Vec<u32> = (0..stats.len() as u32).collect();
+    // One byte per component: the join pass reads it for every dark pixel.
+    let small_flag: Vec<bool> = stats.iter().map(|c| c.count <= MAX_JOIN_PX).collect();
+    let small = |k: u32| small_flag[k as usize];
+    let mut any = false;
+    for y in 1..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let a = comp_of[i];
+            if a == u32::MAX || !small(a) {
+                continue;
+            }
+            for j in [x.checked_sub(1), (x + 1 < w).then_some(x + 1)]
+                .into_iter()
+                .flatten()
+                .map(|xj| i - w - x + xj)
+            {
+                let c = comp_of[j];
+                if c != u32::MAX && c != a && small(c) {
+                    union(&mut group_of, a, c);
+                    any = true;
+                }
+            }
+        }
+    }
+    let mut groups: Vec<CompStats> = Vec::new();
+    if any {
+        let mut slot = vec![u32::MAX; stats.len()];
+        for k in 0..stats.len() {
+            let g = find(&mut group_of, k as u32) as usize;
+            group_of[k] = g as u32;
+            if g == k {
+                continue;
+            }
+            if slot[g] == u32::MAX {
+                slot[g] = groups.len() as u32;
+                groups.push(stats[g]);
+            }
+            groups[slot[g] as usize].join(&stats[k]);
+        }
+    }
+    (group_of, groups)
 }
 
 /// Pixel count and bounding box of a component.

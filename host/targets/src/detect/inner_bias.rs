@@ -11,7 +11,7 @@
 use crate::detect::cells::SQUARE;
 use crate::detect::covariance::{allow_for_correlation, corner_covariance};
 use crate::detect::edge::SMALL_CELL_PX;
-use crate::detect::line::{fit_line, is_convex, Line};
+use crate::detect::line::{fit_line, is_convex, quad_corners, Line};
 use crate::detect::refine::RefinedQuad;
 use crate::homography::apply_h;
 use crate::tag36h11;
@@ -74,6 +74,76 @@ pub(crate) fn unbias_inner_edges(
     h: &DMat3,
     white: &[[bool; 10]; 10],
 ) -> Option<RefinedQuad> {
+    let outward_lines = outward_lines(rq);
+    let sides = bias_samples(rq, h, white, &outward_lines);
+    let PairBiases { bias, fits, sigma2 } = pair_biases(rq, &sides)?;
+    let mut lines = rq.lines;
+    let mut points = rq.edge_points.clone();
+    for k in 0..4 {
+        let Some((b, sww_b)) = bias[k % 2] else {
+            continue;
+        };
+        let old = &outward_lines[k];
+        let moved: Vec<(DVec2, f64)> = rq.edge_points[k]
+            .iter()
+            .zip(&sides[k])
+            .map(|(&(p, wgt), sp)| (p - old.n * (b * sp.white), wgt))
+            .collect();
+        let mut line = fit_line(&moved)?;
+        // Keep the normal outward, so the position along the line is measured as in `fits`.
+        if line.n.dot(old.n) < 0.0 {
+            line.n = -line.n;
+            line.d = -line.d;
+        }
+        // The side's straight-line fit of `w`, re-centred on the new line's centroid.
+        let (_, _, wa, wm) = fits[k];
+        let shift = (line.centroid - old.centroid).dot(old.dir());
+        line.bias_var = [wa + wm * shift, wm, sigma2 / sww_b];
+        lines[k] = line;
+        points[k] = moved;
+    }
+    allow_for_correlation(&mut lines, &points);
+    let corners = quad_corners(&lines)?;
+    let moved = (0..4)
+        .map(|k| corners[k].distance(rq.corners[k]))
+        .fold(0.0, f64::max);
+    if !is_convex(&corners) || moved > 0.5 * rq.cell_px {
+        return None;
+    }
+    let (cov, bent) = corner_covariance(&lines, &corners, &rq.bend, rq.cell_px);
+    Some(RefinedQuad {
+        corners,
+        cov,
+        bent,
+        lines,
+        edge_points: points,
+        ..*rq
+    })
+}
+
+/// The sides' lines with their normals outward (`refine_quad`'s convention: the interior is to
+/// the right of corner k -> k + 1 on screen), so that `b` has one sign on every side.
+fn outward_lines(rq: &RefinedQuad) -> [Line; 4] {
+    std::array::from_fn(|k| {
+        let mut line = rq.lines[k];
+        let along = rq.corners[(k + 1) % 4] - rq.corners[k];
+        if line.n.dot(DVec2::new(along.y, -along.x)) < 0.0 {
+            line.n = -line.n;
+            line.d = -line.d;
+        }
+        line
+    })
+}
+
+/// Per side, its edge points as [`BiasSample`]s about its outward line, each with the fraction
+/// of white data cell behind the border there (sampled at its position and half a pixel either
+/// way along the side).
+fn bias_samples(
+    rq: &RefinedQuad,
+    h: &DMat3,
+    white: &[[bool; 10]; 10],
+    outward_lines: &[Line; 4],
+) -> Vec<Vec<BiasSample>> {
     let cw = 2.0 / tag36h11::WIDTH_AT_BORDER as f64;
     let tag_from_image = h.inverse();
     // Half a pixel along the side, in tag units.
@@ -85,17 +155,6 @@ pub(crate) fn unbias_inner_edges(
             && (0.0..10.0).contains(&row)
             && white[row as usize][col as usize]
     };
-    // The sides' lines with their normals outward (`refine_quad`'s convention: the interior
-    // is to the right of corner k -> k + 1 on screen), so that `b` has one sign on every side.
-    let outward_lines: [Line; 4] = std::array::from_fn(|k| {
-        let mut line = rq.lines[k];
-        let along = rq.corners[(k + 1) % 4] - rq.corners[k];
-        if line.n.dot(DVec2::new(along.y, -along.x)) < 0.0 {
-            line.n = -line.n;
-            line.d = -line.d;
-        }
-        line
-    });
     let mut sides: Vec<Vec<BiasSample>> = Vec::with_capacity(4);
     for k in 0..4 {
         let (s, e) = (DVec2::from(SQUARE[k]), DVec2::from(SQUARE[(k + 1) % 4]));
@@ -120,6 +179,24 @@ pub(crate) fn unbias_inner_edges(
             .collect();
         sides.push(pts);
     }
+    sides
+}
+
+/// The inner edges' bias fitted per pair of opposite sides.
+struct PairBiases {
+    /// Per pair (sides 0 and 2, sides 1 and 3), the bias `b_j` and its `Σ ω w̃²`; `None` for a
+    /// pair left as it was.
+    bias: [Option<(f64, f64)>; 2],
+    /// Per side, its straight-line fits of the offsets and of the white fractions,
+    /// `(a_s, m_s, a_w, m_w)`.
+    fits: Vec<(f64, f64, f64, f64)>,
+    /// The model's residual variance `σ²`.
+    sigma2: f64,
+}
+
+/// Fits the bias of each pair of opposite sides (Frisch-Waugh, see `unbias_inner_edges`), or
+/// takes the tag's pooled one; `None` when neither pair can be corrected.
+fn pair_biases(rq: &RefinedQuad, sides: &[Vec<BiasSample>]) -> Option<PairBiases> {
     // Per pair of opposite sides (0 and 2, 1 and 3), which share the cell across them: the
     // Frisch-Waugh sums, and the counts of white- and black-backed points.
     let mut fits = Vec::with_capacity(4);
@@ -174,51 +251,7 @@ pub(crate) fn unbias_inner_edges(
     let n = sides.iter().map(Vec::len).sum::<usize>() as f64;
     let fitted = bias.iter().flatten().count() as f64;
     let sigma2 = res2 / (n - 8.0 - fitted).max(1.0);
-    let mut lines = rq.lines;
-    let mut points = rq.edge_points.clone();
-    for k in 0..4 {
-        let Some((b, sww_b)) = bias[k % 2] else {
-            continue;
-        };
-        let old = &outward_lines[k];
-        let moved: Vec<(DVec2, f64)> = rq.edge_points[k]
-            .iter()
-            .zip(&sides[k])
-            .map(|(&(p, wgt), sp)| (p - old.n * (b * sp.white), wgt))
-            .collect();
-        let mut line = fit_line(&moved)?;
-        // Keep the normal outward, so the position along the line is measured as in `fits`.
-        if line.n.dot(old.n) < 0.0 {
-            line.n = -line.n;
-            line.d = -line.d;
-        }
-        // The side's straight-line fit of `w`, re-centred on the new line's centroid.
-        let (_, _, wa, wm) = fits[k];
-        let shift = (line.centroid - old.centroid).dot(old.dir());
-        line.bias_var = [wa + wm * shift, wm, sigma2 / sww_b];
-        lines[k] = line;
-        points[k] = moved;
-    }
-    allow_for_correlation(&mut lines, &points);
-    let mut corners = [DVec2::ZERO; 4];
-    for k in 0..4 {
-        corners[k] = lines[(k + 3) % 4].intersect(&lines[k])?;
-    }
-    let moved = (0..4)
-        .map(|k| corners[k].distance(rq.corners[k]))
-        .fold(0.0, f64::max);
-    if !is_convex(&corners) || moved > 0.5 * rq.cell_px {
-        return None;
-    }
-    let (cov, bent) = corner_covariance(&lines, &corners, &rq.bend, rq.cell_px);
-    Some(RefinedQuad {
-        corners,
-        cov,
-        bent,
-        lines,
-        edge_points: points,
-        ..*rq
-    })
+    Some(PairBiases { bias, fits, sigma2 })
 }
 
 /// One edge point of a side, for `unbias_inner_edges`.
