@@ -123,13 +123,49 @@ pub enum GltfProblem {
         /// What is wrong.
         reason: String,
     },
-    /// The node hierarchy has a cycle.
-    #[error("node {node} is its own ancestor")]
+    /// The primitives read more vertices and triangles than the buffers can hold without
+    /// reusing accessors many times (a small file drawing one mesh a million times).
+    #[error(
+        "{at}: the primitives read so far take {bytes} bytes of vertices and triangles, more than \
+         {max} ({READ_BYTES_PER_BUFFER_BYTE} times the buffers' bytes): accessors reused many times"
+    )]
+    TooMuchGeometry {
+        /// Mesh and primitive where the limit was passed.
+        at: String,
+        /// Bytes the primitives take as read.
+        bytes: u64,
+        /// The limit.
+        max: u64,
+    },
+    /// The materials' textures hold more texels together than one texture may have.
+    #[error(
+        "material {material}: the materials' textures hold {texels} texels together, more than \
+         the {max} one texture may have (one image used by many materials?)",
+        max = crate::textured::MAX_TEXTURE_TEXELS
+    )]
+    TooManyTexels {
+        /// The material where the limit was passed.
+        material: usize,
+        /// Texels so far.
+        texels: u64,
+    },
+    /// A node is reached twice from the scene: the hierarchy has a cycle, or a node has two
+    /// parents or is listed twice (glTF's nodes form trees; a node drawn many times would
+    /// multiply the mesh held in memory).
+    #[error("node {node} is reached twice: a cycle, or a node with two parents (glTF's nodes form trees)")]
     NodeCycle {
-        /// A node on the cycle.
+        /// The node reached twice.
         node: usize,
     },
 }
+
+/// How many bytes of vertices and triangles the primitives may take as read, per byte of the
+/// buffers (plus [`READ_BYTES_SLACK`]): each accessor read once takes about as much as it
+/// stores (more for 8- and 16-bit indices, widened to 32 bits), so only accessors reused many
+/// times pass it.
+pub const READ_BYTES_PER_BUFFER_BYTE: u64 = 8;
+/// Bytes of geometry allowed beyond [`READ_BYTES_PER_BUFFER_BYTE`] times the buffers' bytes.
+const READ_BYTES_SLACK: u64 = 16 << 20;
 
 /// A glTF scan's geometry with per-triangle appearance, before units and repair.
 #[derive(Debug, Clone, Default)]
@@ -298,6 +334,27 @@ pub(crate) fn resolve_uri(dir: &Path, uri: &str) -> UriTarget {
 /// the glTF file's folder (decoded, `/`-separated) and the resolved path; a URI leading outside
 /// the folder, or to anything but a regular file, is refused ([`resolve_uri`]).
 pub fn gltf_external_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshError> {
+    guarded(path, || external_files(path))
+}
+
+/// Runs a reader of the `gltf` crate's document and turns a panic inside that crate into this
+/// file's error: its validation and accessors index unchecked on some malformed documents (a
+/// primitive's attribute naming an accessor that does not exist, an image with no source).
+fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T, MeshError>) -> Result<T, MeshError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|panic| {
+        let what = panic
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "an index it did not check".into());
+        Err(gltf_err(
+            path,
+            GltfProblem::Document(format!("the glTF reader gave up ({what})")),
+        ))
+    })
+}
+
+fn external_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshError> {
     let bytes = skinbrdf_core::untrusted::read_bounded(path, skinbrdf_core::untrusted::SCAN_FILE)?;
     let doc = parse_document(path, &bytes)?;
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
@@ -565,19 +622,22 @@ fn scene_primitives<'a>(
             doc.nodes().filter(|n| !child[n.index()]).collect()
         }
     };
-    let n_nodes = doc.nodes().len();
+    let mut reached = vec![false; doc.nodes().len()];
     let mut out = Vec::new();
-    let mut stack: Vec<(::gltf::Node<'a>, DMat4, usize)> = roots
+    let mut stack: Vec<(::gltf::Node<'a>, DMat4)> = roots
         .into_iter()
         .rev()
-        .map(|n| (n, DMat4::IDENTITY, 0))
+        .map(|n| (n, DMat4::IDENTITY))
         .collect();
-    while let Some((node, parent, depth)) = stack.pop() {
-        if depth > n_nodes {
-            return Err(gltf_err(
-                path,
-                GltfProblem::NodeCycle { node: node.index() },
-            ));
+    while let Some((node, parent)) = stack.pop() {
+        match reached.get_mut(node.index()) {
+            Some(r) if !*r => *r = true,
+            _ => {
+                return Err(gltf_err(
+                    path,
+                    GltfProblem::NodeCycle { node: node.index() },
+                ))
+            }
         }
         let m = node.transform().matrix().map(|c| c.map(f64::from));
         let world = parent * DMat4::from_cols_array_2d(&m);
@@ -586,7 +646,7 @@ fn scene_primitives<'a>(
         }
         let children: Vec<_> = node.children().collect();
         for c in children.into_iter().rev() {
-            stack.push((c, world, depth + 1));
+            stack.push((c, world));
         }
     }
     Ok(out)
@@ -601,6 +661,10 @@ fn primitive_name(mesh: &::gltf::Mesh<'_>, p: usize) -> String {
 
 /// Reads a `.glb` or `.gltf` (see the module docs).
 pub(crate) fn read_gltf(path: &Path, detail: Detail) -> Result<GltfData, MeshError> {
+    guarded(path, || read_gltf_unguarded(path, detail))
+}
+
+fn read_gltf_unguarded(path: &Path, detail: Detail) -> Result<GltfData, MeshError> {
     let bytes = skinbrdf_core::untrusted::read_bounded(path, skinbrdf_core::untrusted::SCAN_FILE)?;
     let ::gltf::Gltf {
         document: doc,
@@ -612,11 +676,29 @@ pub(crate) fn read_gltf(path: &Path, detail: Detail) -> Result<GltfData, MeshErr
     let mut out = GltfData::default();
     let mut images: HashMap<usize, TextureImage> = HashMap::new();
     if detail == Detail::Appearance {
+        let mut texels = 0u64;
         for m in doc.materials() {
-            out.materials
-                .push(material(path, &dir, &buffers, &m, &mut images)?);
+            let made = material(path, &dir, &buffers, &m, &mut images)?;
+            if let Some(t) = &made.texture {
+                texels += u64::from(t.width) * u64::from(t.height);
+                if texels > crate::textured::MAX_TEXTURE_TEXELS {
+                    return Err(gltf_err(
+                        path,
+                        GltfProblem::TooManyTexels {
+                            material: m.index().unwrap_or(0),
+                            texels,
+                        },
+                    ));
+                }
+            }
+            out.materials.push(made);
         }
     }
+    let buffer_bytes: u64 = buffers.iter().map(|b| b.len() as u64).sum();
+    let max_read_bytes = buffer_bytes
+        .saturating_mul(READ_BYTES_PER_BUFFER_BYTE)
+        .saturating_add(READ_BYTES_SLACK);
+    let mut read_bytes = 0u64;
     let bad = |at: &str, attribute: &str, reason: String| {
         gltf_err(
             path,
@@ -654,6 +736,20 @@ pub(crate) fn read_gltf(path: &Path, detail: Detail) -> Result<GltfData, MeshErr
             )
             .map_err(|r| bad(&at, "POSITION", r))?;
             let n = pos_acc.count();
+            // What this primitive takes once read (positions, and triangles as three u32),
+            // checked before it is read.
+            let corners = prim.indices().map_or(n, |a| a.count()) as u64;
+            read_bytes = read_bytes.saturating_add(12 * n as u64 + 4 * corners);
+            if read_bytes > max_read_bytes {
+                return Err(gltf_err(
+                    path,
+                    GltfProblem::TooMuchGeometry {
+                        at,
+                        bytes: read_bytes,
+                        max: max_read_bytes,
+                    },
+                ));
+            }
             let positions: Vec<[f32; 3]> = reader
                 .read_positions()
                 .ok_or_else(|| bad(&at, "POSITION", "unreadable".into()))?

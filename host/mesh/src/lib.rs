@@ -44,6 +44,7 @@ pub use ply::{
 pub use shadow::{shadow_ray, ShadowScratch};
 pub use textured::{
     load_textured, obj_companion_files, Appearance, Material, TextureImage, TexturedMesh,
+    MAX_TEXTURE_TEXELS,
 };
 pub use validate::{inspect, repair, repair_tracked, MeshReport, RepairMap, RepairPolicy};
 

@@ -57,6 +57,23 @@ use crate::MeshError;
 /// Colour of a surface with no appearance (no texture, no vertex colours): a mid grey.
 pub const UNTEXTURED_COLOUR: [f32; 3] = [0.5, 0.5, 0.5];
 
+/// The most texels a texture may have (8192 x 4096). Held as 32-bit floats such a texture
+/// takes 384 MiB; with the decoded image beside it while it is converted, loading one stays
+/// well under a gigabyte, whatever a small compressed file states (docs/ingest.md, "Untrusted
+/// files").
+pub const MAX_TEXTURE_TEXELS: u64 = 1 << 25;
+
+/// Refuses a texture of more than [`MAX_TEXTURE_TEXELS`], in words.
+fn texels_within_limit(width: u32, height: u32) -> Result<(), String> {
+    let texels = u64::from(width) * u64::from(height);
+    if texels > MAX_TEXTURE_TEXELS {
+        return Err(format!(
+            "{width} x {height} texels, more than the {MAX_TEXTURE_TEXELS} a texture may have"
+        ));
+    }
+    Ok(())
+}
+
 /// An RGB texture, row-major from the top row, values 0..1 as stored.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TextureImage {
@@ -73,11 +90,7 @@ impl TextureImage {
     /// [`untrusted::TEXTURE_FILE`], decoded under the `image` crate's default memory limit.
     pub fn load(path: &Path) -> Result<Self, MeshError> {
         let bytes = untrusted::read_bounded(path, untrusted::TEXTURE_FILE)?;
-        let img = image::load_from_memory(&bytes).map_err(|e| MeshError::Texture {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
-        Self::from_image(&img).map_err(|reason| MeshError::Texture {
+        Self::decode(&bytes).map_err(|reason| MeshError::Texture {
             path: path.to_path_buf(),
             reason,
         })
@@ -99,27 +112,41 @@ impl TextureImage {
         if w == 0 || h == 0 {
             return Err(bad("the image is empty".into()));
         }
+        texels_within_limit(w, h).map_err(bad)?;
         Ok((w, h))
     }
 
     /// Decodes an encoded PNG or JPEG held in memory (a glTF's embedded image) exactly as
     /// [`Self::load`] decodes a file; the error is the decoder's complaint.
     pub fn decode(bytes: &[u8]) -> Result<Self, String> {
+        // The size from the header first: a small file may state a huge image.
+        let (w, h) = image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?
+            .into_dimensions()
+            .map_err(|e| e.to_string())?;
+        texels_within_limit(w, h)?;
         let img = image::load_from_memory(bytes).map_err(|e| e.to_string())?;
         Self::from_image(&img)
     }
 
     fn from_image(img: &image::DynamicImage) -> Result<Self, String> {
-        let rgb = img.to_rgb32f();
-        let (width, height) = rgb.dimensions();
+        let (width, height) = (img.width(), img.height());
         if width == 0 || height == 0 {
             return Err("the image is empty".into());
         }
-        Ok(Self {
-            width,
-            height,
-            rgb: rgb.pixels().map(|p| p.0).collect(),
-        })
+        texels_within_limit(width, height)?;
+        // Converted in bands of rows, so the texels as floats are held once, not twice.
+        const BAND_ROWS: u32 = 64;
+        let mut rgb = Vec::with_capacity(width as usize * height as usize);
+        let mut y = 0;
+        while y < height {
+            let rows = BAND_ROWS.min(height - y);
+            let band = img.crop_imm(0, y, width, rows).to_rgb32f();
+            rgb.extend(band.pixels().map(|p| p.0));
+            y += rows;
+        }
+        Ok(Self { width, height, rgb })
     }
 
     /// Bilinear lookup at an OBJ texture coordinate (`v = 0` at the bottom, repeating outside
@@ -277,30 +304,52 @@ pub(crate) fn read_obj_data(path: &Path) -> Result<ObjData, MeshError> {
     let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let failed: RefCell<Vec<PathBuf>> = RefCell::new(Vec::new());
     let refused: RefCell<Option<MeshError>> = RefCell::new(None);
-    let loaded = tobj::load_obj_buf(&mut BufReader::new(file), &opts, |mtl: &Path| {
-        let written = mtl.to_string_lossy();
-        match material_library(path, &dir, &written, "mtllib") {
-            Ok((_, bytes)) => tobj::load_mtl_buf(&mut bytes.as_slice()),
-            Err(MeshError::Refused { path, key, reason }) => match *reason {
-                ConfineError::Missing { path: full, .. } => {
-                    failed.borrow_mut().push(full);
+    let parse = || {
+        tobj::load_obj_buf(&mut BufReader::new(file), &opts, |mtl: &Path| {
+            let written = mtl.to_string_lossy();
+            match material_library(path, &dir, &written, "mtllib") {
+                Ok((mtl_path, bytes)) => {
+                    if let Some(e) = mtl_colour_problem(&mtl_path, &bytes) {
+                        refused.borrow_mut().get_or_insert(e);
+                        return Err(tobj::LoadError::OpenFileFailed);
+                    }
+                    tobj::load_mtl_buf(&mut bytes.as_slice())
+                }
+                Err(MeshError::Refused { path, key, reason }) => match *reason {
+                    ConfineError::Missing { path: full, .. } => {
+                        failed.borrow_mut().push(full);
+                        Err(tobj::LoadError::OpenFileFailed)
+                    }
+                    other => {
+                        refused.borrow_mut().get_or_insert(MeshError::Refused {
+                            path,
+                            key,
+                            reason: Box::new(other),
+                        });
+                        Err(tobj::LoadError::OpenFileFailed)
+                    }
+                },
+                Err(e) => {
+                    refused.borrow_mut().get_or_insert(e);
                     Err(tobj::LoadError::OpenFileFailed)
                 }
-                other => {
-                    refused.borrow_mut().get_or_insert(MeshError::Refused {
-                        path,
-                        key,
-                        reason: Box::new(other),
-                    });
-                    Err(tobj::LoadError::OpenFileFailed)
-                }
-            },
-            Err(e) => {
-                refused.borrow_mut().get_or_insert(e);
-                Err(tobj::LoadError::OpenFileFailed)
             }
-        }
-    });
+        })
+    };
+    // tobj panics on some malformed lines; a panic is this file's parse error, not the end of
+    // the program.
+    let loaded =
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(parse)).map_err(|panic| {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a line it cannot read".into());
+            MeshError::Parse {
+                path: path.to_path_buf(),
+                reason: format!("OBJ: the parser gave up ({what})"),
+            }
+        })?;
     if let Some(e) = refused.into_inner() {
         return Err(e);
     }
@@ -393,6 +442,27 @@ pub(crate) fn read_obj_data(path: &Path) -> Result<ObjData, MeshError> {
 /// An OBJ's material library named `written` on a line of the OBJ (`key` says where): a
 /// regular file inside the OBJ's folder ([`confine`]), read within
 /// [`untrusted::MATERIAL_LIBRARY`]. Returns the file and its bytes.
+/// The MTL colour keys whose values tobj reads as exactly three numbers.
+const MTL_COLOUR_KEYS: [&str; 4] = ["Ka", "Kd", "Ks", "Ke"];
+
+/// A colour line of a material library with fewer than three values (tobj panics on it),
+/// as an error naming the file and the line.
+fn mtl_colour_problem(mtl: &Path, bytes: &[u8]) -> Option<MeshError> {
+    let text = String::from_utf8_lossy(bytes);
+    text.lines().enumerate().find_map(|(i, line)| {
+        let mut words = line.split_whitespace();
+        let key = words.next()?;
+        let values = words.count();
+        (MTL_COLOUR_KEYS.contains(&key) && values < 3).then(|| MeshError::Parse {
+            path: mtl.to_path_buf(),
+            reason: format!(
+                "line {}: `{key}` has {values} value(s); a colour needs three numbers",
+                i + 1
+            ),
+        })
+    })
+}
+
 fn material_library(
     obj: &Path,
     dir: &Path,

@@ -275,12 +275,18 @@ pub fn decode_photosites(path: &Path, opts: &RawOptions) -> Result<RawFrame, Raw
 }
 
 /// Decodes a Bayer raw file in either layout.
+/// A file rawler cannot decode (an unsupported format or camera, a panic inside it) is
+/// decoded by LibRaw ([`crate::via_libraw`]); a file refused before decoding (truncated,
+/// implausible, not raw) is not.
 pub fn decode_raw(path: &Path, opts: &RawOptions, layout: RawLayout) -> Result<RawFrame, RawError> {
     let (kind, src) = open_raw(path)?;
-    let image = guarded(path, || {
+    match guarded(path, || {
         loader().decode(&src, &RawDecodeParams::default(), false)
-    })?;
-    normalise(path, kind, &image, opts, layout)
+    }) {
+        Ok(image) => normalise(path, kind, &image, opts, layout),
+        Err(rawler) => crate::via_libraw::decode(path, kind, opts, layout)
+            .map_err(|libraw| crate::via_libraw::both_failed(rawler, libraw)),
+    }
 }
 
 /// What [`read_raw_header`] tells without computing superpixels.
@@ -313,7 +319,26 @@ impl RawHeader {
 
 /// The size of the image [`decode_superpixel`] would give, its bit depth and phase, with the
 /// same layout checks (non-Bayer data is refused here too).
+///
+/// Where rawler cannot read it (an unsupported format, a file whose image data is stripped
+/// or cut short), LibRaw reads the header from the file's structure ([`crate::via_libraw`]),
+/// once the file's directories pass the same checks as for metadata: a header is then given
+/// for a file that no decode will accept.
 pub fn read_raw_header(path: &Path) -> Result<RawHeader, RawError> {
+    match rawler_header(path) {
+        Ok(h) => Ok(h),
+        Err(
+            rawler @ (RawError::Decode { .. }
+            | RawError::Truncated { .. }
+            | RawError::Implausible { .. }),
+        ) => crate::via_libraw::header(path)
+            .map_err(|libraw| crate::via_libraw::both_failed(rawler, libraw)),
+        Err(e) => Err(e),
+    }
+}
+
+/// [`read_raw_header`] by rawler alone.
+fn rawler_header(path: &Path) -> Result<RawHeader, RawError> {
     let (kind, src) = open_raw(path)?;
     if kind == FileKind::Dng {
         if let Some(h) = dng_header(path) {
@@ -397,12 +422,12 @@ fn dng_header(path: &Path) -> Option<RawHeader> {
 }
 
 /// Where the active area is and which Bayer phase starts it.
-struct Geometry {
-    left: usize,
-    top: usize,
-    aw: usize,
-    ah: usize,
-    phase: BayerPhase,
+pub(crate) struct Geometry {
+    pub left: usize,
+    pub top: usize,
+    pub aw: usize,
+    pub ah: usize,
+    pub phase: BayerPhase,
 }
 
 /// The layout checks (Bayer, one sample per pixel, active area inside the sensor).
@@ -594,6 +619,16 @@ fn levels(
             }
         },
     };
+    check_levels(path, black_levels, white_level)?;
+    Ok((black_levels, white_level))
+}
+
+/// Refuses levels that leave no range (white at or below a black level) or are not finite.
+pub(crate) fn check_levels(
+    path: &Path,
+    black_levels: [f64; 4],
+    white_level: f64,
+) -> Result<(), RawError> {
     for (k, &b) in black_levels.iter().enumerate() {
         if !b.is_finite() || !white_level.is_finite() || white_level <= b {
             return Err(RawError::BadLevels {
@@ -604,7 +639,7 @@ fn levels(
             });
         }
     }
-    Ok((black_levels, white_level))
+    Ok(())
 }
 
 /// The superpixel or photosite computation on a decoded image.
@@ -617,36 +652,56 @@ fn normalise(
 ) -> Result<RawFrame, RawError> {
     let g = geometry(path, image)?;
     let (black_levels, white_level) = levels(path, kind, image, &g, opts)?;
-    let (sw, sh) = (image.width, image.height);
+    let sensor = Sensor {
+        kind,
+        width: image.width,
+        height: image.height,
+        bits_per_sample: image.bps,
+    };
+    let expected = sensor.width * sensor.height;
+    match &image.data {
+        RawImageData::Integer(d) if d.len() < expected => Err(short_data(path, d.len(), expected)),
+        RawImageData::Float(d) if d.len() < expected => Err(short_data(path, d.len(), expected)),
+        RawImageData::Integer(d) => Ok(assemble(d, &sensor, &g, black_levels, white_level, layout)),
+        RawImageData::Float(d) => Ok(assemble(d, &sensor, &g, black_levels, white_level, layout)),
+    }
+}
+
+/// The sensor a mosaic was read from.
+pub(crate) struct Sensor {
+    pub kind: FileKind,
+    /// Photosites per row of the mosaic.
+    pub width: usize,
+    /// Rows of the mosaic.
+    pub height: usize,
+    pub bits_per_sample: usize,
+}
+
+/// The frame of a whole-sensor mosaic (`sensor.width * sensor.height` values, checked by the
+/// caller), its active area `g` normalised with the given levels.
+pub(crate) fn assemble<T: Copy + Into<f64>>(
+    data: &[T],
+    sensor: &Sensor,
+    g: &Geometry,
+    black_levels: [f64; 4],
+    white_level: f64,
+    layout: RawLayout,
+) -> RawFrame {
     let (w, h) = (g.aw / 2, g.ah / 2);
-    let expected = sw * sh;
     let levels = QuadLevels::new(black_levels, white_level, g.phase);
     let (left, top) = (g.left, g.top);
-    let (rgb, saturated) = match (&image.data, layout) {
-        (RawImageData::Integer(d), _) if d.len() < expected => {
-            return Err(short_data(path, d.len(), expected))
-        }
-        (RawImageData::Float(d), _) if d.len() < expected => {
-            return Err(short_data(path, d.len(), expected))
-        }
-        (RawImageData::Integer(d), RawLayout::Superpixel) => {
-            levels.superpixels(d, sw, left, top, w, h)
-        }
-        (RawImageData::Float(d), RawLayout::Superpixel) => {
-            levels.superpixels(d, sw, left, top, w, h)
-        }
-        (RawImageData::Integer(d), RawLayout::Photosite) => {
-            levels.photosites(d, sw, left, top, w, h)
-        }
-        (RawImageData::Float(d), RawLayout::Photosite) => levels.photosites(d, sw, left, top, w, h),
+    let sw = sensor.width;
+    let (rgb, saturated) = match layout {
+        RawLayout::Superpixel => levels.superpixels(data, sw, left, top, w, h),
+        RawLayout::Photosite => levels.photosites(data, sw, left, top, w, h),
     };
     let to_u32 = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
     let (width_px, height_px) = match layout {
         RawLayout::Superpixel => (w, h),
         RawLayout::Photosite => (2 * w, 2 * h),
     };
-    Ok(RawFrame {
-        kind,
+    RawFrame {
+        kind: sensor.kind,
         layout,
         width_px: to_u32(width_px),
         height_px: to_u32(height_px),
@@ -655,12 +710,12 @@ fn normalise(
         cfa: g.phase,
         black_levels,
         white_level,
-        bits_per_sample: to_u32(image.bps),
+        bits_per_sample: to_u32(sensor.bits_per_sample),
         sensor_width_px: to_u32(sw),
-        sensor_height_px: to_u32(sh),
+        sensor_height_px: to_u32(sensor.height),
         active_left_px: to_u32(left),
         active_top_px: to_u32(top),
-    })
+    }
 }
 
 fn short_data(path: &Path, got: usize, expected: usize) -> RawError {

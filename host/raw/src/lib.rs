@@ -57,6 +57,7 @@ mod kind;
 mod limits;
 mod meta;
 pub mod tiff;
+mod via_libraw;
 
 pub use bayer::{BayerPhase, CfaColour};
 pub use decode::{
@@ -71,7 +72,7 @@ pub use isolate::{
     DEFAULT_MAX_MEMORY_BYTES, DEFAULT_TIMEOUT, WORKER_REFUSED,
 };
 pub use kind::{check_extension, sniff, FileKind};
-pub use limits::{MAX_IFDS, MAX_IFD_ENTRIES, MAX_PIXELS};
+pub use limits::{MAX_IFDS, MAX_IFD_ENTRIES, MAX_PIXELS, VALUE_BYTES_PER_FILE_BYTE};
 pub use meta::{
     focal_plane_unit_mm, read_metadata, CaptureTime, ExposureMeta, LocalDateTime,
     FULL_FRAME_DIAGONAL_MM,

@@ -52,6 +52,7 @@ use rawler::tags::{DngTag, ExifTag, TiffCommonTag};
 use crate::decode::loader;
 use crate::error::RawError;
 use crate::kind::{sniff_for_metadata, FileKind};
+use crate::via_libraw;
 
 /// A naive (zone-less) calendar date and time of day, as EXIF stores it.
 #[derive(
@@ -301,10 +302,21 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
             })
         }
         _ => {
-            let decoder = crate::decode::guarded(path, || loader().get_decoder(&src))?;
-            let md = crate::decode::guarded(path, || {
-                decoder.raw_metadata(&src, &RawDecodeParams::default())
-            })?;
+            let rawler =
+                crate::decode::guarded(path, || loader().get_decoder(&src)).and_then(|d| {
+                    let md = crate::decode::guarded(path, || {
+                        d.raw_metadata(&src, &RawDecodeParams::default())
+                    })?;
+                    Ok((d, md))
+                });
+            let (decoder, md) = match rawler {
+                Ok(r) => r,
+                // A raw file rawler cannot read (an unsupported format or camera): LibRaw's.
+                Err(e) => {
+                    return via_libraw::metadata(path)
+                        .map_err(|libraw| via_libraw::both_failed(e, libraw))
+                }
+            };
             // rawler exposes a DNG's root directory only; other TIFF-based formats' root is read
             // here, so `Make` and `Model` come as written rather than as rawler's clean names.
             let root = decoder
@@ -322,14 +334,19 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
             }
             let mut exif = md.exif;
             if root.is_none() {
-                // Formats without a TIFF root (CR3, RAF...): rawler's names are all there is.
-                return finish(
+                // Formats without a TIFF root (CR3, CRW, RAF, MRW...): rawler gives its clean
+                // names and no exposure for some; LibRaw gives the names as written where it
+                // meets them and the exposure fields (rawler's stand where LibRaw fails).
+                let mut meta = finish(
                     path,
                     exif_take(&mut exif),
                     &exif,
                     Some(md.make),
                     Some(md.model),
-                );
+                )?;
+                // rawler's answer stands where LibRaw cannot read the file.
+                via_libraw::fill_metadata(path, &mut meta, via_libraw::Fill::Everything).ok();
+                return Ok(meta);
             }
             (exif, root)
         }
@@ -360,7 +377,17 @@ pub fn read_metadata(path: &Path) -> Result<ExposureMeta, RawError> {
     if let Some(root) = &root {
         focal_plane_tags(&mut extra, root, raw_ifd.as_ref());
     }
-    finish(path, extra, &exif, make, model)
+    let mut meta = finish(path, extra, &exif, make, model)?;
+    let exposure_missing = meta.exposure_time_s.is_none()
+        || meta.f_number.is_none()
+        || meta.iso.is_none()
+        || meta.focal_length_mm.is_none();
+    if kind.is_raw() && exposure_missing {
+        // A raw file whose EXIF lacks an exposure field: LibRaw's (maker notes included),
+        // where it reads the file.
+        via_libraw::fill_metadata(path, &mut meta, via_libraw::Fill::Exposure).ok();
+    }
+    Ok(meta)
 }
 
 /// The root directory of a file with a TIFF structure (CR2, NEF, ARW, PEF, ORF, RW2, ...),

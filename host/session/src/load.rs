@@ -697,10 +697,13 @@ fn validate(
             return None;
         }
         let path = dir.join(rel);
-        let bytes = match std::fs::read(&path) {
+        let bytes = match skinbrdf_core::untrusted::read_bounded(
+            &path,
+            skinbrdf_core::untrusted::CAPTURE_RECORD,
+        ) {
             Ok(b) => b,
             Err(e) => {
-                errs.push(&path, "", format!("cannot read: {e}"));
+                errs.push(&path, "", e.reason());
                 return None;
             }
         };

@@ -362,3 +362,21 @@ fn a_float_image_with_an_inf_patch_is_implausible() {
     assert!(errs.problems[0].file.ends_with("images/l0.exr"), "{errs}");
     assert!(errs.to_string().contains("non-finite"), "{errs}");
 }
+
+#[test]
+fn a_capture_record_larger_than_its_limit_is_refused_unread() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut f = valid_file();
+    f.capture = Some("capture.json".into());
+    write_dir(dir.path(), &f);
+    // A sparse file one byte above the limit: refused by its length, never read into memory.
+    let big = std::fs::File::create(dir.path().join("capture.json")).unwrap();
+    big.set_len(skinbrdf_core::untrusted::CAPTURE_RECORD.max_bytes + 1)
+        .unwrap();
+    let errs = Session::load(dir.path()).unwrap_err();
+    let t = errs.to_string();
+    assert!(
+        t.contains("capture.json") && t.contains("capture record"),
+        "{t}"
+    );
+}
