@@ -1179,7 +1179,7 @@ mod tests {
         let a = light_agreement(&agree, m).expect("three views");
         assert_eq!(a.images, 3);
         assert!(a.reduced_chi2 < 2.0, "{a:?}");
-        assert_eq!(a.farthest_image, "b.dng");
+        assert_eq!(a.farthest_image, "a.dng");
         let mut moved = agree;
         moved[2].1 = m + DVec3::new(0.012, 0.0, 0.0);
         let a = light_agreement(&moved, m).expect("three views");
