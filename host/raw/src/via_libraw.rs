@@ -21,13 +21,13 @@ use std::path::Path;
 
 use skinbrdf_libraw::{Header, LibRawError, RawFile};
 
+use crate::assemble::{assemble, check_levels, Geometry, Sensor};
 use crate::bayer::{BayerPhase, CfaColour};
-use crate::decode::{
-    assemble, check_levels, Geometry, RawFrame, RawHeader, RawLayout, RawOptions, Sensor,
-};
 use crate::error::RawError;
-use crate::kind::{sniff_for_metadata, FileKind};
-use crate::meta::{CaptureTime, ExposureMeta, LocalDateTime};
+use crate::exposure::{CaptureTime, ExposureMeta, LocalDateTime};
+use crate::frame::{RawFrame, RawHeader, RawLayout, RawOptions};
+use crate::identify::sniff_for_metadata;
+use crate::kind::FileKind;
 
 /// Why LibRaw gave no answer where rawler gave none either.
 #[derive(Debug)]
