@@ -671,7 +671,10 @@ pub fn derender_checks(reports: &[StageReport]) -> Vec<(Stage, Check)> {
 /// The fit unit's checks, by stage, from its reports' figures (`image_files`: the session's
 /// image files, to name an image).
 pub fn fit_checks(reports: &[StageReport], image_files: &[&str]) -> Vec<(Stage, Check)> {
-    let mut checks = vec![(Stage::SmoothIncidencePlane, image_offset(reports, image_files))];
+    let mut checks = vec![(
+        Stage::SmoothIncidencePlane,
+        image_offset(reports, image_files),
+    )];
     checks.push((Stage::Fit, fit_vs_smoother(reports)));
     checks
 }

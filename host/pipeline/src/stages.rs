@@ -1177,11 +1177,7 @@ impl StageUnit for FitUnit {
     fn load(&self, _ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
         Ok(())
     }
-    fn checks(
-        &self,
-        ctx: &Ctx<'_>,
-        reports: &[StageReport],
-    ) -> Vec<(Stage, crate::checks::Check)> {
+    fn checks(&self, ctx: &Ctx<'_>, reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
         let files: Vec<&str> = ctx
             .session
             .file
