@@ -48,124 +48,11 @@ use ::gltf::mesh::{Mode, Semantic};
 use glam::{DMat4, DVec3, Vec2, Vec3};
 use skinbrdf_core::TriMesh;
 
-use crate::textured::{Material, TextureImage};
-use crate::MeshError;
-
-/// What is wrong with a glTF file (the `problem` of [`MeshError::Gltf`]).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum GltfProblem {
-    /// The GLB container is cut short: its header or a chunk states more bytes than there are.
-    #[error("truncated GLB: {what} states {stated} bytes, {available} are there")]
-    Truncated {
-        /// Which length (the header's, the JSON chunk's, the binary chunk's).
-        what: &'static str,
-        /// Bytes stated.
-        stated: u64,
-        /// Bytes present.
-        available: u64,
-    },
-    /// The `gltf` crate refused the file: bad GLB header, malformed JSON, invalid references.
-    #[error("{0}")]
-    Document(String),
-    /// A buffer's external file cannot be read.
-    #[error("buffer {buffer}: cannot read {}: {reason}", file.display())]
-    MissingBuffer {
-        /// Buffer index.
-        buffer: usize,
-        /// The file looked for.
-        file: PathBuf,
-        /// The I/O error.
-        reason: String,
-    },
-    /// A buffer's source is unusable (no binary chunk, a bad data URI, an unsupported scheme).
-    #[error("buffer {buffer}: {reason}")]
-    BadBuffer {
-        /// Buffer index.
-        buffer: usize,
-        /// What is wrong.
-        reason: String,
-    },
-    /// A buffer holds fewer bytes than its `byteLength`.
-    #[error("buffer {buffer} holds {actual} bytes, its byteLength is {stated}")]
-    ShortBuffer {
-        /// Buffer index.
-        buffer: usize,
-        /// `byteLength`.
-        stated: usize,
-        /// Bytes read.
-        actual: usize,
-    },
-    /// A primitive is not a triangle list.
-    #[error("{at}: primitive mode {mode} is not read (triangle lists only)")]
-    UnsupportedMode {
-        /// Mesh and primitive.
-        at: String,
-        /// The mode.
-        mode: String,
-    },
-    /// A position is NaN or infinite (the specification forbids it).
-    #[error("{at}: POSITION {vertex} is not finite ({}, {}, {})", value[0], value[1], value[2])]
-    NonFinitePosition {
-        /// Mesh and primitive.
-        at: String,
-        /// Vertex index in the primitive.
-        vertex: usize,
-        /// The stored value.
-        value: [f32; 3],
-    },
-    /// An attribute or the indices cannot be read as a scan needs them.
-    #[error("{at}: {attribute}: {reason}")]
-    BadAccessor {
-        /// Mesh and primitive.
-        at: String,
-        /// `POSITION`, `TEXCOORD_0`, `COLOR_0`, `indices`.
-        attribute: String,
-        /// What is wrong.
-        reason: String,
-    },
-    /// The primitives read more vertices and triangles than the buffers can hold without
-    /// reusing accessors many times (a small file drawing one mesh a million times).
-    #[error(
-        "{at}: the primitives read so far take {bytes} bytes of vertices and triangles, more than \
-         {max} ({READ_BYTES_PER_BUFFER_BYTE} times the buffers' bytes): accessors reused many times"
-    )]
-    TooMuchGeometry {
-        /// Mesh and primitive where the limit was passed.
-        at: String,
-        /// Bytes the primitives take as read.
-        bytes: u64,
-        /// The limit.
-        max: u64,
-    },
-    /// The materials' textures hold more texels together than one texture may have.
-    #[error(
-        "material {material}: the materials' textures hold {texels} texels together, more than \
-         the {max} one texture may have (one image used by many materials?)",
-        max = crate::textured::MAX_TEXTURE_TEXELS
-    )]
-    TooManyTexels {
-        /// The material where the limit was passed.
-        material: usize,
-        /// Texels so far.
-        texels: u64,
-    },
-    /// A node is reached twice from the scene: the hierarchy has a cycle, or a node has two
-    /// parents or is listed twice (glTF's nodes form trees; a node drawn many times would
-    /// multiply the mesh held in memory).
-    #[error("node {node} is reached twice: a cycle, or a node with two parents (glTF's nodes form trees)")]
-    NodeCycle {
-        /// The node reached twice.
-        node: usize,
-    },
-}
-
-/// How many bytes of vertices and triangles the primitives may take as read, per byte of the
-/// buffers (plus [`READ_BYTES_SLACK`]): each accessor read once takes about as much as it
-/// stores (more for 8- and 16-bit indices, widened to 32 bits), so only accessors reused many
-/// times pass it.
-pub const READ_BYTES_PER_BUFFER_BYTE: u64 = 8;
-/// Bytes of geometry allowed beyond [`READ_BYTES_PER_BUFFER_BYTE`] times the buffers' bytes.
-const READ_BYTES_SLACK: u64 = 16 << 20;
+pub use crate::error::GltfProblem;
+use crate::error::MeshError;
+pub use crate::limits::READ_BYTES_PER_BUFFER_BYTE;
+use crate::limits::{MAX_TEXTURE_TEXELS, READ_BYTES_SLACK};
+use crate::material::{Material, TextureImage};
 
 /// A glTF scan's geometry with per-triangle appearance, before units and repair.
 #[derive(Debug, Clone, Default)]
@@ -375,7 +262,7 @@ fn external_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshError> {
             UriTarget::Data => {}
             UriTarget::File(p) => {
                 if what.starts_with("image") {
-                    crate::TextureImage::check_header(&p)?;
+                    TextureImage::check_header(&p)?;
                 }
                 let rel = p
                     .strip_prefix(&dir)
@@ -681,7 +568,7 @@ fn read_gltf_unguarded(path: &Path, detail: Detail) -> Result<GltfData, MeshErro
             let made = material(path, &dir, &buffers, &m, &mut images)?;
             if let Some(t) = &made.texture {
                 texels += u64::from(t.width) * u64::from(t.height);
-                if texels > crate::textured::MAX_TEXTURE_TEXELS {
+                if texels > MAX_TEXTURE_TEXELS {
                     return Err(gltf_err(
                         path,
                         GltfProblem::TooManyTexels {

@@ -17,7 +17,7 @@ use std::path::Path;
 use glam::Vec3;
 use skinbrdf_core::TriMesh;
 
-use crate::MeshError;
+use crate::error::MeshError;
 
 /// Storage format of a PLY file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -332,7 +332,7 @@ pub type VertexColours = Vec<[f32; 3]>;
 pub fn read_ply_coloured(
     path: &Path,
 ) -> Result<(TriMesh, PlyInfo, Option<VertexColours>), MeshError> {
-    let (file, len) = crate::open_scan(path)?;
+    let (file, len) = crate::open::open_scan(path)?;
     read_ply_sized(BufReader::with_capacity(1 << 20, file), path, Some(len))
 }
 
