@@ -36,6 +36,7 @@ mod report;
 pub mod shadow;
 pub mod shapes;
 pub mod textured;
+mod tiled;
 pub mod validate;
 
 pub use bvh::{BuildQuality, Hit, MeshBvh, MeshRay};
