@@ -96,14 +96,24 @@ fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport, RepairMap) {
         triangles_in: mesh.indices.len(),
         ..Default::default()
     };
-    let nv = mesh.positions.len();
     let finite: Vec<bool> = mesh.positions.iter().map(|p| p.is_finite()).collect();
     for (i, f) in finite.iter().enumerate() {
         if !f {
             r.non_finite_vertices.add(i);
         }
     }
-    // Welding map: vertex -> representative.
+    let rep = weld_map(mesh, &finite, weld, &mut r);
+    let kept = filter_triangles(mesh, &finite, &rep, &mut r);
+    let adj = adjacency(&kept, &mut r);
+    let flip = orient(mesh, &kept, &adj, &mut r);
+    let (out, map) = assemble(mesh, &kept, &flip, &mut r);
+    (out, r, map)
+}
+
+/// Per vertex, its representative: itself, or the first earlier vertex at the bit-identical
+/// position when welding.
+fn weld_map(mesh: &TriMesh, finite: &[bool], weld: bool, r: &mut MeshReport) -> Vec<u32> {
+    let nv = mesh.positions.len();
     let mut rep: Vec<u32> = (0..nv as u32).collect();
     if weld {
         let mut seen: HashMap<[u32; 3], u32> = HashMap::with_capacity(nv);
@@ -124,7 +134,18 @@ fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport, RepairMap) {
             }
         }
     }
-    // Triangle filtering.
+    rep
+}
+
+/// The triangles kept (input index, corners as representatives): in range, on finite
+/// vertices, not degenerate, not a duplicate.
+fn filter_triangles(
+    mesh: &TriMesh,
+    finite: &[bool],
+    rep: &[u32],
+    r: &mut MeshReport,
+) -> Vec<(usize, [u32; 3])> {
+    let nv = mesh.positions.len();
     let mut kept: Vec<(usize, [u32; 3])> = Vec::with_capacity(mesh.indices.len());
     let mut dup: HashMap<[u32; 3], usize> = HashMap::with_capacity(mesh.indices.len());
     for (t, tri) in mesh.indices.iter().enumerate() {
@@ -150,7 +171,12 @@ fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport, RepairMap) {
         }
         kept.push((t, w));
     }
-    // Adjacency over undirected edges.
+    kept
+}
+
+/// Per kept triangle, its neighbours across manifold edges and whether the two traverse the
+/// shared edge in the same direction (inconsistent winding); non-manifold edges are reported.
+fn adjacency(kept: &[(usize, [u32; 3])], r: &mut MeshReport) -> Vec<Vec<(usize, bool)>> {
     let mut edges: HashMap<(u32, u32), Vec<(usize, bool)>> = HashMap::with_capacity(kept.len() * 2);
     for (k, (_, w)) in kept.iter().enumerate() {
         for e in 0..3 {
@@ -178,7 +204,17 @@ fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport, RepairMap) {
             many => r.non_manifold_edges.add(kept[many[0].0].0),
         }
     }
-    // Orient components by BFS: flip[k2] = flip[k1] XOR same_dir.
+    adj
+}
+
+/// Per kept triangle, whether to flip it: each component oriented by a breadth-first walk
+/// (`flip[k2] = flip[k1] XOR same_dir`), keeping the orientation of its larger area.
+fn orient(
+    mesh: &TriMesh,
+    kept: &[(usize, [u32; 3])],
+    adj: &[Vec<(usize, bool)>],
+    r: &mut MeshReport,
+) -> Vec<Option<bool>> {
     let mut flip: Vec<Option<bool>> = vec![None; kept.len()];
     let area = |k: usize| {
         let [a, b, c] = kept[k].1.map(|v| mesh.positions[v as usize]);
@@ -224,9 +260,20 @@ fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport, RepairMap) {
             }
         }
     }
-    // Assemble, compacting unreferenced vertices (keeping their order).
+    flip
+}
+
+/// The repaired mesh: kept triangles (flipped where oriented so), unreferenced vertices
+/// dropped (keeping their order), and where each came from.
+fn assemble(
+    mesh: &TriMesh,
+    kept: &[(usize, [u32; 3])],
+    flip: &[Option<bool>],
+    r: &mut MeshReport,
+) -> (TriMesh, RepairMap) {
+    let nv = mesh.positions.len();
     let mut used = vec![false; nv];
-    for (_, w) in &kept {
+    for (_, w) in kept {
         for &v in w {
             used[v as usize] = true;
         }
@@ -258,7 +305,7 @@ fn repair_impl(mesh: &TriMesh, weld: bool) -> (TriMesh, MeshReport, RepairMap) {
         out.normals = Some(normals_out);
     }
     r.triangles_out = out.indices.len();
-    (out, r, map)
+    (out, map)
 }
 
 #[cfg(test)]
