@@ -671,12 +671,13 @@ pub fn derender_checks(reports: &[StageReport]) -> Vec<(Stage, Check)> {
 /// The fit unit's checks, by stage, from its reports' figures (`image_files`: the session's
 /// image files, to name an image).
 pub fn fit_checks(reports: &[StageReport], image_files: &[&str]) -> Vec<(Stage, Check)> {
-    let mut checks = vec![(
-        Stage::SmoothIncidencePlane,
-        image_offset(reports, image_files),
-    )];
-    checks.push((Stage::Fit, fit_vs_smoother(reports)));
-    checks
+    vec![
+        (
+            Stage::SmoothIncidencePlane,
+            image_offset(reports, image_files),
+        ),
+        (Stage::Fit, fit_vs_smoother(reports)),
+    ]
 }
 
 fn image_offset(reports: &[StageReport], image_files: &[&str]) -> Check {
