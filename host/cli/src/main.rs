@@ -2,13 +2,15 @@
 //!
 //! Thin by design (ripgrep's shape): `main` maps the result of [`run`] to an exit code; each
 //! subcommand lives in `cmd/`, validates its raw flags into a library config and calls into the
-//! library crates, which do the work and return typed errors.
+//! library crates, which do the work and return typed errors; what a command prints beyond a
+//! line or two is formatted in `print/`.
 
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
 mod cmd;
+mod print;
 
 /// Measure how living human skin reflects light: capture, synthesize, derender, fit, report.
 #[derive(Debug, Parser)]

@@ -134,6 +134,9 @@ pub struct Loess {
     pub delta1_per_sample: f64,
     /// Generalized cross-validation score `n RSS / (n - tr L)^2` (per-sample form).
     pub gcv: f64,
+    /// The residuals `y_i - fit(x_i)` at the samples the residual scale was computed on, as
+    /// `(index of the sample in the input, residual)`.
+    pub sigma_residuals: Vec<(usize, f64)>,
     z: f64,
 }
 
@@ -274,6 +277,7 @@ impl Loess {
             trace_hat: f64::NAN,
             delta1_per_sample: f64::NAN,
             gcv: f64::NAN,
+            sigma_residuals: Vec::new(),
             z,
         };
         // Residual scale from the operator rows at (a strided subset of) the samples.
@@ -281,24 +285,24 @@ impl Loess {
         let idx: Vec<usize> = (0..m)
             .map(|k| ((k as u128 * n as u128) / m as u128) as usize)
             .collect();
-        let stats: Vec<(f64, f64, f64)> = idx
+        let stats: Vec<(usize, f64, f64, f64)> = idx
             .par_iter()
             .filter_map(|&i| {
                 let (val, l_self, l_norm2) = me.local(&me.points[i], Some(i))?;
-                let r = me.y[i] - val;
-                Some((r * r, l_self, l_norm2))
+                Some((i, me.y[i] - val, l_self, l_norm2))
             })
             .collect();
         let k = stats.len().max(1) as f64;
-        let rss = stats.iter().map(|s| s.0).sum::<f64>() / k;
-        let tr = stats.iter().map(|s| s.1).sum::<f64>() / k;
-        let nrm = stats.iter().map(|s| s.2).sum::<f64>() / k;
+        let rss = stats.iter().map(|s| s.1 * s.1).sum::<f64>() / k;
+        let tr = stats.iter().map(|s| s.2).sum::<f64>() / k;
+        let nrm = stats.iter().map(|s| s.3).sum::<f64>() / k;
         let delta1 = (1.0 - 2.0 * tr + nrm).max(1e-12);
         me.sigma = (rss / delta1).sqrt();
         me.trace_hat = tr * n as f64;
         me.enp = (delta1 + 2.0 * tr - 1.0) * n as f64;
         me.delta1_per_sample = delta1;
         me.gcv = rss / ((1.0 - tr) * (1.0 - tr)).max(1e-300);
+        me.sigma_residuals = stats.iter().map(|s| (s.0, s.1)).collect();
         Ok(me)
     }
 

@@ -201,6 +201,54 @@ pub struct SmoothMetrics {
     pub samples_used: usize,
     /// Wall time, seconds (design, span choice and the final smooth).
     pub run_time_s: f64,
+    /// The image whose samples sit furthest off the smoother: see [`ImageOffset`]. `None`
+    /// when no image has [`IMAGE_OFFSET_MIN_RESIDUALS`] residuals.
+    #[serde(default)]
+    pub worst_image_offset: Option<ImageOffset>,
+}
+
+/// Residuals an image needs among the smoother's residual subset for its offset to be told
+/// (the median of fewer is itself uncertain by a large part of the residual scale).
+pub const IMAGE_OFFSET_MIN_RESIDUALS: usize = 30;
+
+/// How far one image's samples sit off the smoother of all images: the median of its samples'
+/// log residuals `ln(grey + floor) - smooth(theta_i, theta_e, phi_d)`.
+///
+/// The smoother describes the BRDF every image agrees on; an image whose exposure, flash,
+/// pose or standard is wrong has its samples offset together (a relative error of its own),
+/// while noise and the smoother's bias scatter about zero.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ImageOffset {
+    /// The image's index in the session (`BrdfSample::image_index`).
+    pub image_index: u16,
+    /// The median log residual (a relative offset: 0.05 is 5 % bright).
+    pub offset_log: f64,
+    /// Residuals of the image the median is taken over.
+    pub residuals: usize,
+}
+
+/// The image whose median residual is largest in magnitude, from `(sample index, residual)`
+/// pairs of `samples`.
+pub fn worst_image_offset(
+    samples: &[BrdfSample],
+    residuals: impl IntoIterator<Item = (usize, f64)>,
+) -> Option<ImageOffset> {
+    let mut by_image: std::collections::BTreeMap<u16, Vec<f64>> = Default::default();
+    for (i, r) in residuals {
+        let Some(s) = samples.get(i) else { continue };
+        if s.image_index != u16::MAX && r.is_finite() {
+            by_image.entry(s.image_index).or_default().push(r);
+        }
+    }
+    by_image
+        .into_iter()
+        .filter(|(_, r)| r.len() >= IMAGE_OFFSET_MIN_RESIDUALS)
+        .map(|(image_index, r)| ImageOffset {
+            image_index,
+            offset_log: crate::fit::quantile(&r, 0.5),
+            residuals: r.len(),
+        })
+        .max_by(|a, b| a.offset_log.abs().total_cmp(&b.offset_log.abs()))
 }
 
 /// A smoother of `ln(grey + floor)` and its metrics.
@@ -246,12 +294,21 @@ pub fn smooth(samples: &[BrdfSample], cfg: &SmoothConfig) -> Result<Smoothed, Lo
             ..base
         },
     )?;
+    let used: Vec<usize> = strided(samples.len(), cfg.max_samples).collect();
+    let worst = worst_image_offset(
+        samples,
+        loess
+            .sigma_residuals
+            .iter()
+            .filter_map(|&(j, r)| Some((*used.get(j)?, r))),
+    );
     let metrics = SmoothMetrics {
         span,
         residual_sigma_log: loess.sigma,
         floor_rho: input.floor_rho,
         samples_used: input.y_log.len(),
         run_time_s: t.elapsed().as_secs_f64(),
+        worst_image_offset: worst,
     };
     Ok(Smoothed { loess, metrics })
 }
@@ -301,5 +358,62 @@ mod tests {
             (fixed.metrics.span, fixed.metrics.samples_used),
             (0.1, 1_000)
         );
+    }
+
+    /// Gives `samples` to images `0..images` in turn, and scales image `dim`'s by `factor`.
+    fn with_images(samples: &mut [BrdfSample], images: u16, dim: u16, factor: f32) {
+        for (k, s) in samples.iter_mut().enumerate() {
+            s.image_index = (k % usize::from(images)) as u16;
+            if s.image_index == dim {
+                s.rho = s.rho.map(|v| v * factor);
+            }
+        }
+    }
+
+    #[test]
+    fn an_image_whose_samples_sit_off_the_others_is_the_worst_offset() {
+        // 5 % noise: each image's median residual is within a percent or two of zero.
+        let (_, mut samples) = crate::synthetic::lafortune2_samples(6_000, 0.05, 3);
+        with_images(&mut samples, 20, 7, 0.8);
+        let sm = smooth(&samples, &SmoothConfig::default()).expect("smooth");
+        let worst = sm.metrics.worst_image_offset.expect("an offset");
+        assert_eq!(worst.image_index, 7, "{worst:?}");
+        // A fifth of the images' residuals: the smoother follows the dim image a little.
+        assert!(
+            (-0.26..-0.12).contains(&worst.offset_log),
+            "{worst:?} against ln 0.8 = -0.223"
+        );
+        assert!(worst.residuals >= IMAGE_OFFSET_MIN_RESIDUALS);
+    }
+
+    #[test]
+    fn images_that_agree_have_offsets_inside_the_scatter() {
+        let (_, mut samples) = crate::synthetic::lafortune2_samples(6_000, 0.05, 4);
+        with_images(&mut samples, 20, u16::MAX, 1.0);
+        let sm = smooth(&samples, &SmoothConfig::default()).expect("smooth");
+        let worst = sm.metrics.worst_image_offset.expect("an offset");
+        assert!(
+            worst.offset_log.abs() < sm.metrics.residual_sigma_log,
+            "{worst:?} against the scatter {}",
+            sm.metrics.residual_sigma_log
+        );
+    }
+
+    #[test]
+    fn images_with_few_residuals_or_none_are_not_told() {
+        let (_, samples) = crate::synthetic::lafortune2_samples(200, 0.05, 5);
+        // `lafortune2_samples` gives no image (u16::MAX).
+        assert_eq!(
+            worst_image_offset(&samples, (0..200).map(|i| (i, 0.5))),
+            None
+        );
+        // 20 residuals per image, fewer than a median is told from.
+        let mut few = samples.clone();
+        with_images(&mut few, 10, u16::MAX, 1.0);
+        assert_eq!(worst_image_offset(&few, (0..200).map(|i| (i, 0.5))), None);
+        // 40 per image: told.
+        with_images(&mut few, 5, u16::MAX, 1.0);
+        let told = worst_image_offset(&few, (0..200).map(|i| (i, 0.5))).expect("told");
+        assert_eq!((told.offset_log, told.residuals), (0.5, 40));
     }
 }

@@ -1072,7 +1072,9 @@ fn capture_value_problem(rec: &CaptureRecord) -> Option<(String, String)> {
         })
 }
 
-fn read_capture(path: &Path) -> Result<CaptureRecord, IngestError> {
+/// Reads and checks a controller's capture record (`capture.json`) as `ingest` does: within
+/// its read limit, no unknown key, values in range, a format version this build reads.
+pub fn read_capture(path: &Path) -> Result<CaptureRecord, IngestError> {
     let bytes =
         skinbrdf_core::untrusted::read_bounded(path, skinbrdf_core::untrusted::CAPTURE_RECORD)?;
     let capture_err = |source| IngestError::Capture {
@@ -1263,7 +1265,9 @@ fn units_in_header(text: &str) -> Option<LengthUnit> {
     None
 }
 
-fn read_camera(path: &Path) -> Result<(PathBuf, CameraSpec), IngestError> {
+/// Reads and checks a camera file (a `[camera]` table as in session.toml) as `ingest` does.
+/// Returns the file and the camera.
+pub fn read_camera(path: &Path) -> Result<(PathBuf, CameraSpec), IngestError> {
     let text =
         skinbrdf_core::untrusted::read_bounded_text(path, skinbrdf_core::untrusted::SETTINGS_FILE)?;
     let bad = |problem: String| IngestError::Input {

@@ -12,4 +12,6 @@ pub mod focal;
 pub mod ingest;
 pub mod matching;
 
-pub use ingest::{ingest, ExposurePolicy, IngestConfig, IngestError, IngestReport};
+pub use ingest::{
+    ingest, read_camera, read_capture, ExposurePolicy, IngestConfig, IngestError, IngestReport,
+};

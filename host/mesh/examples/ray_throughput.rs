@@ -16,7 +16,7 @@
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
-use skinbrdf_mesh::{shadow_ray, BuildQuality, MeshBvh, MeshRay, ShadowScratch, TraceScratch};
+use skinbrdf_mesh::{shadow_ray, BuildQuality, Hit, MeshBvh, MeshRay, ShadowScratch, TraceScratch};
 
 /// 1500 x 1000 pinhole rays, 30° horizontal field of view, looking down -z (image x = world
 /// +x, image y = world -y).
@@ -46,26 +46,73 @@ fn best_of<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     (best, out.expect("at least one repetition"))
 }
 
+/// The command line: `--reps`, `--quality`, `--ply`, `--json`, `--grid-only`.
+struct Args {
+    reps: usize,
+    only: Option<BuildQuality>,
+    ply: Option<String>,
+    json: bool,
+    grid_only: bool,
+}
+
+impl Args {
+    fn parse() -> Result<Self, Box<dyn std::error::Error>> {
+        let args: Vec<String> = std::env::args().skip(1).collect();
+        let opt = |name: &str| {
+            args.iter()
+                .position(|a| a == name)
+                .and_then(|i| args.get(i + 1).cloned())
+        };
+        Ok(Self {
+            reps: opt("--reps").map(|s| s.parse()).transpose()?.unwrap_or(5),
+            only: opt("--quality").map(|s| s.parse()).transpose()?,
+            ply: opt("--ply"),
+            json: args.iter().any(|a| a == "--json"),
+            grid_only: args.iter().any(|a| a == "--grid-only"),
+        })
+    }
+}
+
+/// Primary rays: the grid's hits, their counts and the times.
+struct Primary {
+    grid: Vec<Option<Hit>>,
+    hits: usize,
+    batch_hits: usize,
+    grid_s: f64,
+    grid1_s: f64,
+    batch_s: f64,
+    single_s: f64,
+    scratch: TraceScratch,
+}
+
+/// Shadow rays from the hits: counts, agreement and times.
+struct Shadow {
+    rays: usize,
+    shadowed: usize,
+    differ: usize,
+    grid_s: f64,
+    grid1_s: f64,
+    batch_s: f64,
+    single_s: f64,
+    scratch: ShadowScratch,
+}
+
+const ORIGIN: Vec3 = Vec3::new(0.0, 0.0, 0.45);
+const LIGHT: Vec3 = Vec3::new(0.25, 0.15, 0.35);
+const STOP_SHORT_M: f32 = 1e-5;
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let opt = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1).cloned())
-    };
-    let json = args.iter().any(|a| a == "--json");
-    let reps: usize = opt("--reps").map(|s| s.parse()).transpose()?.unwrap_or(5);
-    let only: Option<BuildQuality> = opt("--quality").map(|s| s.parse()).transpose()?;
+    let args = Args::parse()?;
+    let reps = args.reps;
     let mesh = skinbrdf_mesh::shapes::bumpy_sphere(0.08, 0.03, 224, 448);
-    let origin = Vec3::new(0.0, 0.0, 0.45);
     let (dirs, width) = primary_dirs();
-    if args.iter().any(|a| a == "--grid-only") {
+    if args.grid_only {
         // For `perf stat`: one build, `reps` one-thread grid passes.
-        let bvh = MeshBvh::build(&mesh, only.unwrap_or(BuildQuality::Medium))?;
+        let bvh = MeshBvh::build(&mesh, args.only.unwrap_or(BuildQuality::Medium))?;
         let mut scratch = TraceScratch::default();
         let mut out = vec![None; dirs.len()];
         let (s, _) = best_of(reps, || {
-            bvh.intersect_grid_into(origin, &dirs, width, f32::INFINITY, &mut out, &mut scratch)
+            bvh.intersect_grid_into(ORIGIN, &dirs, width, f32::INFINITY, &mut out, &mut scratch)
         });
         println!(
             "grid 1 thread {s:.4} s, {} candidates per tile",
@@ -73,29 +120,56 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         return Ok(());
     }
-    if let Some(p) = opt("--ply") {
-        skinbrdf_mesh::write_ply_binary(std::path::Path::new(&p), &mesh)?;
+    if let Some(p) = &args.ply {
+        skinbrdf_mesh::write_ply_binary(std::path::Path::new(p), &mesh)?;
     }
-    let rays: Vec<MeshRay> = dirs.iter().map(|&d| MeshRay::new(origin, d)).collect();
-    let n = dirs.len() as f64;
     let mut builds = Vec::new();
     for q in BuildQuality::ALL {
-        if only.is_some_and(|o| o != q) {
+        if args.only.is_some_and(|o| o != q) {
             continue;
         }
         let (s, _) = best_of(reps.min(3), || MeshBvh::build(&mesh, q));
         builds.push((q, s));
     }
-    let quality = only.unwrap_or(BuildQuality::Medium);
+    let quality = args.only.unwrap_or(BuildQuality::Medium);
     let bvh = MeshBvh::build(&mesh, quality)?;
+    let p = primary(&bvh, &dirs, width, reps);
+    let sh = shadow(&bvh, &mesh, &dirs, &p.grid, width, reps);
+    let run = Run {
+        mesh: &mesh,
+        rays: dirs.len(),
+        quality,
+        builds: &builds,
+        reps,
+    };
+    if args.json {
+        print_json(&run, &p, &sh);
+    } else {
+        print_text(&run, &p, &sh);
+    }
+    Ok(())
+}
+
+/// What was traced, for the printers.
+struct Run<'a> {
+    mesh: &'a skinbrdf_core::TriMesh,
+    rays: usize,
+    quality: BuildQuality,
+    builds: &'a [(BuildQuality, f64)],
+    reps: usize,
+}
+
+/// Times the primary rays: coherent grid (all threads, one thread) and per ray.
+fn primary(bvh: &MeshBvh, dirs: &[Vec3], width: usize, reps: usize) -> Primary {
+    let rays: Vec<MeshRay> = dirs.iter().map(|&d| MeshRay::new(ORIGIN, d)).collect();
     let (grid_s, grid) = best_of(reps, || {
-        bvh.intersect_grid(origin, &dirs, width, f32::INFINITY)
+        bvh.intersect_grid(ORIGIN, dirs, width, f32::INFINITY)
     });
     let hits = grid.iter().filter(|h| h.is_some()).count();
     let mut scratch = TraceScratch::default();
     let mut out = vec![None; dirs.len()];
     let (grid1_s, _) = best_of(reps, || {
-        bvh.intersect_grid_into(origin, &dirs, width, f32::INFINITY, &mut out, &mut scratch)
+        bvh.intersect_grid_into(ORIGIN, dirs, width, f32::INFINITY, &mut out, &mut scratch)
     });
     let (batch_s, batch) = best_of(reps, || bvh.intersect_batch(&rays));
     let batch_hits = batch.iter().filter(|h| h.is_some()).count();
@@ -104,16 +178,36 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .filter(|r| bvh.intersect(r.origin, r.dir, r.t_max).is_some())
             .count()
     });
-    // Shadow rays from the hits towards one light.
-    let light = Vec3::new(0.25, 0.15, 0.35);
-    let stop_short = 1e-5f32;
+    Primary {
+        grid,
+        hits,
+        batch_hits,
+        grid_s,
+        grid1_s,
+        batch_s,
+        single_s,
+        scratch,
+    }
+}
+
+/// Times the shadow rays from the hits towards one light, per ray and coherent, and counts
+/// where the two differ.
+fn shadow(
+    bvh: &MeshBvh,
+    mesh: &skinbrdf_core::TriMesh,
+    dirs: &[Vec3],
+    grid: &[Option<Hit>],
+    width: usize,
+    reps: usize,
+) -> Shadow {
+    let (light, stop_short) = (LIGHT, STOP_SHORT_M);
     let origins: Vec<Vec3> = grid
         .iter()
-        .zip(&dirs)
+        .zip(dirs)
         .map(|(h, d)| match h {
             Some(h) => {
                 let ng = mesh.face_normal_area2(h.triangle as usize).normalize();
-                origin + *d * h.t_m + ng * 1e-5
+                ORIGIN + *d * h.t_m + ng * 1e-5
             }
             None => Vec3::NAN,
         })
@@ -129,27 +223,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })
         })
         .collect();
-    let ns = shadow_rays.len() as f64;
-    let (sh_batch_s, sh_batch) = best_of(reps, || bvh.occluded_batch(&shadow_rays));
-    let (sh_single_s, _) = best_of(reps.min(3), || {
+    let (batch_s, sh_batch) = best_of(reps, || bvh.occluded_batch(&shadow_rays));
+    let (single_s, _) = best_of(reps.min(3), || {
         shadow_rays
             .iter()
             .filter(|r| bvh.occluded(r.origin, r.dir, r.t_max))
             .count()
     });
-    let (sh_grid_s, sh_grid) = best_of(reps, || {
+    let (grid_s, sh_grid) = best_of(reps, || {
         bvh.occluded_toward_grid(light, &origins, width, stop_short)
     });
-    let mut sh_scratch = ShadowScratch::default();
+    let mut scratch = ShadowScratch::default();
     let mut sh_out = vec![false; origins.len()];
-    let (sh_grid1_s, _) = best_of(reps, || {
+    let (grid1_s, _) = best_of(reps, || {
         bvh.occluded_toward_grid_into(
             light,
             &origins,
             width,
             stop_short,
             &mut sh_out,
-            &mut sh_scratch,
+            &mut scratch,
         )
     });
     let sh_grid_valid: Vec<bool> = origins
@@ -159,84 +252,128 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .map(|(_, b)| *b)
         .collect();
     let shadowed = sh_batch.iter().filter(|b| **b).count();
-    let shadow_differ = sh_grid_valid
+    let differ = sh_grid_valid
         .iter()
         .zip(&sh_batch)
         .filter(|(a, b)| a != b)
         .count();
+    Shadow {
+        rays: shadow_rays.len(),
+        shadowed,
+        differ,
+        grid_s,
+        grid1_s,
+        batch_s,
+        single_s,
+        scratch,
+    }
+}
+
+fn print_json(run: &Run<'_>, p: &Primary, sh: &Shadow) {
+    let (mesh, dirs_len, quality, reps) = (run.mesh, run.rays, run.quality, run.reps);
+    let (hits, batch_hits, grid_s, grid1_s, batch_s, single_s, scratch) = (
+        p.hits,
+        p.batch_hits,
+        p.grid_s,
+        p.grid1_s,
+        p.batch_s,
+        p.single_s,
+        &p.scratch,
+    );
+    let (shadowed, shadow_differ) = (sh.shadowed, sh.differ);
+    let (sh_grid_s, sh_grid1_s, sh_batch_s, sh_single_s) =
+        (sh.grid_s, sh.grid1_s, sh.batch_s, sh.single_s);
     let tiles = scratch.tiles + scratch.fallback_tiles;
     let threads = rayon::current_num_threads();
+    let b: Vec<String> = run
+        .builds
+        .iter()
+        .map(|(q, s)| format!("\"{}\": {s:.4}", q.name()))
+        .collect();
+    println!(
+        "{{\"triangles\": {}, \"rays\": {}, \"hits\": {hits}, \"per_ray_hits\": {batch_hits}, \"threads\": {threads}, \"quality\": \"{}\", \"build_s\": {{{}}}, \"grid_s\": {grid_s:.4}, \"grid_1_thread_s\": {grid1_s:.4}, \"per_ray_s\": {batch_s:.4}, \"per_ray_1_thread_s\": {single_s:.4}, \"fallback_tiles\": {}, \"tiles\": {tiles}, \"mean_candidates\": {:.1}, \"shadow_rays\": {}, \"shadowed\": {shadowed}, \"shadow_differ\": {shadow_differ}, \"shadow_grid_s\": {sh_grid_s:.4}, \"shadow_grid_1_thread_s\": {sh_grid1_s:.4}, \"shadow_per_ray_s\": {sh_batch_s:.4}, \"shadow_per_ray_1_thread_s\": {sh_single_s:.4}}}",
+        mesh.indices.len(),
+        dirs_len,
+        quality.name(),
+        b.join(", "),
+        scratch.fallback_tiles / reps.max(1) as u64,
+        scratch.candidates as f64 / scratch.tiles.max(1) as f64,
+        sh.rays,
+    );
+}
+
+fn print_text(run: &Run<'_>, p: &Primary, sh: &Shadow) {
+    let (mesh, dirs_len, quality, builds, reps) =
+        (run.mesh, run.rays, run.quality, run.builds, run.reps);
+    let (hits, batch_hits, grid_s, grid1_s, batch_s, single_s, scratch) = (
+        p.hits,
+        p.batch_hits,
+        p.grid_s,
+        p.grid1_s,
+        p.batch_s,
+        p.single_s,
+        &p.scratch,
+    );
+    let (shadowed, shadow_differ, sh_scratch) = (sh.shadowed, sh.differ, &sh.scratch);
+    let (sh_grid_s, sh_grid1_s, sh_batch_s, sh_single_s) =
+        (sh.grid_s, sh.grid1_s, sh.batch_s, sh.single_s);
+    let light = LIGHT;
+    let threads = rayon::current_num_threads();
+    let tiles = scratch.tiles + scratch.fallback_tiles;
+    let (n, ns) = (dirs_len as f64, sh.rays as f64);
     let mrays = |s: f64| n / s / 1e6;
-    if json {
-        let b: Vec<String> = builds
-            .iter()
-            .map(|(q, s)| format!("\"{}\": {s:.4}", q.name()))
-            .collect();
-        println!(
-            "{{\"triangles\": {}, \"rays\": {}, \"hits\": {hits}, \"per_ray_hits\": {batch_hits}, \"threads\": {threads}, \"quality\": \"{}\", \"build_s\": {{{}}}, \"grid_s\": {grid_s:.4}, \"grid_1_thread_s\": {grid1_s:.4}, \"per_ray_s\": {batch_s:.4}, \"per_ray_1_thread_s\": {single_s:.4}, \"fallback_tiles\": {}, \"tiles\": {tiles}, \"mean_candidates\": {:.1}, \"shadow_rays\": {}, \"shadowed\": {shadowed}, \"shadow_differ\": {shadow_differ}, \"shadow_grid_s\": {sh_grid_s:.4}, \"shadow_grid_1_thread_s\": {sh_grid1_s:.4}, \"shadow_per_ray_s\": {sh_batch_s:.4}, \"shadow_per_ray_1_thread_s\": {sh_single_s:.4}}}",
-            mesh.indices.len(),
-            dirs.len(),
-            quality.name(),
-            b.join(", "),
-            scratch.fallback_tiles / reps.max(1) as u64,
-            scratch.candidates as f64 / scratch.tiles.max(1) as f64,
-            shadow_rays.len(),
-        );
-    } else {
-        println!(
-            "{} triangles, {} rays, {hits} hits (per-ray path {batch_hits}), {threads} rayon threads, quality {}",
-            mesh.indices.len(),
-            dirs.len(),
-            quality.name()
-        );
-        for (q, s) in &builds {
-            println!("build {:10} {s:.3} s", q.name());
-        }
-        println!(
-            "grid (coherent), {threads} threads   {grid_s:.4} s  {:.2} Mrays/s",
-            mrays(grid_s)
-        );
-        println!(
-            "grid (coherent), 1 thread    {grid1_s:.4} s  {:.2} Mrays/s",
-            mrays(grid1_s)
-        );
-        println!(
-            "per ray, {threads} threads           {batch_s:.4} s  {:.2} Mrays/s",
-            mrays(batch_s)
-        );
-        println!(
-            "per ray, 1 thread            {single_s:.4} s  {:.2} Mrays/s",
-            mrays(single_s)
-        );
-        println!(
-            "tiles {tiles} ({} per ray), mean candidates per tile {:.1}",
-            scratch.fallback_tiles,
-            scratch.candidates as f64 / scratch.tiles.max(1) as f64
-        );
-        let ms = |s: f64| ns / s / 1e6;
-        println!(
-            "shadow rays: {} towards {light:?}, {shadowed} occluded, coherent differs on {shadow_differ}",
-            shadow_rays.len()
-        );
-        println!(
-            "shadow coherent, {threads} threads  {sh_grid_s:.4} s  {:.2} Mrays/s",
-            ms(sh_grid_s)
-        );
-        println!(
-            "shadow coherent, 1 thread   {sh_grid1_s:.4} s  {:.2} Mrays/s ({} tiles, {} per ray, {:.1} candidates per tile)",
-            ms(sh_grid1_s),
-            sh_scratch.tiles / reps.max(1) as u64,
-            sh_scratch.fallback_tiles / reps.max(1) as u64,
-            sh_scratch.candidates as f64 / sh_scratch.tiles.max(1) as f64
-        );
-        println!(
-            "shadow per ray, {threads} threads   {sh_batch_s:.4} s  {:.2} Mrays/s",
-            ms(sh_batch_s)
-        );
-        println!(
-            "shadow per ray, 1 thread    {sh_single_s:.4} s  {:.2} Mrays/s",
-            ms(sh_single_s)
-        );
+    println!(
+        "{} triangles, {} rays, {hits} hits (per-ray path {batch_hits}), {threads} rayon threads, quality {}",
+        mesh.indices.len(),
+        dirs_len,
+        quality.name()
+    );
+    for (q, s) in builds {
+        println!("build {:10} {s:.3} s", q.name());
     }
-    Ok(())
+    println!(
+        "grid (coherent), {threads} threads   {grid_s:.4} s  {:.2} Mrays/s",
+        mrays(grid_s)
+    );
+    println!(
+        "grid (coherent), 1 thread    {grid1_s:.4} s  {:.2} Mrays/s",
+        mrays(grid1_s)
+    );
+    println!(
+        "per ray, {threads} threads           {batch_s:.4} s  {:.2} Mrays/s",
+        mrays(batch_s)
+    );
+    println!(
+        "per ray, 1 thread            {single_s:.4} s  {:.2} Mrays/s",
+        mrays(single_s)
+    );
+    println!(
+        "tiles {tiles} ({} per ray), mean candidates per tile {:.1}",
+        scratch.fallback_tiles,
+        scratch.candidates as f64 / scratch.tiles.max(1) as f64
+    );
+    let ms = |s: f64| ns / s / 1e6;
+    println!(
+        "shadow rays: {} towards {light:?}, {shadowed} occluded, coherent differs on {shadow_differ}",
+        sh.rays
+    );
+    println!(
+        "shadow coherent, {threads} threads  {sh_grid_s:.4} s  {:.2} Mrays/s",
+        ms(sh_grid_s)
+    );
+    println!(
+        "shadow coherent, 1 thread   {sh_grid1_s:.4} s  {:.2} Mrays/s ({} tiles, {} per ray, {:.1} candidates per tile)",
+        ms(sh_grid1_s),
+        sh_scratch.tiles / reps.max(1) as u64,
+        sh_scratch.fallback_tiles / reps.max(1) as u64,
+        sh_scratch.candidates as f64 / sh_scratch.tiles.max(1) as f64
+    );
+    println!(
+        "shadow per ray, {threads} threads   {sh_batch_s:.4} s  {:.2} Mrays/s",
+        ms(sh_batch_s)
+    );
+    println!(
+        "shadow per ray, 1 thread    {sh_single_s:.4} s  {:.2} Mrays/s",
+        ms(sh_single_s)
+    );
 }

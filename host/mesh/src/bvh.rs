@@ -28,7 +28,7 @@ use obvhs::{
 use rayon::prelude::*;
 use skinbrdf_core::TriMesh;
 
-use crate::MeshError;
+use crate::error::MeshError;
 
 /// How much time to spend building for faster traversal: the obvhs build presets, cheapest
 /// first. Sweep them with [`BuildQuality::ALL`]; parse them from their [`BuildQuality::name`].

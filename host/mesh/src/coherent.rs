@@ -28,9 +28,9 @@
 //! need no ray). Scratch buffers are per band (no allocation per ray).
 
 use glam::{Vec3, Vec3A, Vec4};
-use rayon::prelude::*;
 
 use crate::bvh::{Hit, MeshBvh};
+use crate::tiled::{in_bands, trace_tiles, Cull, TileBuffers, TileScratch, TileTracer};
 
 /// Tile side, rays: the rays tested together against one candidate list.
 pub const TILE_PX: usize = 8;
@@ -49,11 +49,8 @@ pub const MAX_TILE_CANDIDATES: usize = 384;
 /// Reusable buffers and counters of the coherent tracer (one per thread or band).
 #[derive(Debug, Default, Clone)]
 pub struct TraceScratch {
-    stack: Vec<u32>,
-    cand: Vec<u32>,
-    super_cand: Vec<u32>,
+    bufs: TileBuffers<(usize, Vec3A)>,
     packs: Vec<Pack>,
-    tile: Vec<(usize, Vec3A)>,
     /// Tiles traced with shared candidates.
     pub tiles: u64,
     /// Tiles traced ray by ray (too wide or too many candidates).
@@ -84,31 +81,6 @@ pub(crate) fn tri_in_frustum(a: Vec3A, b: Vec3A, c: Vec3A, planes: &[Vec3A; 4]) 
     planes
         .iter()
         .all(|n| n.dot(a) >= 0.0 || n.dot(b) >= 0.0 || n.dot(c) >= 0.0)
-}
-
-/// The valid rays (finite, non-zero direction) of the grid cells `x0..x1` x `y0..y1`.
-fn gather(
-    dirs: &[Vec3],
-    n: usize,
-    width: usize,
-    (x0, x1): (usize, usize),
-    (y0, y1): (usize, usize),
-    tile: &mut Vec<(usize, Vec3A)>,
-) {
-    tile.clear();
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let i = y * width + x;
-            if i >= n {
-                return;
-            }
-            let d = dirs[i];
-            if d.is_finite() && d != Vec3::ZERO {
-                // -0.0 -> +0.0, as for single rays (obvhs's octant pitfall).
-                tile.push((i, Vec3A::new(d.x + 0.0, d.y + 0.0, d.z + 0.0)));
-            }
-        }
-    }
 }
 
 /// The four planes (through the origin, inward normals) bounding a set of rays, or `None`
@@ -178,12 +150,14 @@ impl MeshBvh {
         if width == 0 {
             return out;
         }
-        let band = SUPER_TILE_PX * width;
-        out.par_chunks_mut(band)
-            .zip(dirs.par_chunks(band))
-            .for_each_init(TraceScratch::default, |scratch, (o, d)| {
-                self.intersect_grid_into(origin, d, width, t_max, o, scratch)
-            });
+        in_bands(
+            dirs,
+            &mut out,
+            width,
+            SUPER_TILE_PX,
+            TraceScratch::default,
+            |scratch, d, o| self.intersect_grid_into(origin, d, width, t_max, o, scratch),
+        );
         out
     }
 
@@ -203,84 +177,96 @@ impl MeshBvh {
         if width == 0 || !origin.is_finite() || t_max.is_nan() {
             return;
         }
-        let o = Vec3A::from(origin);
-        let height = n.div_ceil(width);
-        let sc = scratch;
-        for ty in (0..height).step_by(SUPER_TILE_PX) {
-            for tx in (0..width).step_by(SUPER_TILE_PX) {
-                let (y1, x1) = (
-                    (ty + SUPER_TILE_PX).min(height),
-                    (tx + SUPER_TILE_PX).min(width),
-                );
-                gather(dirs, n, width, (tx, x1), (ty, y1), &mut sc.tile);
-                if sc.tile.is_empty() {
-                    continue;
-                }
-                let Some(planes) = frustum(&sc.tile) else {
-                    self.trace_per_ray(o, t_max, sc, out);
-                    continue;
-                };
-                self.frustum_candidates(o, &planes, sc);
-                if sc.cand.len() > MAX_SUPER_CANDIDATES {
-                    self.trace_per_ray(o, t_max, sc, out);
-                    continue;
-                }
-                std::mem::swap(&mut sc.cand, &mut sc.super_cand);
-                for sy in (ty..y1).step_by(TILE_PX) {
-                    for sx in (tx..x1).step_by(TILE_PX) {
-                        gather(
-                            dirs,
-                            n,
-                            width,
-                            (sx, (sx + TILE_PX).min(x1)),
-                            (sy, (sy + TILE_PX).min(y1)),
-                            &mut sc.tile,
-                        );
-                        if !sc.tile.is_empty() {
-                            self.trace_tile(o, t_max, sc, out);
-                        }
-                    }
-                }
-            }
-        }
-    }
-
-    fn trace_per_ray(&self, o: Vec3A, t_max: f32, sc: &mut TraceScratch, out: &mut [Option<Hit>]) {
-        sc.fallback_tiles += 1;
-        for &(i, d) in &sc.tile {
-            out[i] = self.intersect(o.into(), d.into(), t_max);
-        }
-    }
-
-    /// Traces the rays of `sc.tile` against the candidates of `sc.super_cand` that lie in the
-    /// tile's own frustum.
-    fn trace_tile(&self, o: Vec3A, t_max: f32, sc: &mut TraceScratch, out: &mut [Option<Hit>]) {
-        let Some(planes) = frustum(&sc.tile) else {
-            return self.trace_per_ray(o, t_max, sc, out);
+        let rays = GridRays {
+            bvh: self,
+            origin: Vec3A::from(origin),
+            dirs,
+            t_max,
         };
-        sc.cand.clear();
-        for &k in &sc.super_cand {
-            let [v0, e1, e2] = self.leaf_tris[k as usize];
-            let a = v0 - o;
-            if tri_in_frustum(a, a + e1, a + e2, &planes) {
-                sc.cand.push(k);
-            }
+        trace_tiles(&rays, n, width, scratch, out);
+    }
+}
+
+/// The four planes of a tile's frustum (through the origin, inward normals).
+struct Frustum([Vec3A; 4]);
+
+impl Cull for Frustum {
+    fn keeps_box(&self, lo: Vec3A, hi: Vec3A) -> bool {
+        box_in_frustum(lo, hi, &self.0)
+    }
+
+    fn keeps_tri(&self, a: Vec3A, b: Vec3A, c: Vec3A) -> bool {
+        tri_in_frustum(a, b, c, &self.0)
+    }
+}
+
+/// Camera rays of one band: one origin, a direction per grid cell.
+struct GridRays<'a> {
+    bvh: &'a MeshBvh,
+    origin: Vec3A,
+    dirs: &'a [Vec3],
+    t_max: f32,
+}
+
+impl TileScratch<(usize, Vec3A)> for TraceScratch {
+    fn buffers(&mut self) -> &mut TileBuffers<(usize, Vec3A)> {
+        &mut self.bufs
+    }
+
+    fn count_fallback(&mut self) {
+        self.fallback_tiles += 1;
+    }
+
+    fn count_tile(&mut self, candidates: usize) {
+        self.tiles += 1;
+        self.candidates += candidates as u64;
+    }
+}
+
+impl TileTracer for GridRays<'_> {
+    type Ray = (usize, Vec3A);
+    type Out = Option<Hit>;
+    type Scratch = TraceScratch;
+    type Cull = Frustum;
+    const TILE_PX: usize = TILE_PX;
+    const SUPER_TILE_PX: usize = SUPER_TILE_PX;
+    const MAX_SUPER_CANDIDATES: usize = MAX_SUPER_CANDIDATES;
+    const MAX_TILE_CANDIDATES: usize = MAX_TILE_CANDIDATES;
+
+    fn bvh(&self) -> &MeshBvh {
+        self.bvh
+    }
+
+    fn apex(&self) -> Vec3A {
+        self.origin
+    }
+
+    /// The valid rays: finite, non-zero direction.
+    fn ray(&self, i: usize) -> Option<(usize, Vec3A)> {
+        let d = self.dirs[i];
+        // -0.0 -> +0.0, as for single rays (obvhs's octant pitfall).
+        (d.is_finite() && d != Vec3::ZERO).then(|| (i, Vec3A::new(d.x + 0.0, d.y + 0.0, d.z + 0.0)))
+    }
+
+    fn cull(&self, tile: &[(usize, Vec3A)]) -> Option<Frustum> {
+        frustum(tile).map(Frustum)
+    }
+
+    fn trace_per_ray(&self, tile: &[(usize, Vec3A)], out: &mut [Option<Hit>]) {
+        for &(i, d) in tile {
+            out[i] = self.bvh.intersect(self.origin.into(), d.into(), self.t_max);
         }
-        if sc.cand.len() > MAX_TILE_CANDIDATES {
-            return self.trace_per_ray(o, t_max, sc, out);
-        }
-        sc.tiles += 1;
-        sc.candidates += sc.cand.len() as u64;
-        if sc.cand.is_empty() {
-            return;
-        }
+    }
+
+    /// Packs the candidates four to a SIMD lane group, then finds each ray's closest hit.
+    fn trace_candidates(&self, sc: &mut TraceScratch, out: &mut [Option<Hit>]) {
         sc.packs.clear();
-        for chunk in sc.cand.chunks(4) {
+        for chunk in sc.bufs.cand.chunks(4) {
             let mut l = [[0.0f32; 13]; 4];
             let mut slot = [u32::MAX; 4];
             for (lane, &k) in chunk.iter().enumerate() {
-                let [v0, e1, e2] = self.leaf_tris[k as usize];
-                let s = o - v0;
+                let [v0, e1, e2] = self.bvh.leaf_tris[k as usize];
+                let s = self.origin - v0;
                 let q = s.cross(e1);
                 let tn = e2.dot(q);
                 l[lane] = [
@@ -302,9 +288,9 @@ impl MeshBvh {
                 slot,
             });
         }
-        for &(i, d) in &sc.tile {
+        for &(i, d) in &sc.bufs.tile {
             let (dx, dy, dz) = (Vec4::splat(d.x), Vec4::splat(d.y), Vec4::splat(d.z));
-            let mut best_t = t_max;
+            let mut best_t = self.t_max;
             let mut best_slot = u32::MAX;
             let (mut best_u, mut best_v) = (0.0f32, 0.0f32);
             for p in &sc.packs {
@@ -340,44 +326,10 @@ impl MeshBvh {
                 // same corners in the same order as `intersect`'s.
                 out[i] = Some(Hit {
                     t_m: best_t,
-                    triangle: self.tri_ids[best_slot as usize],
+                    triangle: self.bvh.tri_ids[best_slot as usize],
                     u: best_u,
                     v: best_v,
                 });
-            }
-        }
-    }
-
-    /// Leaf slots of the triangles that can lie in the frustum (planes through `o`).
-    fn frustum_candidates(&self, o: Vec3A, planes: &[Vec3A; 4], sc: &mut TraceScratch) {
-        sc.cand.clear();
-        sc.stack.clear();
-        if self.bvh.nodes.is_empty() {
-            return;
-        }
-        sc.stack.push(0);
-        while let Some(ni) = sc.stack.pop() {
-            let node = &self.bvh.nodes[ni as usize];
-            for ch in 0..8 {
-                if node.is_child_empty(ch) {
-                    continue;
-                }
-                let b = node.child_aabb(ch);
-                if !box_in_frustum(b.min - o, b.max - o, planes) {
-                    continue;
-                }
-                if node.is_leaf(ch) {
-                    let (first, count) = node.child_primitives(ch);
-                    for k in first..first + count {
-                        let [v0, e1, e2] = self.leaf_tris[k as usize];
-                        let a = v0 - o;
-                        if tri_in_frustum(a, a + e1, a + e2, planes) {
-                            sc.cand.push(k);
-                        }
-                    }
-                } else {
-                    sc.stack.push(node.child_node_index(ch));
-                }
             }
         }
     }

@@ -11,78 +11,12 @@
 
 use std::path::Path;
 
-use glam::Vec3;
 use skinbrdf_core::TriMesh;
 
-use crate::validate::{repair, MeshReport, RepairPolicy};
-use crate::MeshError;
-
-/// Length unit of the coordinates in a scan file.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub enum LengthUnit {
-    /// Metres.
-    Metres,
-    /// Centimetres.
-    Centimetres,
-    /// Millimetres.
-    Millimetres,
-    /// Inches.
-    Inches,
-    /// Any unit, by its size in metres.
-    Custom(f64),
-    /// Guess from the bounding box (see the module documentation).
-    Auto,
-}
-
-impl LengthUnit {
-    /// Metres per file unit (`None` for `Auto`).
-    pub fn metres_per_unit(self) -> Option<f64> {
-        Some(match self {
-            Self::Metres => 1.0,
-            Self::Centimetres => 0.01,
-            Self::Millimetres => 0.001,
-            Self::Inches => 0.0254,
-            Self::Custom(m) => m,
-            Self::Auto => return None,
-        })
-    }
-
-    /// Parses `m`, `cm`, `mm`, `in`, `auto` or a number of metres per unit.
-    pub fn parse(s: &str) -> Option<Self> {
-        Some(match s {
-            "m" => Self::Metres,
-            "cm" => Self::Centimetres,
-            "mm" => Self::Millimetres,
-            "in" | "inch" => Self::Inches,
-            "auto" => Self::Auto,
-            other => {
-                let v: f64 = other.parse().ok()?;
-                if !(v.is_finite() && v > 0.0) {
-                    return None;
-                }
-                Self::Custom(v)
-            }
-        })
-    }
-}
-
-/// Options for [`load_mesh`].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LoadOptions {
-    /// Unit of the file's coordinates.
-    pub unit: LengthUnit,
-    /// What to do about defects.
-    pub policy: RepairPolicy,
-}
-
-impl Default for LoadOptions {
-    fn default() -> Self {
-        Self {
-            unit: LengthUnit::Auto,
-            policy: RepairPolicy::repair(),
-        }
-    }
-}
+use crate::error::{unknown_format, MeshError};
+use crate::load_options::{gltf_unit, scale_to_metres};
+pub use crate::load_options::{guess_unit, LengthUnit, LoadOptions};
+use crate::validate::{repair, MeshReport};
 
 /// A loaded, validated mesh in metres with what was done to it.
 #[derive(Debug, Clone)]
@@ -93,23 +27,6 @@ pub struct LoadedMesh {
     pub unit: LengthUnit,
     /// Validation and repair.
     pub report: MeshReport,
-}
-
-/// Guesses the unit from the largest bounding-box extent (see the module docs).
-pub fn guess_unit(mesh: &TriMesh) -> LengthUnit {
-    let finite = mesh.positions.iter().filter(|p| p.is_finite());
-    let (lo, hi) = finite.fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
-    let extent = (hi - lo).max_element();
-    if !(extent.is_finite()) || extent < 2.0 {
-        LengthUnit::Metres
-    } else if extent < 50.0 {
-        LengthUnit::Centimetres
-    } else {
-        LengthUnit::Millimetres
-    }
 }
 
 /// Loads `.ply`, `.obj`, `.glb` or `.gltf`, converts to metres and validates/repairs per
@@ -135,48 +52,18 @@ pub fn load_mesh(path: &Path, opts: &LoadOptions) -> Result<LoadedMesh, MeshErro
     Ok(LoadedMesh { mesh, unit, report })
 }
 
-/// The error for a file whose extension names no format the crate reads.
-pub(crate) fn unknown_format(path: &Path) -> MeshError {
-    MeshError::Parse {
-        path: path.to_path_buf(),
-        reason: "unknown mesh format (expected .ply, .obj, .glb or .gltf)".into(),
-    }
-}
-
-/// The unit of a glTF file: metres by specification when the caller leaves it to the loader.
-pub(crate) fn gltf_unit(unit: LengthUnit) -> LengthUnit {
-    match unit {
-        LengthUnit::Auto => LengthUnit::Metres,
-        u => u,
-    }
-}
-
-/// Scales a mesh read in `unit` (guessed when `Auto`) to metres; returns the unit used.
-pub(crate) fn scale_to_metres(mesh: &mut TriMesh, unit: LengthUnit) -> LengthUnit {
-    let unit = match unit {
-        LengthUnit::Auto => guess_unit(mesh),
-        u => u,
-    };
-    let scale = unit.metres_per_unit().unwrap_or(1.0) as f32;
-    if scale != 1.0 {
-        for p in &mut mesh.positions {
-            *p *= scale;
-        }
-    }
-    unit
-}
-
 /// Reads an OBJ file (all objects merged, polygons triangulated, normals dropped: OBJ normals
 /// are indexed separately from positions and the scan's normals are refitted anyway). Texture
 /// coordinates and materials are ignored here (see [`crate::textured::load_textured`]), and a
 /// missing MTL file is no error for the geometry.
 pub fn read_obj(path: &Path) -> Result<TriMesh, MeshError> {
-    Ok(crate::textured::read_obj_data(path)?.mesh)
+    Ok(crate::obj::read_obj_data(path)?.mesh)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     #[test]
     fn millimetre_ply_becomes_metres() {

@@ -28,7 +28,8 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use skinbrdf_core::TriMesh;
 
-use crate::{Hit, MeshError};
+use crate::bvh::Hit;
+use crate::error::MeshError;
 
 /// Fewest neighbours (the vertex included) a plane fit needs; fewer falls back.
 pub const MIN_FIT_POINTS: usize = 4;

@@ -17,7 +17,7 @@ use std::path::Path;
 use glam::Vec3;
 use skinbrdf_core::TriMesh;
 
-use crate::MeshError;
+use crate::error::MeshError;
 
 /// Storage format of a PLY file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -332,7 +332,7 @@ pub type VertexColours = Vec<[f32; 3]>;
 pub fn read_ply_coloured(
     path: &Path,
 ) -> Result<(TriMesh, PlyInfo, Option<VertexColours>), MeshError> {
-    let (file, len) = crate::open_scan(path)?;
+    let (file, len) = crate::open::open_scan(path)?;
     read_ply_sized(BufReader::with_capacity(1 << 20, file), path, Some(len))
 }
 
@@ -420,144 +420,17 @@ fn read_ply_sized<R: BufRead>(
     let mut saw_vertex = false;
     let mut saw_face = false;
     for el in &elements {
-        let prop_index = |n: &str| {
-            el.properties
-                .iter()
-                .position(|p| matches!(p, Property::Scalar { name, .. } if name == n))
-        };
         match el.name.as_str() {
             "vertex" => {
                 saw_vertex = true;
-                let xyz = [prop_index("x"), prop_index("y"), prop_index("z")];
-                let [Some(ix), Some(iy), Some(iz)] = xyz else {
-                    return Err(rd.err("element `vertex` lacks one of the properties x, y, z"));
-                };
-                let nrm = [prop_index("nx"), prop_index("ny"), prop_index("nz")];
-                have_normals = nrm.iter().all(Option::is_some);
-                let colour_prop = |long: &str, short: &str| {
-                    el.properties.iter().position(|p| {
-                        matches!(p, Property::Scalar { name, .. } if name == long || name == short)
-                    })
-                };
-                let rgb = [
-                    colour_prop("red", "r"),
-                    colour_prop("green", "g"),
-                    colour_prop("blue", "b"),
-                ];
-                let rgb_scale = rgb.map(|k| match k.map(|k| &el.properties[k]) {
-                    Some(Property::Scalar { ty, .. }) => match ty {
-                        Scalar::U8 | Scalar::I8 => 1.0 / 255.0,
-                        Scalar::U16 | Scalar::I16 => 1.0 / 65535.0,
-                        Scalar::U32 | Scalar::I32 => 1.0 / f64::from(u32::MAX),
-                        Scalar::F32 | Scalar::F64 => 1.0,
-                    },
-                    _ => 1.0,
-                });
-                have_colours = rgb.iter().all(Option::is_some);
-                mesh.positions.reserve(el.count.min(MAX_RESERVED_ELEMENTS));
-                let mut vals = vec![0.0f64; el.properties.len()];
-                for i in 0..el.count {
-                    rd.begin_element();
-                    for (k, p) in el.properties.iter().enumerate() {
-                        let what = || format!("vertex {i}");
-                        match p {
-                            Property::Scalar { ty, .. } => vals[k] = rd.read(*ty, &what)?,
-                            Property::List { count, item, .. } => {
-                                let c = rd.read(*count, &what)?;
-                                for _ in 0..c as usize {
-                                    rd.read(*item, &what)?;
-                                }
-                            }
-                        }
-                    }
-                    mesh.positions.push(Vec3::new(
-                        vals[ix] as f32,
-                        vals[iy] as f32,
-                        vals[iz] as f32,
-                    ));
-                    if let [Some(a), Some(b), Some(c)] = nrm {
-                        normals.push(Vec3::new(vals[a] as f32, vals[b] as f32, vals[c] as f32));
-                    }
-                    if let [Some(a), Some(b), Some(c)] = rgb {
-                        colours.push([
-                            (vals[a] * rgb_scale[0]) as f32,
-                            (vals[b] * rgb_scale[1]) as f32,
-                            (vals[c] * rgb_scale[2]) as f32,
-                        ]);
-                    }
-                }
+                (have_normals, have_colours) =
+                    read_vertices(&mut rd, el, &mut mesh, &mut normals, &mut colours)?;
             }
             "face" => {
                 saw_face = true;
-                let list = el.properties.iter().position(|p| {
-                    matches!(p, Property::List { name, .. } if name == "vertex_indices" || name == "vertex_index")
-                });
-                let Some(list) = list else {
-                    return Err(rd.err(
-                        "element `face` has no list property `vertex_indices` or `vertex_index`",
-                    ));
-                };
-                mesh.indices.reserve(el.count.min(MAX_RESERVED_ELEMENTS));
-                let mut corners: Vec<u32> = Vec::with_capacity(8);
-                for i in 0..el.count {
-                    rd.begin_element();
-                    for (k, p) in el.properties.iter().enumerate() {
-                        let what = || format!("face {i}");
-                        match p {
-                            Property::Scalar { ty, .. } => {
-                                rd.read(*ty, &what)?;
-                            }
-                            Property::List { count, item, .. } => {
-                                let c = rd.read(*count, &what)?;
-                                if !(0.0..=1e6).contains(&c) {
-                                    return Err(rd.err(format!("face {i}: list length {c}")));
-                                }
-                                corners.clear();
-                                for _ in 0..c as usize {
-                                    let v = rd.read(*item, &what)?;
-                                    if k == list {
-                                        if v < 0.0 || v.fract() != 0.0 || v > u32::MAX as f64 {
-                                            return Err(rd.err(format!(
-                                                "face {i}: vertex index {v} is not a valid index"
-                                            )));
-                                        }
-                                        corners.push(v as u32);
-                                    }
-                                }
-                            }
-                        }
-                    }
-                    if corners.len() < 3 {
-                        info.faces_dropped += 1;
-                        continue;
-                    }
-                    if corners.len() > 3 {
-                        info.polygons_triangulated += 1;
-                    }
-                    for w in 1..corners.len() - 1 {
-                        mesh.indices.push([corners[0], corners[w], corners[w + 1]]);
-                    }
-                }
+                read_faces(&mut rd, el, &mut mesh, &mut info)?;
             }
-            _ => {
-                for i in 0..el.count {
-                    rd.begin_element();
-                    for p in &el.properties {
-                        let what = || format!("element `{}` {i}", el.name);
-                        match p {
-                            Property::Scalar { ty, .. } => {
-                                rd.read(*ty, &what)?;
-                            }
-                            Property::List { count, item, .. } => {
-                                let c = rd.read(*count, &what)?;
-                                for _ in 0..c as usize {
-                                    rd.read(*item, &what)?;
-                                }
-                            }
-                        }
-                    }
-                }
-            }
+            _ => skip_element(&mut rd, el)?,
         }
     }
     if !saw_vertex {
@@ -582,6 +455,160 @@ fn read_ply_sized<R: BufRead>(
         mesh.normals = Some(normals);
     }
     Ok((mesh, info, have_colours.then_some(colours)))
+}
+
+/// Reads the `vertex` element: positions, and the normals and colours when it has them
+/// (returned: whether it has normals, whether it has colours).
+fn read_vertices<R: BufRead>(
+    rd: &mut Reader<'_, R>,
+    el: &Element,
+    mesh: &mut TriMesh,
+    normals: &mut Vec<Vec3>,
+    colours: &mut VertexColours,
+) -> Result<(bool, bool), MeshError> {
+    let prop_index = |n: &str| {
+        el.properties
+            .iter()
+            .position(|p| matches!(p, Property::Scalar { name, .. } if name == n))
+    };
+    let xyz = [prop_index("x"), prop_index("y"), prop_index("z")];
+    let [Some(ix), Some(iy), Some(iz)] = xyz else {
+        return Err(rd.err("element `vertex` lacks one of the properties x, y, z"));
+    };
+    let nrm = [prop_index("nx"), prop_index("ny"), prop_index("nz")];
+    let have_normals = nrm.iter().all(Option::is_some);
+    let colour_prop = |long: &str, short: &str| {
+        el.properties.iter().position(
+            |p| matches!(p, Property::Scalar { name, .. } if name == long || name == short),
+        )
+    };
+    let rgb = [
+        colour_prop("red", "r"),
+        colour_prop("green", "g"),
+        colour_prop("blue", "b"),
+    ];
+    let rgb_scale = rgb.map(|k| match k.map(|k| &el.properties[k]) {
+        Some(Property::Scalar { ty, .. }) => match ty {
+            Scalar::U8 | Scalar::I8 => 1.0 / 255.0,
+            Scalar::U16 | Scalar::I16 => 1.0 / 65535.0,
+            Scalar::U32 | Scalar::I32 => 1.0 / f64::from(u32::MAX),
+            Scalar::F32 | Scalar::F64 => 1.0,
+        },
+        _ => 1.0,
+    });
+    let have_colours = rgb.iter().all(Option::is_some);
+    mesh.positions.reserve(el.count.min(MAX_RESERVED_ELEMENTS));
+    let mut vals = vec![0.0f64; el.properties.len()];
+    for i in 0..el.count {
+        rd.begin_element();
+        for (k, p) in el.properties.iter().enumerate() {
+            let what = || format!("vertex {i}");
+            match p {
+                Property::Scalar { ty, .. } => vals[k] = rd.read(*ty, &what)?,
+                Property::List { count, item, .. } => {
+                    let c = rd.read(*count, &what)?;
+                    for _ in 0..c as usize {
+                        rd.read(*item, &what)?;
+                    }
+                }
+            }
+        }
+        mesh.positions
+            .push(Vec3::new(vals[ix] as f32, vals[iy] as f32, vals[iz] as f32));
+        if let [Some(a), Some(b), Some(c)] = nrm {
+            normals.push(Vec3::new(vals[a] as f32, vals[b] as f32, vals[c] as f32));
+        }
+        if let [Some(a), Some(b), Some(c)] = rgb {
+            colours.push([
+                (vals[a] * rgb_scale[0]) as f32,
+                (vals[b] * rgb_scale[1]) as f32,
+                (vals[c] * rgb_scale[2]) as f32,
+            ]);
+        }
+    }
+    Ok((have_normals, have_colours))
+}
+
+/// Reads the `face` element: polygons fanned into triangles, faces of fewer than three corners
+/// dropped (both counted in `info`).
+fn read_faces<R: BufRead>(
+    rd: &mut Reader<'_, R>,
+    el: &Element,
+    mesh: &mut TriMesh,
+    info: &mut PlyInfo,
+) -> Result<(), MeshError> {
+    let list = el.properties.iter().position(|p| {
+        matches!(p, Property::List { name, .. } if name == "vertex_indices" || name == "vertex_index")
+    });
+    let Some(list) = list else {
+        return Err(
+            rd.err("element `face` has no list property `vertex_indices` or `vertex_index`")
+        );
+    };
+    mesh.indices.reserve(el.count.min(MAX_RESERVED_ELEMENTS));
+    let mut corners: Vec<u32> = Vec::with_capacity(8);
+    for i in 0..el.count {
+        rd.begin_element();
+        for (k, p) in el.properties.iter().enumerate() {
+            let what = || format!("face {i}");
+            match p {
+                Property::Scalar { ty, .. } => {
+                    rd.read(*ty, &what)?;
+                }
+                Property::List { count, item, .. } => {
+                    let c = rd.read(*count, &what)?;
+                    if !(0.0..=1e6).contains(&c) {
+                        return Err(rd.err(format!("face {i}: list length {c}")));
+                    }
+                    corners.clear();
+                    for _ in 0..c as usize {
+                        let v = rd.read(*item, &what)?;
+                        if k == list {
+                            if v < 0.0 || v.fract() != 0.0 || v > u32::MAX as f64 {
+                                return Err(rd.err(format!(
+                                    "face {i}: vertex index {v} is not a valid index"
+                                )));
+                            }
+                            corners.push(v as u32);
+                        }
+                    }
+                }
+            }
+        }
+        if corners.len() < 3 {
+            info.faces_dropped += 1;
+            continue;
+        }
+        if corners.len() > 3 {
+            info.polygons_triangulated += 1;
+        }
+        for w in 1..corners.len() - 1 {
+            mesh.indices.push([corners[0], corners[w], corners[w + 1]]);
+        }
+    }
+    Ok(())
+}
+
+/// Reads past an element the mesh does not use.
+fn skip_element<R: BufRead>(rd: &mut Reader<'_, R>, el: &Element) -> Result<(), MeshError> {
+    for i in 0..el.count {
+        rd.begin_element();
+        for p in &el.properties {
+            let what = || format!("element `{}` {i}", el.name);
+            match p {
+                Property::Scalar { ty, .. } => {
+                    rd.read(*ty, &what)?;
+                }
+                Property::List { count, item, .. } => {
+                    let c = rd.read(*count, &what)?;
+                    for _ in 0..c as usize {
+                        rd.read(*item, &what)?;
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Writes the mesh as binary little-endian PLY, atomically (temporary file + rename).

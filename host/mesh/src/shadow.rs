@@ -23,10 +23,10 @@
 //! non-finite origin, or an origin at the target, are not occluded (as with single rays).
 
 use glam::{Vec3, Vec3A, Vec4};
-use rayon::prelude::*;
 
 use crate::bvh::MeshBvh;
 use crate::coherent::{box_in_frustum, frustum_with_axis, tri_in_frustum, FRUSTUM_PAD};
+use crate::tiled::{in_bands, trace_tiles, Cull, TileBuffers, TileScratch, TileTracer};
 
 /// Tile side, origins: the rays tested together against one candidate list.
 pub const SHADOW_TILE: usize = 8;
@@ -51,12 +51,9 @@ pub fn shadow_ray(origin: Vec3, target: Vec3, stop_short_m: f32) -> Option<(Vec3
 /// Reusable buffers and counters of the coherent shadow tracer.
 #[derive(Debug, Default, Clone)]
 pub struct ShadowScratch {
-    stack: Vec<u32>,
-    cand: Vec<u32>,
-    super_cand: Vec<u32>,
+    /// The driver's buffers; a tile's rays are [`ShadowRay`]s.
+    bufs: TileBuffers<ShadowRay>,
     packs: Vec<ShadowPack>,
-    /// `(index, o − target, origin, unit direction, t_max)` of the tile's rays.
-    tile: Vec<(usize, Vec3A, Vec3A, Vec3A, f32)>,
     /// Tiles traced with shared candidates.
     pub tiles: u64,
     /// Tiles traced ray by ray.
@@ -64,6 +61,9 @@ pub struct ShadowScratch {
     /// Candidate triangles summed over tiles.
     pub candidates: u64,
 }
+
+/// `(index, o − target, origin, unit direction, t_max)` of a ray of a tile.
+type ShadowRay = (usize, Vec3A, Vec3A, Vec3A, f32);
 
 /// Four candidate triangles (obvhs's `RtTriangle` layout) in SIMD lanes.
 #[derive(Debug, Clone, Copy)]
@@ -83,7 +83,7 @@ struct Cone {
 }
 
 impl Cone {
-    fn of(tile: &[(usize, Vec3A, Vec3A, Vec3A, f32)]) -> Option<Self> {
+    fn of(tile: &[ShadowRay]) -> Option<Self> {
         let dirs: Vec<(usize, Vec3A)> = tile.iter().map(|r| (r.0, r.1)).collect();
         let (planes, axis) = frustum_with_axis(&dirs)?;
         let far = tile.iter().map(|r| r.1.dot(axis)).fold(0.0f32, f32::max);
@@ -94,7 +94,9 @@ impl Cone {
             far: far * (1.0 + FRUSTUM_PAD) + 1e-6,
         })
     }
+}
 
+impl Cull for Cone {
     fn keeps_box(&self, lo: Vec3A, hi: Vec3A) -> bool {
         box_in_frustum(lo, hi, &self.planes)
             && Vec3A::select(self.axis.cmpge(Vec3A::ZERO), lo, hi).dot(self.axis) <= self.far
@@ -124,12 +126,14 @@ impl MeshBvh {
         if width == 0 {
             return out;
         }
-        let band = SHADOW_SUPER_TILE * width;
-        out.par_chunks_mut(band)
-            .zip(origins.par_chunks(band))
-            .for_each_init(ShadowScratch::default, |sc, (o, p)| {
-                self.occluded_toward_grid_into(target, p, width, stop_short_m, o, sc)
-            });
+        in_bands(
+            origins,
+            &mut out,
+            width,
+            SHADOW_SUPER_TILE,
+            ShadowScratch::default,
+            |sc, p, o| self.occluded_toward_grid_into(target, p, width, stop_short_m, o, sc),
+        );
         out
     }
 
@@ -149,93 +153,87 @@ impl MeshBvh {
         if width == 0 || !target.is_finite() || stop_short_m.is_nan() {
             return;
         }
-        let apex = Vec3A::from(target);
-        let height = n.div_ceil(width);
-        for ty in (0..height).step_by(SHADOW_SUPER_TILE) {
-            for tx in (0..width).step_by(SHADOW_SUPER_TILE) {
-                let (y1, x1) = (
-                    (ty + SHADOW_SUPER_TILE).min(height),
-                    (tx + SHADOW_SUPER_TILE).min(width),
-                );
-                gather(
-                    origins,
-                    n,
-                    width,
-                    (tx, x1),
-                    (ty, y1),
-                    target,
-                    stop_short_m,
-                    sc,
-                );
-                if sc.tile.is_empty() {
-                    continue;
-                }
-                let Some(cone) = Cone::of(&sc.tile) else {
-                    self.shadow_per_ray(sc, out);
-                    continue;
-                };
-                self.cone_candidates(apex, &cone, sc);
-                if sc.cand.len() > 8 * MAX_SHADOW_CANDIDATES {
-                    self.shadow_per_ray(sc, out);
-                    continue;
-                }
-                std::mem::swap(&mut sc.cand, &mut sc.super_cand);
-                for sy in (ty..y1).step_by(SHADOW_TILE) {
-                    for sx in (tx..x1).step_by(SHADOW_TILE) {
-                        gather(
-                            origins,
-                            n,
-                            width,
-                            (sx, (sx + SHADOW_TILE).min(x1)),
-                            (sy, (sy + SHADOW_TILE).min(y1)),
-                            target,
-                            stop_short_m,
-                            sc,
-                        );
-                        if !sc.tile.is_empty() {
-                            self.shadow_tile(apex, sc, out);
-                        }
-                    }
-                }
-            }
-        }
-    }
-
-    fn shadow_per_ray(&self, sc: &mut ShadowScratch, out: &mut [bool]) {
-        sc.fallback_tiles += 1;
-        for &(i, _, o, d, t_max) in &sc.tile {
-            out[i] = self.occluded(o.into(), d.into(), t_max);
-        }
-    }
-
-    /// Any-hit tests of the rays of `sc.tile` against the super-tile's candidates that lie in
-    /// the tile's own cone.
-    fn shadow_tile(&self, apex: Vec3A, sc: &mut ShadowScratch, out: &mut [bool]) {
-        let Some(cone) = Cone::of(&sc.tile) else {
-            return self.shadow_per_ray(sc, out);
+        let rays = ShadowRays {
+            bvh: self,
+            target,
+            origins,
+            stop_short_m,
         };
-        sc.cand.clear();
-        for &k in &sc.super_cand {
-            let [v0, e1, e2] = self.leaf_tris[k as usize];
-            let a = v0 - apex;
-            if cone.keeps_tri(a, a + e1, a + e2) {
-                sc.cand.push(k);
-            }
+        trace_tiles(&rays, n, width, sc, out);
+    }
+}
+
+/// Shadow rays of one band: a surface point per grid cell, one target.
+struct ShadowRays<'a> {
+    bvh: &'a MeshBvh,
+    target: Vec3,
+    origins: &'a [Vec3],
+    stop_short_m: f32,
+}
+
+impl TileScratch<ShadowRay> for ShadowScratch {
+    fn buffers(&mut self) -> &mut TileBuffers<ShadowRay> {
+        &mut self.bufs
+    }
+
+    fn count_fallback(&mut self) {
+        self.fallback_tiles += 1;
+    }
+
+    fn count_tile(&mut self, candidates: usize) {
+        self.tiles += 1;
+        self.candidates += candidates as u64;
+    }
+}
+
+impl TileTracer for ShadowRays<'_> {
+    type Ray = ShadowRay;
+    type Out = bool;
+    type Scratch = ShadowScratch;
+    type Cull = Cone;
+    const TILE_PX: usize = SHADOW_TILE;
+    const SUPER_TILE_PX: usize = SHADOW_SUPER_TILE;
+    const MAX_SUPER_CANDIDATES: usize = 8 * MAX_SHADOW_CANDIDATES;
+    const MAX_TILE_CANDIDATES: usize = MAX_SHADOW_CANDIDATES;
+
+    fn bvh(&self) -> &MeshBvh {
+        self.bvh
+    }
+
+    fn apex(&self) -> Vec3A {
+        Vec3A::from(self.target)
+    }
+
+    /// The valid shadow rays: a finite origin away from the target, a range that is a number.
+    fn ray(&self, i: usize) -> Option<ShadowRay> {
+        let o = self.origins[i];
+        let (d, t_max) = shadow_ray(o, self.target, self.stop_short_m)?;
+        if t_max.is_nan() {
+            return None;
         }
-        if sc.cand.len() > MAX_SHADOW_CANDIDATES {
-            return self.shadow_per_ray(sc, out);
+        // -0.0 -> +0.0, as `MeshBvh::occluded` does (obvhs's octant pitfall).
+        let d = Vec3A::new(d.x + 0.0, d.y + 0.0, d.z + 0.0);
+        Some((i, Vec3A::from(o - self.target), Vec3A::from(o), d, t_max))
+    }
+
+    fn cull(&self, tile: &[ShadowRay]) -> Option<Cone> {
+        Cone::of(tile)
+    }
+
+    fn trace_per_ray(&self, tile: &[ShadowRay], out: &mut [bool]) {
+        for &(i, _, o, d, t_max) in tile {
+            out[i] = self.bvh.occluded(o.into(), d.into(), t_max);
         }
-        sc.tiles += 1;
-        sc.candidates += sc.cand.len() as u64;
-        if sc.cand.is_empty() {
-            return;
-        }
+    }
+
+    /// Packs the candidates four to a SIMD lane group, then tests each ray for any hit.
+    fn trace_candidates(&self, sc: &mut ShadowScratch, out: &mut [bool]) {
         sc.packs.clear();
-        for chunk in sc.cand.chunks(4) {
+        for chunk in sc.bufs.cand.chunks(4) {
             // Empty lanes: zero edges and normal (inv_det = inf, u = v = NaN: never a hit).
             let mut l = [[0.0f32; 12]; 4];
             for (lane, &k) in chunk.iter().enumerate() {
-                let t = &self.tris[k as usize];
+                let t = &self.bvh.tris[k as usize];
                 l[lane] = [
                     t.v0.x, t.v0.y, t.v0.z, t.e1.x, t.e1.y, t.e1.z, t.e2.x, t.e2.y, t.e2.z, t.ng.x,
                     t.ng.y, t.ng.z,
@@ -249,76 +247,8 @@ impl MeshBvh {
                 ng: [g(9), g(10), g(11)],
             });
         }
-        for &(i, _, o, d, t_max) in &sc.tile {
+        for &(i, _, o, d, t_max) in &sc.bufs.tile {
             out[i] = any_hit(&sc.packs, o, d, t_max);
-        }
-    }
-
-    /// Leaf slots of the triangles that can meet the cone.
-    fn cone_candidates(&self, apex: Vec3A, cone: &Cone, sc: &mut ShadowScratch) {
-        sc.cand.clear();
-        sc.stack.clear();
-        if self.bvh.nodes.is_empty() {
-            return;
-        }
-        sc.stack.push(0);
-        while let Some(ni) = sc.stack.pop() {
-            let node = &self.bvh.nodes[ni as usize];
-            for ch in 0..8 {
-                if node.is_child_empty(ch) {
-                    continue;
-                }
-                let b = node.child_aabb(ch);
-                if !cone.keeps_box(b.min - apex, b.max - apex) {
-                    continue;
-                }
-                if node.is_leaf(ch) {
-                    let (first, count) = node.child_primitives(ch);
-                    for k in first..first + count {
-                        let [v0, e1, e2] = self.leaf_tris[k as usize];
-                        let a = v0 - apex;
-                        if cone.keeps_tri(a, a + e1, a + e2) {
-                            sc.cand.push(k);
-                        }
-                    }
-                } else {
-                    sc.stack.push(node.child_node_index(ch));
-                }
-            }
-        }
-    }
-}
-
-/// The valid shadow rays of the grid cells `x0..x1` x `y0..y1` into `sc.tile`.
-#[allow(clippy::too_many_arguments)]
-fn gather(
-    origins: &[Vec3],
-    n: usize,
-    width: usize,
-    (x0, x1): (usize, usize),
-    (y0, y1): (usize, usize),
-    target: Vec3,
-    stop_short_m: f32,
-    sc: &mut ShadowScratch,
-) {
-    sc.tile.clear();
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let i = y * width + x;
-            if i >= n {
-                return;
-            }
-            let o = origins[i];
-            let Some((d, t_max)) = shadow_ray(o, target, stop_short_m) else {
-                continue;
-            };
-            if t_max.is_nan() {
-                continue;
-            }
-            // -0.0 -> +0.0, as `MeshBvh::occluded` does (obvhs's octant pitfall).
-            let d = Vec3A::new(d.x + 0.0, d.y + 0.0, d.z + 0.0);
-            sc.tile
-                .push((i, Vec3A::from(o - target), Vec3A::from(o), d, t_max));
         }
     }
 }

@@ -41,124 +41,20 @@
 //! same print gives the same colour in every format. Finding targets needs only the print's
 //! contrast, which either encoding keeps; what matters is that all formats agree.
 
-use std::cell::RefCell;
-use std::io::BufReader;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use glam::{Vec2, Vec3};
-use skinbrdf_core::untrusted::{self, confine, ConfineError};
+use glam::Vec2;
+use skinbrdf_core::untrusted::ConfineError;
 use skinbrdf_core::TriMesh;
 
 use crate::bvh::Hit;
-use crate::load::{scale_to_metres, LengthUnit, LoadOptions};
+use crate::error::{unknown_format, MeshError};
+pub use crate::limits::MAX_TEXTURE_TEXELS;
+use crate::load_options::{gltf_unit, scale_to_metres, LengthUnit, LoadOptions};
+pub use crate::material::{Material, TextureImage, UNTEXTURED_COLOUR};
+pub use crate::obj::obj_companion_files;
+use crate::obj::{read_obj_data, texture_file};
 use crate::validate::{repair_tracked, MeshReport, RepairMap};
-use crate::MeshError;
-
-/// Colour of a surface with no appearance (no texture, no vertex colours): a mid grey.
-pub const UNTEXTURED_COLOUR: [f32; 3] = [0.5, 0.5, 0.5];
-
-/// An RGB texture, row-major from the top row, values 0..1 as stored.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TextureImage {
-    /// Width, texels.
-    pub width: u32,
-    /// Height, texels.
-    pub height: u32,
-    /// Texels, row-major from the top.
-    pub rgb: Vec<[f32; 3]>,
-}
-
-impl TextureImage {
-    /// Loads a PNG or JPEG (any pixel type; alpha is dropped): a regular file within
-    /// [`untrusted::TEXTURE_FILE`], decoded under the `image` crate's default memory limit.
-    pub fn load(path: &Path) -> Result<Self, MeshError> {
-        let bytes = untrusted::read_bounded(path, untrusted::TEXTURE_FILE)?;
-        let img = image::load_from_memory(&bytes).map_err(|e| MeshError::Texture {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
-        Self::from_image(&img).map_err(|reason| MeshError::Texture {
-            path: path.to_path_buf(),
-            reason,
-        })
-    }
-
-    /// Checks that a texture file is an image the loader decodes, by its header (format and
-    /// size; the pixels are not decoded). Returns its width and height.
-    pub fn check_header(path: &Path) -> Result<(u32, u32), MeshError> {
-        let (file, _) = untrusted::open_regular(path)?;
-        let bad = |reason: String| MeshError::Texture {
-            path: path.to_path_buf(),
-            reason,
-        };
-        let (w, h) = image::ImageReader::new(BufReader::new(file))
-            .with_guessed_format()
-            .map_err(|e| bad(e.to_string()))?
-            .into_dimensions()
-            .map_err(|e| bad(format!("not a PNG or JPEG image: {e}")))?;
-        if w == 0 || h == 0 {
-            return Err(bad("the image is empty".into()));
-        }
-        Ok((w, h))
-    }
-
-    /// Decodes an encoded PNG or JPEG held in memory (a glTF's embedded image) exactly as
-    /// [`Self::load`] decodes a file; the error is the decoder's complaint.
-    pub fn decode(bytes: &[u8]) -> Result<Self, String> {
-        let img = image::load_from_memory(bytes).map_err(|e| e.to_string())?;
-        Self::from_image(&img)
-    }
-
-    fn from_image(img: &image::DynamicImage) -> Result<Self, String> {
-        let rgb = img.to_rgb32f();
-        let (width, height) = rgb.dimensions();
-        if width == 0 || height == 0 {
-            return Err("the image is empty".into());
-        }
-        Ok(Self {
-            width,
-            height,
-            rgb: rgb.pixels().map(|p| p.0).collect(),
-        })
-    }
-
-    /// Bilinear lookup at an OBJ texture coordinate (`v = 0` at the bottom, repeating outside
-    /// `[0, 1]`; see the module docs). A non-finite coordinate gives texel `(0, 0)`.
-    pub fn bilinear(&self, uv: Vec2) -> [f32; 3] {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let x = f64::from(uv.x) * w as f64 - 0.5;
-        let y = (1.0 - f64::from(uv.y)) * h as f64 - 0.5;
-        if !(x.is_finite() && y.is_finite()) {
-            return self.rgb[0];
-        }
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let at = |i: i64, j: i64| self.rgb[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
-        let (a, b, c, d) = (
-            at(x0, y0),
-            at(x0 + 1, y0),
-            at(x0, y0 + 1),
-            at(x0 + 1, y0 + 1),
-        );
-        std::array::from_fn(|k| {
-            (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
-        })
-    }
-}
-
-/// One material: its flat colour and optional texture (an OBJ's MTL entry, a glTF material).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Material {
-    /// Name (`newmtl`; glTF: `name`, else `material N`).
-    pub name: String,
-    /// `Kd`, or [`UNTEXTURED_COLOUR`] when absent (glTF: `baseColorFactor`, sRGB-encoded).
-    pub diffuse: [f32; 3],
-    /// The `map_Kd` image (glTF: the base-colour texture, `baseColorFactor` multiplied in).
-    pub texture: Option<TextureImage>,
-    /// Where the texture was read from (`None` for an image embedded in a glTF).
-    pub texture_path: Option<PathBuf>,
-}
 
 /// How a scan's surface is coloured.
 #[derive(Debug, Clone, PartialEq)]
@@ -252,243 +148,6 @@ impl TexturedMesh {
         let [r, g, b] = self.colour_at(hit);
         0.2126 * r + 0.7152 * g + 0.0722 * b
     }
-}
-
-/// An OBJ file's geometry with its per-corner texture coordinates and per-triangle materials,
-/// before units and repair.
-#[derive(Debug, Clone)]
-pub(crate) struct ObjData {
-    pub(crate) mesh: TriMesh,
-    pub(crate) uv: Vec<Option<[Vec2; 3]>>,
-    pub(crate) material: Vec<Option<u32>>,
-    /// The materials, or the MTL files that could not be read.
-    pub(crate) materials: Result<Vec<tobj::Material>, Vec<PathBuf>>,
-}
-
-/// Reads an OBJ file: every object merged in file order, polygons triangulated.
-pub(crate) fn read_obj_data(path: &Path) -> Result<ObjData, MeshError> {
-    let opts = tobj::LoadOptions {
-        triangulate: true,
-        single_index: false,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let (file, _) = crate::open_scan(path)?;
-    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let failed: RefCell<Vec<PathBuf>> = RefCell::new(Vec::new());
-    let refused: RefCell<Option<MeshError>> = RefCell::new(None);
-    let loaded = tobj::load_obj_buf(&mut BufReader::new(file), &opts, |mtl: &Path| {
-        let written = mtl.to_string_lossy();
-        match material_library(path, &dir, &written, "mtllib") {
-            Ok((_, bytes)) => tobj::load_mtl_buf(&mut bytes.as_slice()),
-            Err(MeshError::Refused { path, key, reason }) => match *reason {
-                ConfineError::Missing { path: full, .. } => {
-                    failed.borrow_mut().push(full);
-                    Err(tobj::LoadError::OpenFileFailed)
-                }
-                other => {
-                    refused.borrow_mut().get_or_insert(MeshError::Refused {
-                        path,
-                        key,
-                        reason: Box::new(other),
-                    });
-                    Err(tobj::LoadError::OpenFileFailed)
-                }
-            },
-            Err(e) => {
-                refused.borrow_mut().get_or_insert(e);
-                Err(tobj::LoadError::OpenFileFailed)
-            }
-        }
-    });
-    if let Some(e) = refused.into_inner() {
-        return Err(e);
-    }
-    let (models, materials) = loaded.map_err(|e| MeshError::Parse {
-        path: path.to_path_buf(),
-        reason: format!("OBJ: {e}"),
-    })?;
-    let failed = failed.into_inner();
-    let materials = match materials {
-        Ok(m) if failed.is_empty() => Ok(m),
-        _ => Err(failed),
-    };
-    let mut out = ObjData {
-        mesh: TriMesh::default(),
-        uv: Vec::new(),
-        material: Vec::new(),
-        materials,
-    };
-    for m in models {
-        let base = out.mesh.positions.len() as u32;
-        let mm = &m.mesh;
-        out.mesh.positions.extend(
-            mm.positions
-                .chunks_exact(3)
-                .map(|c| Vec3::new(c[0], c[1], c[2])),
-        );
-        out.mesh.indices.extend(
-            mm.indices
-                .chunks_exact(3)
-                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
-        );
-        let n_tris = mm.indices.len() / 3;
-        let material = mm.material_id.map(|i| i as u32);
-        out.material.extend(std::iter::repeat_n(material, n_tris));
-        if mm.texcoord_indices.is_empty() {
-            out.uv.extend(std::iter::repeat_n(None, n_tris));
-            continue;
-        }
-        if mm.texcoord_indices.len() != mm.indices.len() {
-            return Err(MeshError::BadUv {
-                path: path.to_path_buf(),
-                reason: format!(
-                    "object `{}`: {} texture-coordinate indices for {} face corners (some faces \
-                     have `vt` indices, some not)",
-                    m.name,
-                    mm.texcoord_indices.len(),
-                    mm.indices.len()
-                ),
-            });
-        }
-        let n_vt = mm.texcoords.len() / 2;
-        for (f, t) in mm.texcoord_indices.chunks_exact(3).enumerate() {
-            let mut c = [Vec2::ZERO; 3];
-            for (k, &i) in t.iter().enumerate() {
-                if i as usize >= n_vt {
-                    return Err(MeshError::BadUv {
-                        path: path.to_path_buf(),
-                        reason: format!(
-                            "object `{}`, triangle {f}: texture-coordinate index {} but the \
-                             file has {n_vt} `vt` lines",
-                            m.name,
-                            i + 1
-                        ),
-                    });
-                }
-                let (u, v) = (
-                    mm.texcoords[2 * i as usize],
-                    mm.texcoords[2 * i as usize + 1],
-                );
-                if !(u.is_finite() && v.is_finite()) {
-                    return Err(MeshError::BadUv {
-                        path: path.to_path_buf(),
-                        reason: format!("`vt` {} is not finite", i + 1),
-                    });
-                }
-                c[k] = Vec2::new(u, v);
-            }
-            out.uv.push(Some(c));
-        }
-    }
-    if out.mesh.indices.is_empty() {
-        return Err(MeshError::Parse {
-            path: path.to_path_buf(),
-            reason: "OBJ has no faces".into(),
-        });
-    }
-    Ok(out)
-}
-
-/// An OBJ's material library named `written` on a line of the OBJ (`key` says where): a
-/// regular file inside the OBJ's folder ([`confine`]), read within
-/// [`untrusted::MATERIAL_LIBRARY`]. Returns the file and its bytes.
-fn material_library(
-    obj: &Path,
-    dir: &Path,
-    written: &str,
-    key: &str,
-) -> Result<(PathBuf, Vec<u8>), MeshError> {
-    let file = confine(dir, written).map_err(|reason| MeshError::Refused {
-        path: obj.to_path_buf(),
-        key: key.to_string(),
-        reason: Box::new(reason),
-    })?;
-    let bytes = untrusted::read_bounded(&file, untrusted::MATERIAL_LIBRARY)?;
-    Ok((file, bytes))
-}
-
-/// The texture file a material names: the `map_Kd` string as a path inside `dir`
-/// ([`confine`]: not absolute, no `..`, no link out, a regular file; Windows separators read
-/// as `/`); when that fails and the string has options before the name (`-bm 1.0 skin
-/// tone.png`), the first tail of it after a space that names such a file (names may hold
-/// spaces), else its last word.
-fn texture_file(dir: &Path, map_kd: &str) -> Result<PathBuf, ConfineError> {
-    let map_kd = map_kd.trim();
-    let whole = confine(dir, map_kd);
-    if whole.is_ok() || !map_kd.starts_with('-') {
-        return whole;
-    }
-    let tails = map_kd
-        .char_indices()
-        .filter(|&(_, c)| c == ' ' || c == '\t')
-        .map(|(i, _)| map_kd[i + 1..].trim_start())
-        .filter(|t| !t.is_empty() && !t.starts_with('-'));
-    let mut last = None;
-    for t in tails {
-        match confine(dir, t) {
-            Ok(p) => return Ok(p),
-            Err(e) => last = Some(e),
-        }
-    }
-    match map_kd.split_whitespace().last() {
-        Some(w) => confine(dir, w),
-        None => Err(last.unwrap_or(ConfineError::Empty {
-            written: map_kd.to_string(),
-        })),
-    }
-}
-
-/// The files that come with an OBJ scan, for copying it with them: every `mtllib` anywhere
-/// in the OBJ and every `map_Kd` texture of those libraries, each a regular file inside the
-/// OBJ's folder (refused by file, line and path otherwise), each texture's header decoded (a
-/// file that is not a PNG or JPEG image is refused here, not when the scan's colours are
-/// needed). Each entry is the path relative to the OBJ's folder (`/`-separated) and the file.
-pub fn obj_companion_files(path: &Path) -> Result<Vec<(String, PathBuf)>, MeshError> {
-    use std::io::BufRead;
-    let (file, _) = crate::open_scan(path)?;
-    let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    let relative = |p: &Path| {
-        p.strip_prefix(&dir)
-            .unwrap_or(p)
-            .to_string_lossy()
-            .replace('\\', "/")
-    };
-    let mut out: Vec<(String, PathBuf)> = Vec::new();
-    for (n, line) in BufReader::new(file).split(b'\n').enumerate() {
-        let line = line.map_err(|source| MeshError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        let line = String::from_utf8_lossy(&line);
-        let mut words = line.split_whitespace();
-        if words.next() != Some("mtllib") {
-            continue;
-        }
-        let written = line.trim().split_once(' ').unwrap_or_default().1.trim();
-        let key = format!("line {} mtllib", n + 1);
-        let (mtl, bytes) = material_library(path, &dir, written, &key)?;
-        if !out.iter().any(|(_, q)| q == &mtl) {
-            out.push((relative(&mtl), mtl.clone()));
-        }
-        for (m, l) in String::from_utf8_lossy(&bytes).lines().enumerate() {
-            let l = l.trim();
-            if l.split_whitespace().next() != Some("map_Kd") {
-                continue;
-            }
-            let refused = |reason| MeshError::Refused {
-                path: mtl.clone(),
-                key: format!("line {} map_Kd", m + 1),
-                reason: Box::new(reason),
-            };
-            let tex = texture_file(&dir, l.get(6..).unwrap_or_default()).map_err(refused)?;
-            TextureImage::check_header(&tex)?;
-            if !out.iter().any(|(_, q)| q == &tex) {
-                out.push((relative(&tex), tex));
-            }
-        }
-    }
-    Ok(out)
 }
 
 /// Loads a scan with its colours: `.obj` (with its MTL and textures), `.ply` (with vertex
@@ -597,7 +256,7 @@ pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, Me
         }
         Some("glb" | "gltf") => {
             let mut data = crate::gltf_scan::read_gltf(path, crate::gltf_scan::Detail::Appearance)?;
-            let unit = scale_to_metres(&mut data.mesh, crate::load::gltf_unit(opts.unit));
+            let unit = scale_to_metres(&mut data.mesh, gltf_unit(opts.unit));
             let (mesh, report, map) = repair_tracked(&data.mesh, opts.policy, &source)?;
             let (uv, material) = follow_repair(&map, &data.uv, &data.material);
             let corner_colours: Vec<Option<[[f32; 3]; 3]>> = map
@@ -629,7 +288,7 @@ pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, Me
                 report,
             })
         }
-        _ => Err(crate::load::unknown_format(path)),
+        _ => Err(unknown_format(path)),
     }
 }
 
@@ -657,6 +316,8 @@ fn follow_repair(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
+    use std::path::PathBuf;
 
     fn quad_obj(dir: &Path, with_texture: bool) -> PathBuf {
         let obj = dir.join("quad.obj");

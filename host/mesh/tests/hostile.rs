@@ -1,6 +1,7 @@
 //! Hostile scan files (issue 31): paths an OBJ, MTL or glTF names that lead out of the scan's
 //! folder, devices and FIFOs, and headers that state more than the file holds. Each is refused
 //! with an error naming the file, where in it, and the path; none panics or reads what it names.
+//! A texture stating more texels than a texture may have is refused by its header.
 
 use std::path::{Path, PathBuf};
 
@@ -206,4 +207,228 @@ fn gltf_uris_leading_out_or_to_a_device_are_refused() {
         let e = skinbrdf_mesh::gltf_external_files(&gltf).expect_err("refused");
         assert_refused(&e, "head.gltf", "buffer 0 uri", named);
     }
+}
+
+#[test]
+fn a_texture_stating_more_texels_than_the_limit_is_refused_before_decoding() {
+    let d = tempfile::tempdir().expect("tempdir");
+    let obj = obj_scan(d.path(), "head.mtl", Some("bomb.png"));
+    // 13000 x 13000: a 3 MB file whose pixels inflate to 507 MB (within the image crate's
+    // allocation limit) and to 2 GB as floats.
+    let bomb = png_of_zeros(13_000, 13_000);
+    assert!(bomb.len() < 4 << 20, "{}", bomb.len());
+    std::fs::write(d.path().join("scan/bomb.png"), &bomb).expect("png");
+    for e in [
+        obj_companion_files(&obj).expect_err("refused"),
+        load_textured(&obj, &LoadOptions::default()).expect_err("refused"),
+    ] {
+        let t = text(&e);
+        assert!(
+            matches!(e, MeshError::Texture { .. })
+                && t.contains("bomb.png")
+                && t.contains("13000 x 13000 texels"),
+            "{t}"
+        );
+    }
+    // The geometry alone still loads.
+    assert!(load_mesh(&obj, &LoadOptions::default()).is_ok());
+}
+
+#[test]
+fn a_material_colour_with_fewer_than_three_numbers_is_a_parse_error_not_a_panic() {
+    let d = tempfile::tempdir().expect("tempdir");
+    let obj = obj_scan(d.path(), "head.mtl", Some("tex.png"));
+    for kd in ["Kd 1 1", "Kd", "Ks 0.5"] {
+        std::fs::write(
+            d.path().join("scan/head.mtl"),
+            format!("newmtl skin\n{kd}\n"),
+        )
+        .expect("mtl");
+        for e in [
+            load_mesh(&obj, &LoadOptions::default()).expect_err("refused"),
+            load_textured(&obj, &LoadOptions::default()).expect_err("refused"),
+        ] {
+            let t = text(&e);
+            assert!(
+                matches!(e, MeshError::Parse { .. })
+                    && t.contains("head.mtl")
+                    && t.contains("line 2"),
+                "{kd}: {t}"
+            );
+        }
+    }
+}
+
+/// A GLB of one textured quad, its JSON chunk edited by `edit` and re-packed.
+fn glb_edited(edit: impl Fn(&mut serde_json::Value)) -> Vec<u8> {
+    use glam::{Vec2, Vec3};
+    let mesh = skinbrdf_core::TriMesh {
+        positions: vec![
+            Vec3::ZERO,
+            Vec3::new(0.1, 0.0, 0.0),
+            Vec3::new(0.1, 0.1, 0.0),
+            Vec3::new(0.0, 0.1, 0.0),
+        ],
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+        normals: None,
+    };
+    let uv = [[Vec2::ZERO, Vec2::X, Vec2::ONE]; 2];
+    let glb = skinbrdf_mesh::encode_glb(&mesh, &uv, &png()).expect("glb");
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().expect("len")) as usize;
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&glb[20..20 + json_len]).expect("json");
+    edit(&mut json);
+    let bin = &glb[20 + json_len..];
+    let mut j = serde_json::to_vec(&json).expect("json");
+    while !j.len().is_multiple_of(4) {
+        j.push(b' ');
+    }
+    let mut out = b"glTF".to_vec();
+    out.extend(2u32.to_le_bytes());
+    out.extend(((12 + 8 + j.len() + bin.len()) as u32).to_le_bytes());
+    out.extend((j.len() as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(&j);
+    out.extend(bin);
+    out
+}
+
+#[test]
+fn gltf_documents_that_make_the_gltf_crate_index_unchecked_are_errors_not_panics() {
+    let d = tempfile::tempdir().expect("tempdir");
+    type Edit<'a> = &'a dyn Fn(&mut serde_json::Value);
+    let cases: [(&str, Edit<'_>); 4] = [
+        ("accessor", &|j| {
+            j["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = 4_294_967_295u64.into()
+        }),
+        ("no-accessors", &|j| j["accessors"] = serde_json::json!([])),
+        ("image", &|j| {
+            j["images"][0]
+                .as_object_mut()
+                .expect("image")
+                .remove("bufferView");
+        }),
+        ("reused", &|j| {
+            j["scenes"][0]["nodes"] = serde_json::json!(vec![0; 10_000])
+        }),
+    ];
+    for (name, edit) in cases {
+        let p = d.path().join(format!("{name}.glb"));
+        std::fs::write(&p, glb_edited(edit)).expect("glb");
+        // The geometry alone does not read the images.
+        let geometry = load_mesh(&p, &LoadOptions::default()).map(|_| ());
+        if name == "image" {
+            assert!(geometry.is_ok());
+        }
+        let textured = load_textured(&p, &LoadOptions::default()).map(|_| ());
+        for r in [geometry, textured]
+            .into_iter()
+            .skip(usize::from(name == "image"))
+        {
+            let e = r.expect_err("refused");
+            let t = text(&e);
+            assert!(t.contains(&format!("{name}.glb")), "{name}: {t}");
+            if name == "reused" {
+                assert!(t.contains("node 0 is reached twice"), "{t}");
+            }
+        }
+    }
+}
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xFFFF_FFFFu32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 == 1 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// Bits of a DEFLATE stream, least significant first.
+#[derive(Default)]
+struct Bits {
+    out: Vec<u8>,
+    acc: u64,
+    n: u32,
+}
+
+impl Bits {
+    fn put(&mut self, v: u64, len: u32) {
+        self.acc |= v << self.n;
+        self.n += len;
+        while self.n >= 8 {
+            self.out.push(self.acc as u8);
+            self.acc >>= 8;
+            self.n -= 8;
+        }
+    }
+    /// A Huffman code, written most significant bit first.
+    fn code(&mut self, code: u32, len: u32) {
+        let rev = (0..len).fold(0u64, |r, i| {
+            r | (u64::from((code >> i) & 1) << (len - 1 - i))
+        });
+        self.put(rev, len);
+    }
+}
+
+/// A zlib stream of `n` zero bytes: one fixed-Huffman block of a literal 0 and matches of 258
+/// bytes at distance 1 (13 bits per 258 bytes: a small file that inflates hugely).
+fn zlib_zeros(n: usize) -> Vec<u8> {
+    let mut b = Bits::default();
+    b.put(1, 1); // the last block
+    b.put(1, 2); // fixed Huffman codes
+    let mut left = n;
+    if left > 0 {
+        b.code(0x30, 8); // literal 0
+        left -= 1;
+    }
+    while left >= 258 {
+        b.code(0xC5, 8); // length 258 (code 285)
+        b.code(0, 5); // distance 1
+        left -= 258;
+    }
+    for _ in 0..left {
+        b.code(0x30, 8);
+    }
+    b.code(0, 7); // end of block
+    if b.n > 0 {
+        b.out.push(b.acc as u8);
+    }
+    let mut out = vec![0x78, 0x01];
+    out.extend_from_slice(&b.out);
+    // Adler-32 of zeros: a = 1, b = n.
+    let adler = (((n % 65_521) as u32) << 16) | 1;
+    out.extend_from_slice(&adler.to_be_bytes());
+    out
+}
+
+/// A PNG chunk with its CRC.
+fn png_chunk(out: &mut Vec<u8>, kind: &[u8; 4], data: &[u8]) {
+    out.extend_from_slice(&(data.len() as u32).to_be_bytes());
+    let start = out.len();
+    out.extend_from_slice(kind);
+    out.extend_from_slice(data);
+    let crc = crc32(&out[start..]);
+    out.extend_from_slice(&crc.to_be_bytes());
+}
+
+/// A black 8-bit RGB PNG of `w` x `h` pixels, a few bytes per thousand pixels: a decompression
+/// bomb for a decoder that trusts the stated size.
+fn png_of_zeros(w: u32, h: u32) -> Vec<u8> {
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend_from_slice(&w.to_be_bytes());
+    ihdr.extend_from_slice(&h.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
+    png_chunk(&mut out, b"IHDR", &ihdr);
+    let raw = h as usize * (1 + 3 * w as usize);
+    png_chunk(&mut out, b"IDAT", &zlib_zeros(raw));
+    png_chunk(&mut out, b"IEND", &[]);
+    out
 }

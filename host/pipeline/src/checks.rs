@@ -18,8 +18,10 @@
 //! | camera poses | `bundle_chi2` | the joint pose adjustment's reduced chi-square over all images | above [`REPROJECTION_CHI2_MAX`] |
 //! | camera poses | `camera_arc_steps` | the largest angle between neighbouring measurement cameras round their aim point, over the median one | above [`CAMERA_ARC_STEP_RATIO_MAX`] |
 //! | camera poses | `camera_distance_spread` | relative sd of the measurement cameras' distances to the point their optical axes meet | above [`CAMERA_DISTANCE_SPREAD_MAX`] |
+//! | flash triangulation | `light_images_agree` | the light-position images' single-view flash positions' reduced chi-square about their combined position (the farthest image named) | above [`LIGHT_IMAGES_CHI2_MAX`] |
 //! | flash triangulation | `flash_sigma` | the flash position's stated sd | above [`FLASH_SIGMA_MAX_MM`] |
 //! | radiometric calibration (in derender) | `c_spread` | C's relative spread over the standard | above [`C_SPREAD_MAX_PCT`] |
+//! | smoothing | `image_offset` | the largest image's median log residual about the smoother, over the samples' scatter about it (at least [`IMAGE_OFFSET_SCATTER_FLOOR_PCT`]) | above [`IMAGE_OFFSET_MAX`] |
 //! | fit | `fit_vs_smoother` | the model's log residual against the samples over the smoother's | above [`FIT_VS_SMOOTHER_MAX`] |
 
 use glam::{DMat3, DVec3};
@@ -73,6 +75,13 @@ pub const CAMERA_ARC_STEP_RATIO_MAX: f64 = 3.5;
 /// uncertain by more than a third of a degree at 1.5 m.
 pub const FLASH_SIGMA_MAX_MM: f64 = 10.0;
 
+/// The light-position images' single-view flash positions' reduced chi-square about their
+/// combined position, each with its pose's stated covariance. Views that see one fixed flash
+/// agree to about 1; one whose flash or camera moved, or whose pose is wrong, by many times.
+/// The single-view covariances come from the detector's corner sigmas, which are
+/// optimistic for small, far targets, hence the same margin as the reprojection checks.
+pub const LIGHT_IMAGES_CHI2_MAX: f64 = REPROJECTION_CHI2_MAX;
+
 /// C's relative spread over the standard's pixels, percent: a uniform Lambertian standard
 /// under one flash gives one C up to noise and the standard's falloff model; a misplaced
 /// standard or flash spreads it.
@@ -82,6 +91,18 @@ pub const C_SPREAD_MAX_PCT: f64 = 5.0;
 /// samples' own scatter about a smooth BRDF). A model that describes the data leaves about
 /// the same; twice as much is a misfit or samples that are not one BRDF.
 pub const FIT_VS_SMOOTHER_MAX: f64 = 2.0;
+
+/// One image's samples' median log residual about the smoother, over the samples' scatter
+/// about it (the smoother's residual sd, at least [`IMAGE_OFFSET_SCATTER_FLOOR_PCT`]). The
+/// smoother is the BRDF all images agree on: an image's noise and the smoother's bias scatter
+/// about it, so its median sits well inside the scatter, while an image whose exposure, flash,
+/// pose or standard is wrong sits off by a relative error of its own.
+pub const IMAGE_OFFSET_MAX: f64 = 2.0;
+
+/// The least scatter, percent (log), an image's offset is compared with: noise-free samples
+/// scatter by the smoother's bias alone, and an offset of a percent is within what the flash's
+/// own energy varies from one firing to the next.
+pub const IMAGE_OFFSET_SCATTER_FLOOR_PCT: f64 = 1.0;
 
 /// What became of one check.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -245,6 +266,7 @@ pub fn pose_checks(poses: &SessionPoses, inputs: PoseCheckInputs<'_>) -> Vec<(St
         (Stage::CameraPoses, camera_distance_spread(poses)),
         (Stage::CameraPoses, camera_arc_steps(poses)),
         (Stage::FlashTriangulation, flash_sigma(poses)),
+        (Stage::FlashTriangulation, light_images_agree(poses)),
     ]
 }
 
@@ -589,6 +611,34 @@ fn flash_sigma(poses: &SessionPoses) -> Check {
     )
 }
 
+fn light_images_agree(poses: &SessionPoses) -> Check {
+    const NAME: &str = "light_images_agree";
+    const WHAT: &str = "the light-position images' single-view flash positions' reduced \
+                        chi-square about their combined position";
+    let Some(a) = &poses.light_agreement else {
+        return Check::not_checked(
+            NAME,
+            WHAT,
+            "",
+            LIGHT_IMAGES_CHI2_MAX,
+            "fewer than two light-position images placed the flash (or its position is given)",
+        );
+    };
+    Check::at_most(
+        NAME,
+        WHAT,
+        a.reduced_chi2,
+        "",
+        LIGHT_IMAGES_CHI2_MAX,
+        &format!(
+            "the light-position images place the flash in different places ({} is {:.1} mm \
+             from their combined position): the flash stand moved between them, or a \
+             light-position image's camera pose is wrong",
+            a.farthest_image, a.farthest_offset_mm
+        ),
+    )
+}
+
 /// The derender unit's checks, by stage, from its report's figures.
 pub fn derender_checks(reports: &[StageReport]) -> Vec<(Stage, Check)> {
     const NAME: &str = "c_spread";
@@ -618,8 +668,59 @@ pub fn derender_checks(reports: &[StageReport]) -> Vec<(Stage, Check)> {
     vec![(Stage::Derender, check)]
 }
 
-/// The fit unit's checks, by stage, from its reports' figures.
-pub fn fit_checks(reports: &[StageReport]) -> Vec<(Stage, Check)> {
+/// The fit unit's checks, by stage, from its reports' figures (`image_files`: the session's
+/// image files, to name an image).
+pub fn fit_checks(reports: &[StageReport], image_files: &[&str]) -> Vec<(Stage, Check)> {
+    vec![
+        (
+            Stage::SmoothIncidencePlane,
+            image_offset(reports, image_files),
+        ),
+        (Stage::Fit, fit_vs_smoother(reports)),
+    ]
+}
+
+fn image_offset(reports: &[StageReport], image_files: &[&str]) -> Check {
+    const NAME: &str = "image_offset";
+    const WHAT: &str = "the largest image's median log residual about the smoother over the \
+                        samples' scatter about it";
+    let smooth = reports.iter().find_map(|r| match &r.figures {
+        StageMetrics::Smooth(m) => Some(m),
+        _ => None,
+    });
+    let Some((offset_pct, index, sigma_pct)) = smooth.and_then(|m| {
+        Some((
+            m.worst_image_offset_pct?,
+            m.worst_image_index?,
+            m.loess_residual_sigma_pct,
+        ))
+    }) else {
+        return Check::not_checked(
+            NAME,
+            WHAT,
+            "",
+            IMAGE_OFFSET_MAX,
+            "no image has enough samples among the smoother's residuals",
+        );
+    };
+    let file = image_files
+        .get(usize::from(index))
+        .map_or_else(|| format!("image {index}"), |f| (*f).to_string());
+    Check::at_most(
+        NAME,
+        WHAT,
+        offset_pct.abs() / sigma_pct.max(IMAGE_OFFSET_SCATTER_FLOOR_PCT),
+        "",
+        IMAGE_OFFSET_MAX,
+        &format!(
+            "the samples of {file} sit {offset_pct:+.2} % off the BRDF the other images agree \
+             on: its flash did not fire fully, its exposure or camera pose is wrong, or the \
+             patch moved in it"
+        ),
+    )
+}
+
+fn fit_vs_smoother(reports: &[StageReport]) -> Check {
     const NAME: &str = "fit_vs_smoother";
     const WHAT: &str = "the model's log residual against the samples over the smoother's";
     let smoother_pct = reports.iter().find_map(|r| match &r.figures {
@@ -632,7 +733,7 @@ pub fn fit_checks(reports: &[StageReport]) -> Vec<(Stage, Check)> {
         StageMetrics::Fit(m) => m.log_rmse_vs_samples_green,
         _ => None,
     });
-    let check = match (model, smoother_pct) {
+    match (model, smoother_pct) {
         (Some(m), Some(s)) => Check::at_most(
             NAME,
             WHAT,
@@ -649,8 +750,7 @@ pub fn fit_checks(reports: &[StageReport]) -> Vec<(Stage, Check)> {
             FIT_VS_SMOOTHER_MAX,
             "the fit or the smoother gave no residual",
         ),
-    };
-    vec![(Stage::Fit, check)]
+    }
 }
 
 /// Attaches each check to its stage's report (a check whose stage has no report goes to the
@@ -788,5 +888,36 @@ mod tests {
         assert_eq!(failed.len(), 1);
         assert!(reports[1].failed());
         assert!(!reports[0].failed());
+    }
+
+    fn smooth_report(offset_pct: Option<f64>, sigma_pct: f64) -> StageReport {
+        StageReport::ran(Stage::SmoothIncidencePlane, 0.0).with_figures(StageMetrics::Smooth(
+            crate::metrics::SmoothMetrics {
+                loess_span: 0.1,
+                loess_residual_sigma_pct: sigma_pct,
+                worst_image_offset_pct: offset_pct,
+                worst_image_index: offset_pct.map(|_| 1),
+            },
+        ))
+    }
+
+    #[test]
+    fn an_image_off_the_smoother_fails_by_name_and_the_floor_keeps_noise_free_runs() {
+        let files = ["a.dng", "b.dng"];
+        let noisy_ok = image_offset(&[smooth_report(Some(-3.0), 6.0)], &files);
+        assert_eq!(noisy_ok.outcome, Outcome::Passed, "{}", noisy_ok.to_line());
+        let dim = image_offset(&[smooth_report(Some(-20.0), 6.0)], &files);
+        assert!(dim.failed());
+        assert!(dim.to_line().contains("b.dng"), "{}", dim.to_line());
+        // Noise-free: a scatter of 0.2 % is floored at a percent.
+        let noise_free = image_offset(&[smooth_report(Some(0.5), 0.2)], &files);
+        assert_eq!(noise_free.figure, Some(0.5));
+        assert_eq!(noise_free.outcome, Outcome::Passed);
+        assert!(matches!(
+            image_offset(&[smooth_report(None, 6.0)], &files).outcome,
+            Outcome::NotChecked { .. }
+        ));
+        let stages: Vec<Stage> = fit_checks(&[], &files).iter().map(|c| c.0).collect();
+        assert_eq!(stages, [Stage::SmoothIncidencePlane, Stage::Fit]);
     }
 }

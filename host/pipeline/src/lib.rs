@@ -9,6 +9,7 @@
 pub mod bench;
 pub mod checks;
 pub mod demo;
+pub mod derender_request;
 pub mod ledger;
 pub mod metrics;
 pub mod plan;

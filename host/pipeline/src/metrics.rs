@@ -195,6 +195,13 @@ pub struct SmoothMetrics {
     pub loess_span: f64,
     /// Residual sigma of the smoother in log space, percent.
     pub loess_residual_sigma_pct: f64,
+    /// The image whose samples sit furthest off the smoother: its samples' median log
+    /// residual, percent (`skinbrdf_fit::smooth::ImageOffset`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_image_offset_pct: Option<f64>,
+    /// That image's index in the session.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub worst_image_index: Option<u16>,
 }
 
 /// The model fit.
@@ -543,6 +550,13 @@ impl StageMetrics {
                     "% (log)",
                     Quality,
                 ));
+                opt(
+                    &mut r,
+                    "worst_image_offset",
+                    m.worst_image_offset_pct,
+                    "% (log)",
+                    Quality,
+                );
             }
             StageMetrics::Fit(m) => {
                 r.push(Metric::new(

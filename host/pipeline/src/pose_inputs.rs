@@ -502,6 +502,7 @@ pub(crate) mod tests {
                 .collect(),
             light_position_m: Some(DVec3::new(0.1, 0.2, 0.5)),
             light_position_cov_m2: Vec::new(),
+            light_agreement: None,
             world_from_flash: None,
             world_from_standard: Some(estimated_pose(Pose::IDENTITY)),
             skipped: Vec::new(),

@@ -1177,12 +1177,15 @@ impl StageUnit for FitUnit {
     fn load(&self, _ctx: &mut Ctx<'_>, _recorded: &[StageReport]) -> Result<(), ProcessError> {
         Ok(())
     }
-    fn checks(
-        &self,
-        _ctx: &Ctx<'_>,
-        reports: &[StageReport],
-    ) -> Vec<(Stage, crate::checks::Check)> {
-        crate::checks::fit_checks(reports)
+    fn checks(&self, ctx: &Ctx<'_>, reports: &[StageReport]) -> Vec<(Stage, crate::checks::Check)> {
+        let files: Vec<&str> = ctx
+            .session
+            .file
+            .images
+            .iter()
+            .map(|i| i.file.as_str())
+            .collect();
+        crate::checks::fit_checks(reports, &files)
     }
 }
 
@@ -1192,6 +1195,8 @@ pub fn fit_reports(plan: &Plan, fr: &FitReport) -> [StageReport; 3] {
         StageMetrics::Smooth(SmoothMetrics {
             loess_span: fr.smooth.span,
             loess_residual_sigma_pct: fr.smooth.residual_sigma_log * 100.0,
+            worst_image_offset_pct: fr.smooth.worst_image_offset.map(|o| o.offset_log * 100.0),
+            worst_image_index: fr.smooth.worst_image_offset.map(|o| o.image_index),
         }),
     );
     let hemi = if plan.runs(Stage::SmoothHemisphere) {

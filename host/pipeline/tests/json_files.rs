@@ -125,6 +125,12 @@ fn calibrated_poses() -> SessionPoses {
         images: (0..4).map(image).collect(),
         light_position_m: Some(DVec3::new(0.5, -0.2, 1.5)),
         light_position_cov_m2: vec![1e-8, 0.0, 0.0, 0.0, 1e-8, 0.0, 0.0, 0.0, 1e-8],
+        light_agreement: Some(skinbrdf_poses::LightAgreement {
+            images: 3,
+            reduced_chi2: 1.2,
+            farthest_image: "img_032.dng".into(),
+            farthest_offset_mm: 0.8,
+        }),
         world_from_flash: None,
         world_from_standard: Some(PoseWithCov {
             pose: Pose::IDENTITY,

@@ -24,7 +24,8 @@ pub use bundle::{BundleConfig, BundleReport, RobustLoss};
 pub use error::{Diagnostic, PoseError};
 pub use pnp::{estimate_pose, PnpConfig, PointObs, PoseEstimate};
 pub use session::{
-    estimate_session, estimate_session_detected, PoseConfig, SessionDetections, SessionPoses,
+    estimate_session, estimate_session_detected, LightAgreement, PoseConfig, SessionDetections,
+    SessionPoses,
 };
 pub use survey::{
     survey, survey_detected, FrameUncertainty, HeadGauge, Survey, SurveyConfig, SurveyIssue,

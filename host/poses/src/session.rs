@@ -185,6 +185,9 @@ pub struct SessionPoses {
     pub light_position_m: Option<DVec3>,
     /// Its 3 x 3 covariance, m², row-major.
     pub light_position_cov_m2: Vec<f64>,
+    /// How the light-position images agree on it (two or more placed it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light_agreement: Option<LightAgreement>,
     /// World from flash (from the first light-position image that saw the flash, or known).
     pub world_from_flash: Option<PoseWithCov>,
     /// World from standard.
@@ -622,6 +625,7 @@ fn estimate_session_stages_with(
     }
     // 4. Flash: combine the light-position images.
     let light_centre = file.flash.light_centre_m;
+    let mut light_agreement = None;
     let (light_position_m, light_position_cov_m2, world_from_flash) =
         if let Some(p) = file.known.world_from_flash {
             skipped.push("flash location (known.world_from_flash)".into());
@@ -634,37 +638,9 @@ fn estimate_session_stages_with(
             skipped.push("flash location (known.light_position_m)".into());
             (Some(l), Vec::new(), None)
         } else {
-            let ests: Vec<&PoseWithCov> = images
-                .iter()
-                .filter_map(|i| i.world_from_flash.as_ref())
-                .collect();
-            let mut info = Matrix3::<f64>::zeros();
-            let mut acc = nalgebra::Vector3::<f64>::zeros();
-            for e in &ests {
-                let p = e.pose.transform_point(light_centre);
-                // Light point covariance: position block plus the lever arm through the rotation.
-                let c = |i: usize, j: usize| e.covariance[i * 6 + j];
-                let arm = e.pose.rotation * light_centre;
-                let skew = Matrix3::new(0.0, arm.z, -arm.y, -arm.z, 0.0, arm.x, arm.y, -arm.x, 0.0);
-                let crr = Matrix3::from_fn(c);
-                let ctt = Matrix3::from_fn(|i, j| c(3 + i, 3 + j));
-                let cov = ctt + skew * crr * skew.transpose();
-                if let Some(inv) = cov.try_inverse() {
-                    info += inv;
-                    acc += inv * nalgebra::Vector3::new(p.x, p.y, p.z);
-                }
-            }
-            match info.try_inverse() {
-                Some(cov) if !ests.is_empty() => {
-                    let m = cov * acc;
-                    (
-                        Some(DVec3::new(m[0], m[1], m[2])),
-                        cov.transpose().as_slice().to_vec(),
-                        ests.first().map(|e| (*e).clone()),
-                    )
-                }
-                _ => (None, Vec::new(), None),
-            }
+            let combined = combine_light_points(&images, light_centre);
+            light_agreement = combined.agreement;
+            (combined.position_m, combined.cov_m2, combined.first_pose)
         };
     let world_from_standard = if let Some(p) = file.known.world_from_standard {
         skipped.push("standard location (known.world_from_standard)".into());
@@ -681,6 +657,7 @@ fn estimate_session_stages_with(
         images,
         light_position_m,
         light_position_cov_m2,
+        light_agreement,
         world_from_flash,
         world_from_standard,
         skipped,
@@ -699,6 +676,103 @@ fn estimate_session_stages_with(
     }
     out.total_ms = t0.elapsed().as_secs_f64() * 1e3;
     Ok((per_image, out))
+}
+
+/// The light-position images' flash poses combined into one light point.
+struct CombinedLight {
+    /// The information-weighted mean of the single-view light points.
+    position_m: Option<DVec3>,
+    /// Its 3 x 3 covariance, row-major (empty when none).
+    cov_m2: Vec<f64>,
+    /// The first image's flash pose.
+    first_pose: Option<PoseWithCov>,
+    /// How the single views agree (two or more).
+    agreement: Option<LightAgreement>,
+}
+
+/// Combines every image's single-view flash pose: each gives the light point `p_i` with
+/// covariance `C_i` (the pose's position block plus the lever arm to the light centre through
+/// its rotation block); the combined point is `m = (Σ C_i⁻¹)⁻¹ Σ C_i⁻¹ p_i`.
+fn combine_light_points(images: &[ImagePoses], light_centre: DVec3) -> CombinedLight {
+    let views: Vec<(&ImagePoses, &PoseWithCov)> = images
+        .iter()
+        .filter_map(|i| Some((i, i.world_from_flash.as_ref()?)))
+        .collect();
+    let points: Vec<(&str, DVec3, Matrix3<f64>)> = views
+        .iter()
+        .filter_map(|(img, e)| {
+            let (p, cov) = light_point(e, light_centre);
+            let c = (cov.len() == 9).then(|| Matrix3::from_row_slice(&cov))?;
+            Some((img.file.as_str(), p, c.try_inverse()?))
+        })
+        .collect();
+    let mut info = Matrix3::<f64>::zeros();
+    let mut acc = nalgebra::Vector3::<f64>::zeros();
+    for (_, p, inv) in &points {
+        info += inv;
+        acc += inv * nalgebra::Vector3::new(p.x, p.y, p.z);
+    }
+    let first_pose = views.first().map(|(_, e)| (*e).clone());
+    match info.try_inverse() {
+        Some(cov) if !points.is_empty() => {
+            let m = cov * acc;
+            let position = DVec3::new(m[0], m[1], m[2]);
+            CombinedLight {
+                position_m: Some(position),
+                cov_m2: cov.transpose().as_slice().to_vec(),
+                first_pose,
+                agreement: light_agreement(&points, position),
+            }
+        }
+        _ => CombinedLight {
+            position_m: None,
+            cov_m2: Vec::new(),
+            first_pose,
+            agreement: None,
+        },
+    }
+}
+
+/// How single-view light points `(file, p_i, C_i⁻¹)` agree about their combined point `m`:
+/// `χ² = Σ (p_i - m)ᵀ C_i⁻¹ (p_i - m)` over its `3 (n - 1)` degrees of freedom. `None` for
+/// fewer than two views.
+fn light_agreement(points: &[(&str, DVec3, Matrix3<f64>)], m: DVec3) -> Option<LightAgreement> {
+    if points.len() < 2 {
+        return None;
+    }
+    let mut chi2 = 0.0;
+    let mut worst: Option<(&str, f64)> = None;
+    for (file, p, inv) in points {
+        let d = *p - m;
+        let v = nalgebra::Vector3::new(d.x, d.y, d.z);
+        chi2 += (v.transpose() * inv * v)[(0, 0)];
+        let off_mm = d.length() * 1e3;
+        if worst.is_none_or(|(_, w)| off_mm > w) {
+            worst = Some((file, off_mm));
+        }
+    }
+    let (file, offset_mm) = worst?;
+    Some(LightAgreement {
+        images: points.len(),
+        reduced_chi2: chi2 / (3.0 * (points.len() - 1) as f64),
+        farthest_image: file.to_string(),
+        farthest_offset_mm: offset_mm,
+    })
+}
+
+/// How the light-position images agree on the flash (each places it from its own view).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LightAgreement {
+    /// Images that placed the flash.
+    pub images: usize,
+    /// Their light points' reduced chi-square about the combined point (their stated
+    /// covariances): near 1 when they agree, large when the flash or a light-position camera
+    /// moved, or a pose is wrong.
+    pub reduced_chi2: f64,
+    /// The image whose light point is farthest from the combined one.
+    pub farthest_image: String,
+    /// Its distance from the combined point, mm.
+    pub farthest_offset_mm: f64,
 }
 
 /// The light point (flash frame `light_centre`) of a flash pose with its 3 x 3 covariance.
@@ -1091,6 +1165,29 @@ pub fn reproject_target(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn light_images_that_agree_have_chi2_near_one_and_a_moved_one_stands_out() {
+        // Each view places the light point with a 1 mm sd per axis.
+        let info = Matrix3::<f64>::identity() * 1e6;
+        let m = DVec3::new(0.4, 1.2, 1.5);
+        let agree = [
+            ("a.dng", m + DVec3::new(0.0007, -0.0005, 0.0009), info),
+            ("b.dng", m + DVec3::new(-0.0011, 0.0004, -0.0002), info),
+            ("c.dng", m + DVec3::new(0.0004, 0.0001, -0.0007), info),
+        ];
+        let a = light_agreement(&agree, m).expect("three views");
+        assert_eq!(a.images, 3);
+        assert!(a.reduced_chi2 < 2.0, "{a:?}");
+        assert_eq!(a.farthest_image, "a.dng");
+        let mut moved = agree;
+        moved[2].1 = m + DVec3::new(0.012, 0.0, 0.0);
+        let a = light_agreement(&moved, m).expect("three views");
+        assert!(a.reduced_chi2 > 20.0, "{a:?}");
+        assert_eq!(a.farthest_image, "c.dng");
+        assert!((a.farthest_offset_mm - 12.0).abs() < 1e-9);
+        assert_eq!(light_agreement(&agree[..1], m), None);
+    }
 
     #[test]
     fn occluded_corners_are_left_out_of_the_pose_points() {

@@ -30,117 +30,13 @@ use rawler::formats::tiff::{GenericTiffReader, IFD};
 use rawler::rawimage::{RawImage, RawImageData, RawPhotometricInterpretation};
 use rawler::rawsource::RawSource;
 use rawler::tags::TiffCommonTag;
-use skinbrdf_core::CameraModel;
 
+use crate::assemble::{assemble, check_levels, Geometry, Sensor};
 use crate::bayer::{BayerPhase, CfaColour};
 use crate::error::RawError;
-use crate::kind::{sniff, FileKind};
-
-/// Overrides of the file's levels (the session's per-image `linearization`).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct RawOptions {
-    /// Black level per CFA position of the active area's quad, in reading order (top-left,
-    /// top-right, bottom-left, bottom-right), in raw units.
-    pub black_levels: Option<[f64; 4]>,
-    /// White level in raw units.
-    pub white_level: Option<f64>,
-}
-
-/// A decoded raw image, at superpixel (half) or photosite (full) resolution.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RawFrame {
-    /// What the file is.
-    pub kind: FileKind,
-    /// Superpixels or photosites.
-    pub layout: RawLayout,
-    /// Width of the image as loaded: half the active area's width, rounded down (superpixels),
-    /// or twice that (photosites: an odd last column is dropped in both layouts).
-    pub width_px: u32,
-    /// Height of the image as loaded.
-    pub height_px: u32,
-    /// Normalised linear values per pixel, row-major. Superpixels: R, mean(G1, G2), B.
-    /// Photosites: the photosite's own channel, the other two NaN.
-    pub rgb: Vec<[f32; 3]>,
-    /// True where any photosite of the quad (superpixels), or the photosite itself, is at or
-    /// above the white level.
-    pub saturated: Vec<bool>,
-    /// The Bayer phase at the active area's top-left photosite.
-    pub cfa: BayerPhase,
-    /// Black level per CFA position of the active quad, reading order (as used).
-    pub black_levels: [f64; 4],
-    /// White level (as used).
-    pub white_level: f64,
-    /// Bits per stored sample the file declares.
-    pub bits_per_sample: u32,
-    /// Full sensor width in photosites (masked areas included).
-    pub sensor_width_px: u32,
-    /// Full sensor height in photosites.
-    pub sensor_height_px: u32,
-    /// Left edge of the active area in sensor photosites.
-    pub active_left_px: u32,
-    /// Top edge of the active area in sensor photosites.
-    pub active_top_px: u32,
-}
-
-impl RawFrame {
-    /// The pixel at column `u`, row `v`.
-    pub fn get(&self, u: u32, v: u32) -> Option<[f32; 3]> {
-        (u < self.width_px && v < self.height_px)
-            .then(|| self.rgb[(v * self.width_px + u) as usize])
-    }
-}
-
-/// A focal length in active-area photosites as a focal length in superpixels: `f / 2`.
-pub const fn sensor_to_superpixel_focal(f_px: f64) -> f64 {
-    f_px / 2.0
-}
-
-/// A coordinate (principal point, detection) in active-area photosites as a coordinate in
-/// superpixels, both with pixel centres at integers: `(c - 0.5) / 2`.
-pub const fn sensor_to_superpixel_centre(c_px: f64) -> f64 {
-    (c_px - 0.5) / 2.0
-}
-
-/// A focal length in superpixels as a focal length in active-area photosites: `2 f`.
-pub const fn superpixel_to_sensor_focal(f_px: f64) -> f64 {
-    2.0 * f_px
-}
-
-/// A coordinate in superpixels as a coordinate in active-area photosites: `2 c + 0.5`
-/// (the inverse of [`sensor_to_superpixel_centre`]).
-pub const fn superpixel_to_sensor_centre(c_px: f64) -> f64 {
-    2.0 * c_px + 0.5
-}
-
-/// A calibration of the superpixel image converted to the photosite image (the even part of
-/// the active area: size doubled, focal lengths and principal point as above, distortion
-/// unchanged); the inverse of [`sensor_camera_to_superpixel`] on an even-sized active area.
-pub fn superpixel_camera_to_sensor(cam: &CameraModel) -> CameraModel {
-    CameraModel {
-        width_px: cam.width_px.saturating_mul(2),
-        height_px: cam.height_px.saturating_mul(2),
-        fx_px: superpixel_to_sensor_focal(cam.fx_px),
-        fy_px: superpixel_to_sensor_focal(cam.fy_px),
-        cx_px: superpixel_to_sensor_centre(cam.cx_px),
-        cy_px: superpixel_to_sensor_centre(cam.cy_px),
-        distortion: cam.distortion,
-    }
-}
-
-/// A calibration made on the full-resolution active area, converted to the superpixel image
-/// (size halved, rounded down; focal lengths and principal point as above; distortion
-/// coefficients unchanged, as they act on normalised coordinates).
-pub fn sensor_camera_to_superpixel(cam: &CameraModel) -> CameraModel {
-    CameraModel {
-        width_px: cam.width_px / 2,
-        height_px: cam.height_px / 2,
-        fx_px: sensor_to_superpixel_focal(cam.fx_px),
-        fy_px: sensor_to_superpixel_focal(cam.fy_px),
-        cx_px: sensor_to_superpixel_centre(cam.cx_px),
-        cy_px: sensor_to_superpixel_centre(cam.cy_px),
-        distortion: cam.distortion,
-    }
-}
+use crate::frame::{RawFrame, RawHeader, RawLayout, RawOptions};
+use crate::identify::sniff;
+use crate::kind::FileKind;
 
 /// The shared camera table (parsed once).
 pub(crate) fn loader() -> &'static RawLoader {
@@ -275,45 +171,42 @@ pub fn decode_photosites(path: &Path, opts: &RawOptions) -> Result<RawFrame, Raw
 }
 
 /// Decodes a Bayer raw file in either layout.
+/// A file rawler cannot decode (an unsupported format or camera, a panic inside it) is
+/// decoded by LibRaw ([`crate::via_libraw`]); a file refused before decoding (truncated,
+/// implausible, not raw) is not.
 pub fn decode_raw(path: &Path, opts: &RawOptions, layout: RawLayout) -> Result<RawFrame, RawError> {
     let (kind, src) = open_raw(path)?;
-    let image = guarded(path, || {
+    match guarded(path, || {
         loader().decode(&src, &RawDecodeParams::default(), false)
-    })?;
-    normalise(path, kind, &image, opts, layout)
-}
-
-/// What [`read_raw_header`] tells without computing superpixels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RawHeader {
-    /// What the file is.
-    pub kind: FileKind,
-    /// Width of the image as loaded (superpixels).
-    pub width_px: u32,
-    /// Height of the image as loaded (superpixels).
-    pub height_px: u32,
-    /// Bits per stored sample.
-    pub bits_per_sample: u32,
-    /// The Bayer phase at the active area's top-left photosite.
-    pub cfa: BayerPhase,
-}
-
-impl RawHeader {
-    /// The size of the image as a decode in `layout` gives it.
-    pub const fn size_px(&self, layout: RawLayout) -> (u32, u32) {
-        match layout {
-            RawLayout::Superpixel => (self.width_px, self.height_px),
-            RawLayout::Photosite => (
-                self.width_px.saturating_mul(2),
-                self.height_px.saturating_mul(2),
-            ),
-        }
+    }) {
+        Ok(image) => normalise(path, kind, &image, opts, layout),
+        Err(rawler) => crate::via_libraw::decode(path, kind, opts, layout)
+            .map_err(|libraw| crate::via_libraw::both_failed(rawler, libraw)),
     }
 }
 
 /// The size of the image [`decode_superpixel`] would give, its bit depth and phase, with the
 /// same layout checks (non-Bayer data is refused here too).
+///
+/// Where rawler cannot read it (an unsupported format, a file whose image data is stripped
+/// or cut short), LibRaw reads the header from the file's structure ([`crate::via_libraw`]),
+/// once the file's directories pass the same checks as for metadata: a header is then given
+/// for a file that no decode will accept.
 pub fn read_raw_header(path: &Path) -> Result<RawHeader, RawError> {
+    match rawler_header(path) {
+        Ok(h) => Ok(h),
+        Err(
+            rawler @ (RawError::Decode { .. }
+            | RawError::Truncated { .. }
+            | RawError::Implausible { .. }),
+        ) => crate::via_libraw::header(path)
+            .map_err(|libraw| crate::via_libraw::both_failed(rawler, libraw)),
+        Err(e) => Err(e),
+    }
+}
+
+/// [`read_raw_header`] by rawler alone.
+fn rawler_header(path: &Path) -> Result<RawHeader, RawError> {
     let (kind, src) = open_raw(path)?;
     if kind == FileKind::Dng {
         if let Some(h) = dng_header(path) {
@@ -396,15 +289,6 @@ fn dng_header(path: &Path) -> Option<RawHeader> {
     })
 }
 
-/// Where the active area is and which Bayer phase starts it.
-struct Geometry {
-    left: usize,
-    top: usize,
-    aw: usize,
-    ah: usize,
-    phase: BayerPhase,
-}
-
 /// The layout checks (Bayer, one sample per pixel, active area inside the sensor).
 fn geometry(path: &Path, image: &RawImage) -> Result<Geometry, RawError> {
     let layout_err = |layout: String| RawError::UnsupportedLayout {
@@ -477,99 +361,6 @@ fn geometry(path: &Path, image: &RawImage) -> Result<Geometry, RawError> {
     })
 }
 
-/// The levels of a decode: per CFA position of a 2x2 quad, its black level and the scale to
-/// the white level; and where red, the two greens and blue sit in the quad.
-struct QuadLevels {
-    black: [f64; 4],
-    scale: [f64; 4],
-    white: f64,
-    positions: [usize; 4],
-    /// The channel (0 red, 1 green, 2 blue) of each quad position, reading order.
-    channels: [usize; 4],
-}
-
-impl QuadLevels {
-    fn new(black: [f64; 4], white: f64, phase: BayerPhase) -> Self {
-        Self {
-            black,
-            scale: black.map(|b| 1.0 / (white - b)),
-            white,
-            positions: phase.positions(),
-            channels: phase.quad().map(|c| usize::from(c.dng_code())),
-        }
-    }
-
-    /// One RGB pixel per 2x2 quad of the active area (`w` x `h` quads from column `left`,
-    /// row `top` of a sensor `sw` samples wide): red, the mean of the greens and blue, each
-    /// black-subtracted and scaled to the white level; saturated where any sample reaches it.
-    /// Generic over the sample type so that the inner loop is monomorphic.
-    fn superpixels<T: Copy + Into<f64>>(
-        &self,
-        data: &[T],
-        sw: usize,
-        left: usize,
-        top: usize,
-        w: usize,
-        h: usize,
-    ) -> (Vec<[f32; 3]>, Vec<bool>) {
-        let mut rgb = Vec::with_capacity(w * h);
-        let mut saturated = Vec::with_capacity(w * h);
-        let [pr, pg1, pg2, pb] = self.positions;
-        for v in 0..h {
-            let y = top + 2 * v;
-            let row0 = &data[y * sw + left..y * sw + left + 2 * w];
-            let row1 = &data[(y + 1) * sw + left..(y + 1) * sw + left + 2 * w];
-            for (a, b) in row0.chunks_exact(2).zip(row1.chunks_exact(2)) {
-                let q: [f64; 4] = [a[0].into(), a[1].into(), b[0].into(), b[1].into()];
-                let n = |k: usize| (q[k] - self.black[k]) * self.scale[k];
-                rgb.push([n(pr) as f32, (0.5 * (n(pg1) + n(pg2))) as f32, n(pb) as f32]);
-                saturated.push(q.iter().any(|&r| r >= self.white));
-            }
-        }
-        (rgb, saturated)
-    }
-
-    /// One pixel per photosite of the active area's `2w` x `2h` photosites from column
-    /// `left`, row `top`: its own channel black-subtracted and scaled to the white level, the
-    /// other two NaN (not measured there); saturated where its own value reaches the white
-    /// level.
-    fn photosites<T: Copy + Into<f64>>(
-        &self,
-        data: &[T],
-        sw: usize,
-        left: usize,
-        top: usize,
-        w: usize,
-        h: usize,
-    ) -> (Vec<[f32; 3]>, Vec<bool>) {
-        let (pw, ph) = (2 * w, 2 * h);
-        let mut rgb = Vec::with_capacity(pw * ph);
-        let mut saturated = Vec::with_capacity(pw * ph);
-        for y in 0..ph {
-            let row = &data[(top + y) * sw + left..(top + y) * sw + left + pw];
-            for (x, &raw) in row.iter().enumerate() {
-                let k = (y % 2) * 2 + x % 2;
-                let raw: f64 = raw.into();
-                let mut px = [f32::NAN; 3];
-                px[self.channels[k]] = ((raw - self.black[k]) * self.scale[k]) as f32;
-                rgb.push(px);
-                saturated.push(raw >= self.white);
-            }
-        }
-        (rgb, saturated)
-    }
-}
-
-/// How a decode lays the photosites out in the image it returns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum RawLayout {
-    /// One pixel per photosite of the active area (full resolution); each pixel holds its own
-    /// channel, the other two NaN ([`decode_photosites`]).
-    Photosite,
-    /// One RGB pixel per 2x2 quad (half resolution; [`decode_superpixel`]).
-    Superpixel,
-}
-
 /// The levels a decode uses: the overrides, else the file's (see the module docs).
 fn levels(
     path: &Path,
@@ -594,16 +385,7 @@ fn levels(
             }
         },
     };
-    for (k, &b) in black_levels.iter().enumerate() {
-        if !b.is_finite() || !white_level.is_finite() || white_level <= b {
-            return Err(RawError::BadLevels {
-                path: path.to_path_buf(),
-                problem: format!(
-                    "white level {white_level} is not above the black level {b} of CFA position {k}"
-                ),
-            });
-        }
-    }
+    check_levels(path, black_levels, white_level)?;
     Ok((black_levels, white_level))
 }
 
@@ -617,50 +399,19 @@ fn normalise(
 ) -> Result<RawFrame, RawError> {
     let g = geometry(path, image)?;
     let (black_levels, white_level) = levels(path, kind, image, &g, opts)?;
-    let (sw, sh) = (image.width, image.height);
-    let (w, h) = (g.aw / 2, g.ah / 2);
-    let expected = sw * sh;
-    let levels = QuadLevels::new(black_levels, white_level, g.phase);
-    let (left, top) = (g.left, g.top);
-    let (rgb, saturated) = match (&image.data, layout) {
-        (RawImageData::Integer(d), _) if d.len() < expected => {
-            return Err(short_data(path, d.len(), expected))
-        }
-        (RawImageData::Float(d), _) if d.len() < expected => {
-            return Err(short_data(path, d.len(), expected))
-        }
-        (RawImageData::Integer(d), RawLayout::Superpixel) => {
-            levels.superpixels(d, sw, left, top, w, h)
-        }
-        (RawImageData::Float(d), RawLayout::Superpixel) => {
-            levels.superpixels(d, sw, left, top, w, h)
-        }
-        (RawImageData::Integer(d), RawLayout::Photosite) => {
-            levels.photosites(d, sw, left, top, w, h)
-        }
-        (RawImageData::Float(d), RawLayout::Photosite) => levels.photosites(d, sw, left, top, w, h),
-    };
-    let to_u32 = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
-    let (width_px, height_px) = match layout {
-        RawLayout::Superpixel => (w, h),
-        RawLayout::Photosite => (2 * w, 2 * h),
-    };
-    Ok(RawFrame {
+    let sensor = Sensor {
         kind,
-        layout,
-        width_px: to_u32(width_px),
-        height_px: to_u32(height_px),
-        rgb,
-        saturated,
-        cfa: g.phase,
-        black_levels,
-        white_level,
-        bits_per_sample: to_u32(image.bps),
-        sensor_width_px: to_u32(sw),
-        sensor_height_px: to_u32(sh),
-        active_left_px: to_u32(left),
-        active_top_px: to_u32(top),
-    })
+        width: image.width,
+        height: image.height,
+        bits_per_sample: image.bps,
+    };
+    let expected = sensor.width * sensor.height;
+    match &image.data {
+        RawImageData::Integer(d) if d.len() < expected => Err(short_data(path, d.len(), expected)),
+        RawImageData::Float(d) if d.len() < expected => Err(short_data(path, d.len(), expected)),
+        RawImageData::Integer(d) => Ok(assemble(d, &sensor, &g, black_levels, white_level, layout)),
+        RawImageData::Float(d) => Ok(assemble(d, &sensor, &g, black_levels, white_level, layout)),
+    }
 }
 
 fn short_data(path: &Path, got: usize, expected: usize) -> RawError {

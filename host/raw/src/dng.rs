@@ -21,7 +21,7 @@ use std::path::Path;
 
 use crate::bayer::BayerPhase;
 use crate::error::RawError;
-use crate::meta::CaptureTime;
+use crate::exposure::CaptureTime;
 use crate::tiff::{encode, Directory, TagValue};
 
 /// A mosaicked sensor image and the metadata a camera would store with it.

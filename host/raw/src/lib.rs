@@ -48,31 +48,35 @@
 //! area's origin. X-Trans, other CFA patterns and linear (non-mosaic, e.g. Foveon or linear DNG)
 //! data are refused with [`RawError::UnsupportedLayout`], naming the file and the layout.
 
+mod assemble;
 mod bayer;
 mod decode;
 pub mod dng;
 mod error;
+mod exposure;
+mod frame;
+mod identify;
 mod isolate;
 mod kind;
 mod limits;
 mod meta;
 pub mod tiff;
+mod via_libraw;
 
 pub use bayer::{BayerPhase, CfaColour};
-pub use decode::{
-    decode_photosites, decode_raw, decode_superpixel, read_raw_header, sensor_camera_to_superpixel,
-    sensor_to_superpixel_centre, sensor_to_superpixel_focal, superpixel_camera_to_sensor,
-    superpixel_to_sensor_centre, superpixel_to_sensor_focal, RawFrame, RawHeader, RawLayout,
-    RawOptions,
-};
+pub use decode::{decode_photosites, decode_raw, decode_superpixel, read_raw_header};
 pub use error::RawError;
+pub use exposure::{CaptureTime, ExposureMeta, LocalDateTime};
+pub use frame::{
+    sensor_camera_to_superpixel, sensor_to_superpixel_centre, sensor_to_superpixel_focal,
+    superpixel_camera_to_sensor, superpixel_to_sensor_centre, superpixel_to_sensor_focal, RawFrame,
+    RawHeader, RawLayout, RawOptions,
+};
+pub use identify::{check_extension, sniff};
 pub use isolate::{
     decoded_size_with, read_metadata_with, worker_main, Isolation, WorkerOp,
     DEFAULT_MAX_MEMORY_BYTES, DEFAULT_TIMEOUT, WORKER_REFUSED,
 };
-pub use kind::{check_extension, sniff, FileKind};
-pub use limits::{MAX_IFDS, MAX_IFD_ENTRIES, MAX_PIXELS};
-pub use meta::{
-    focal_plane_unit_mm, read_metadata, CaptureTime, ExposureMeta, LocalDateTime,
-    FULL_FRAME_DIAGONAL_MM,
-};
+pub use kind::FileKind;
+pub use limits::{MAX_IFDS, MAX_IFD_ENTRIES, MAX_PIXELS, VALUE_BYTES_PER_FILE_BYTE};
+pub use meta::{focal_plane_unit_mm, read_metadata, FULL_FRAME_DIAGONAL_MM};

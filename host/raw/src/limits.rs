@@ -36,6 +36,12 @@ pub const MAX_IFD_ENTRIES: u64 = 4096;
 /// The largest image a header may state, pixels (the largest camera sensors have a few hundred
 /// million photosites).
 pub const MAX_PIXELS: u64 = 1 << 30;
+/// How many bytes the values of all directories' entries may state together, per byte of the
+/// file (plus [`VALUE_BYTES_SLACK`]): the raw decoder allocates every entry's values before
+/// reading them, so entries pointing many times at the same bytes multiply what it allocates.
+pub const VALUE_BYTES_PER_FILE_BYTE: u64 = 4;
+/// Value bytes allowed beyond [`VALUE_BYTES_PER_FILE_BYTE`] times the file's length.
+const VALUE_BYTES_SLACK: u64 = 1 << 20;
 /// The most strips or tiles whose byte counts are read.
 const MAX_STRIPS: u64 = 1 << 20;
 
@@ -124,6 +130,8 @@ struct Walker<'a> {
     len: u64,
     order: Order,
     path: &'a Path,
+    /// The bytes the entries' values read so far state, together.
+    value_bytes: u64,
 }
 
 impl Walker<'_> {
@@ -199,6 +207,7 @@ impl Walker<'_> {
         let mut children = Vec::new();
         for e in body.chunks_exact(12).take(usize::try_from(n).unwrap_or(0)) {
             let e = e.to_vec();
+            self.check_value_bytes(&e)?;
             let first = |w: &mut Self| -> Result<Option<u64>, RawError> {
                 Ok(w.values(&e, 1)?.first().copied())
             };
@@ -222,6 +231,41 @@ impl Walker<'_> {
         }
         let next = u64::from(o.u32(&body[body.len() - 4..]));
         Ok((tags, children, next))
+    }
+
+    /// Checks the bytes an entry's values state (a value of an unknown type counts one byte, as
+    /// the decoder reads it): no array larger than the file, and all arrays together within
+    /// [`VALUE_BYTES_PER_FILE_BYTE`] times the file's length.
+    fn check_value_bytes(&mut self, entry: &[u8]) -> Result<(), RawError> {
+        let o = self.order;
+        let tag = o.u16(&entry[0..2]);
+        let count = u64::from(o.u32(&entry[4..8]));
+        let bytes = count.saturating_mul(type_size(o.u16(&entry[2..4])).max(1));
+        if bytes <= 4 {
+            return Ok(());
+        }
+        if bytes > self.len {
+            return Err(RawError::Truncated {
+                path: self.path.to_path_buf(),
+                what: format!(
+                    "tag {tag} states {count} values ({bytes} bytes), more than the file's {} \
+                     bytes",
+                    self.len
+                ),
+            });
+        }
+        self.value_bytes = self.value_bytes.saturating_add(bytes);
+        let max = self
+            .len
+            .saturating_mul(VALUE_BYTES_PER_FILE_BYTE)
+            .saturating_add(VALUE_BYTES_SLACK);
+        if self.value_bytes > max {
+            return Err(self.bad(format!(
+                "its directories' values state more than {max} bytes together, \
+                 {VALUE_BYTES_PER_FILE_BYTE} times the file's length"
+            )));
+        }
+        Ok(())
     }
 
     /// Checks what one directory states against the file.
@@ -318,6 +362,7 @@ fn walk_tiff(path: &Path, image_data: bool) -> Result<(), RawError> {
         len,
         order,
         path,
+        value_bytes: 0,
     };
     let mut visited: HashSet<u64> = HashSet::new();
     let mut pending = vec![u64::from(order.u32(&head[4..8]))];
@@ -403,5 +448,23 @@ mod tests {
         b.extend([0u8; 40]);
         let e = check(&b).expect_err("refused");
         assert!(e.to_string().contains("8192 bytes"), "{e}");
+    }
+
+    #[test]
+    fn values_stating_more_than_the_file_holds_are_refused() {
+        // One entry stating 4 GiB of values (the decoder would allocate them before reading).
+        let big = vec![(TAG_WIDTH, 3, 1, 2), (36864, 7, u32::MAX, 8)];
+        let e = check(&tiff(&[(big, 0)])).expect_err("refused");
+        assert!(e.to_string().contains("4294967295 values"), "{e}");
+        // Many entries each stating the whole file: together more than the budget.
+        let mut b = tiff(&[((0..4000).map(|_| (700u16, 7u16, 0, 8u32)).collect(), 0)]);
+        let len = b.len() as u32 + 1000;
+        b = tiff(&[(
+            (0..4000).map(|_| (700u16, 7u16, len - 8, 8u32)).collect(),
+            0,
+        )]);
+        b.extend(vec![0u8; 1000]);
+        let e = check(&b).expect_err("refused");
+        assert!(e.to_string().contains("together"), "{e}");
     }
 }

@@ -34,13 +34,16 @@
 //! constant. Equivalently a surface point renders to `V = rho · cos(theta_i) / (C · D²)`.
 
 pub mod capture;
+mod checks;
 pub mod error;
 pub mod format;
 pub mod linear;
 pub mod load;
+mod needs;
 mod parse;
 pub mod rig;
 pub mod truth;
+mod validate;
 pub mod write;
 
 pub use capture::{CaptureRecord, ImageRole};

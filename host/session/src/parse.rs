@@ -27,7 +27,7 @@ use crate::format::*;
 use crate::linear::Linearization;
 
 /// What `session.toml` stated, beyond the parsed values: which optional sections were given
-/// (the loader's rules depend on it; see [`crate::load::SectionNeeds`]).
+/// (the loader's rules depend on it; see [`crate::needs::SectionNeeds`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Stated {
     /// `[linearization]` was given.
@@ -570,7 +570,7 @@ pub(crate) fn parse_session_toml(
 }
 
 /// The sections `[targets]`, `[flash]` and `[linearization]` are required only when a stage
-/// needs them (see [`crate::load::SectionNeeds`]); reports the ones missing.
+/// needs them (see [`crate::needs::SectionNeeds`]); reports the ones missing.
 fn report_missing_sections(
     images: &[ImageEntry],
     known: &KnownQuantities,
@@ -579,7 +579,7 @@ fn report_missing_sections(
     file: &Path,
     errs: &mut SessionErrors,
 ) {
-    let needs = crate::load::SectionNeeds::of(images, known, camera);
+    let needs = crate::needs::SectionNeeds::of(images, known, camera);
     if !stated.targets {
         if let Some(why) = needs
             .reference_targets

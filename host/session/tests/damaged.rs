@@ -6,82 +6,22 @@
 use std::path::Path;
 
 use glam::DVec3;
-use skinbrdf_brdf::BrdfModel;
-use skinbrdf_core::{CameraModel, Pose};
+use skinbrdf_core::Pose;
 use skinbrdf_session::write::{write_exr_rgb32f, write_png_rgb16, write_png_rgb8};
 use skinbrdf_session::*;
+
+mod common;
 
 const W: u32 = 8;
 const H: u32 = 6;
 
-fn target(id: u32, centre: DVec3) -> Target {
-    Target::square(id, 0.04, centre, DVec3::NEG_Z, DVec3::Y).unwrap()
-}
-
-fn entry(file: &str, role: ImageRole) -> ImageEntry {
-    ImageEntry {
-        file: file.into(),
-        role,
-        exposure_index: None,
-        linearization: None,
-        mask: None,
-        world_from_camera: None,
-        world_from_head: None,
-        exposure_scale: None,
-    }
-}
-
+/// The valid session every test damages: four PNG images of a W x H camera.
 fn valid_file() -> SessionFile {
-    SessionFile {
-        format_version: SESSION_FORMAT_VERSION,
-        description: "test".into(),
-        capture: None,
-        camera: CameraSpec::Calibrated(CameraModel::from_fov(W, H, 0.8)),
-        linearization: Linearization::LINEAR,
-        images: vec![
-            entry("images/m0.png", ImageRole::Measurement),
-            entry("images/m1.png", ImageRole::Measurement),
-            entry("images/l0.png", ImageRole::LightPosition),
-            entry("images/s0.png", ImageRole::ReferenceStandard),
-        ],
-        targets: TargetLayouts {
-            family: TAG_FAMILY.into(),
-            reference: vec![target(0, DVec3::new(0.0, 0.0, 2.0))],
-            headdress: vec![target(10, DVec3::new(0.0, 0.1, 0.0))],
-            unplaced: Vec::new(),
-        },
-        flash: FlashSpec {
-            diameter_m: 0.082,
-            light_centre_m: DVec3::ZERO,
-            targets: vec![target(20, DVec3::new(0.08, 0.0, 0.0))],
-        },
-        standard: Some(StandardSpec {
-            brdf: BrdfModel::Lambertian { albedo: [0.99; 3] },
-            size_m: [0.1, 0.1],
-            targets: vec![target(30, DVec3::new(0.08, 0.0, 0.0))],
-        }),
-        geometry: GeometrySpec::Sphere {
-            centre_m: DVec3::ZERO,
-            radius_m: 0.08,
-        },
-        roi: None,
-        known: KnownQuantities::default(),
-        registration: None,
-    }
-}
-
-/// A distinct 16-bit photograph per index (identical contents are themselves an error).
-fn write_png(dir: &Path, rel: &str, i: usize) {
-    let mut px = vec![1000u16; (3 * W * H) as usize];
-    px[0] = i as u16;
-    write_png_rgb16(&dir.join(rel), W, H, &px).unwrap();
+    common::session_file(W, H, "png")
 }
 
 fn write_dir(dir: &Path, f: &SessionFile) {
-    for (i, im) in f.images.iter().enumerate() {
-        write_png(dir, &im.file, i);
-    }
-    Session::write_file(dir, f).unwrap();
+    common::write_dir(dir, f, W, H);
 }
 
 /// `session.toml` of `f` as a TOML table, to damage.
@@ -361,4 +301,22 @@ fn a_float_image_with_an_inf_patch_is_implausible() {
     let errs = s.check_images(BadImagePolicy::Fail).unwrap_err();
     assert!(errs.problems[0].file.ends_with("images/l0.exr"), "{errs}");
     assert!(errs.to_string().contains("non-finite"), "{errs}");
+}
+
+#[test]
+fn a_capture_record_larger_than_its_limit_is_refused_unread() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut f = valid_file();
+    f.capture = Some("capture.json".into());
+    write_dir(dir.path(), &f);
+    // A sparse file one byte above the limit: refused by its length, never read into memory.
+    let big = std::fs::File::create(dir.path().join("capture.json")).unwrap();
+    big.set_len(skinbrdf_core::untrusted::CAPTURE_RECORD.max_bytes + 1)
+        .unwrap();
+    let errs = Session::load(dir.path()).unwrap_err();
+    let t = errs.to_string();
+    assert!(
+        t.contains("capture.json") && t.contains("capture record"),
+        "{t}"
+    );
 }

@@ -5,10 +5,11 @@
 use std::path::Path;
 
 use glam::DVec3;
-use skinbrdf_brdf::BrdfModel;
-use skinbrdf_core::{CameraModel, Pose};
+use skinbrdf_core::Pose;
 use skinbrdf_session::write::write_png_rgb16;
 use skinbrdf_session::*;
+
+mod common;
 
 /// A 16-bit code decoded to `f32` in [0, 1] equals the exact quotient within `f32` rounding.
 const F32_DECODE_TOL: f32 = 1e-7;
@@ -16,79 +17,23 @@ const F32_DECODE_TOL: f32 = 1e-7;
 const W: u32 = 8;
 const H: u32 = 6;
 
-fn target(id: u32, centre: DVec3) -> Target {
-    Target::square(id, 0.04, centre, DVec3::NEG_Z, DVec3::Y).unwrap()
-}
-
+/// The valid session the tests start from: four PNG images of a W x H camera, two reference
+/// targets, a region of interest and the standard's pose known.
 fn valid_file() -> SessionFile {
-    let images = [
-        ("images/m0.png", ImageRole::Measurement),
-        ("images/m1.png", ImageRole::Measurement),
-        ("images/l0.png", ImageRole::LightPosition),
-        ("images/s0.png", ImageRole::ReferenceStandard),
-    ]
-    .into_iter()
-    .map(|(f, role)| ImageEntry {
-        file: f.into(),
-        role,
-        exposure_index: None,
-        linearization: None,
-        mask: None,
-        world_from_camera: None,
-        world_from_head: None,
-        exposure_scale: None,
-    })
-    .collect();
-    SessionFile {
-        format_version: SESSION_FORMAT_VERSION,
-        description: "test".into(),
-        capture: None,
-        camera: CameraSpec::Calibrated(CameraModel::from_fov(W, H, 0.8)),
-        linearization: Linearization::LINEAR,
-        images,
-        targets: TargetLayouts {
-            family: TAG_FAMILY.into(),
-            reference: vec![
-                target(0, DVec3::new(0.0, 0.0, 2.0)),
-                target(1, DVec3::new(0.1, 0.0, 2.0)),
-            ],
-            headdress: vec![target(10, DVec3::new(0.0, 0.1, 0.0))],
-            unplaced: Vec::new(),
-        },
-        flash: FlashSpec {
-            diameter_m: 0.082,
-            light_centre_m: DVec3::ZERO,
-            targets: vec![target(20, DVec3::new(0.08, 0.0, 0.0))],
-        },
-        standard: Some(StandardSpec {
-            brdf: BrdfModel::Lambertian { albedo: [0.99; 3] },
-            size_m: [0.1, 0.1],
-            targets: vec![target(30, DVec3::new(0.08, 0.0, 0.0))],
-        }),
-        geometry: GeometrySpec::Sphere {
-            centre_m: DVec3::ZERO,
-            radius_m: 0.08,
-        },
-        roi: Some(RegionOfInterest {
-            centre_m: DVec3::new(0.0, 0.0, 0.08),
-            radius_m: 0.03,
-        }),
-        known: KnownQuantities {
-            world_from_standard: Some(Pose::IDENTITY),
-            ..Default::default()
-        },
-        registration: None,
-    }
+    let mut f = common::session_file(W, H, "png");
+    f.targets
+        .reference
+        .push(common::target(1, DVec3::new(0.1, 0.0, 2.0)));
+    f.roi = Some(RegionOfInterest {
+        centre_m: DVec3::new(0.0, 0.0, 0.08),
+        radius_m: 0.03,
+    });
+    f.known.world_from_standard = Some(Pose::IDENTITY);
+    f
 }
 
 fn write_dir(dir: &Path, f: &SessionFile) {
-    for (i, im) in f.images.iter().enumerate() {
-        // Distinct photographs: identical contents are an error (the same image listed twice).
-        let mut px = vec![1000u16; (3 * W * H) as usize];
-        px[0] = i as u16;
-        write_png_rgb16(&dir.join(&im.file), W, H, &px).unwrap();
-    }
-    Session::write_file(dir, f).unwrap();
+    common::write_dir(dir, f, W, H);
 }
 
 #[test]

@@ -4,13 +4,13 @@
 
 use std::path::Path;
 
-use glam::DVec3;
-use skinbrdf_brdf::BrdfModel;
 use skinbrdf_core::{CameraModel, Pose};
 use skinbrdf_raw::dng::{write_dng, DngImage};
 use skinbrdf_raw::BayerPhase;
 use skinbrdf_session::write::write_png_rgb16;
 use skinbrdf_session::*;
+
+mod common;
 
 /// The decoder's `f32` value against the same black/white scaling done in `f64`.
 const F32_DECODE_TOL: f64 = 1e-6;
@@ -24,64 +24,12 @@ const WHITE: u16 = 16_383;
 /// `WHITE - BLACK`) plus half a 16-bit step, plus the f32 rounding of both.
 const QUANT_TOL: f32 = 0.5 / (WHITE - BLACK) as f32 + 0.5 / 65_535.0 + 1e-6;
 
-fn target(id: u32, centre: DVec3) -> Target {
-    Target::square(id, 0.04, centre, DVec3::NEG_Z, DVec3::Y).unwrap()
-}
-
+/// The session of four `ext` images of a W x H (superpixel) camera, the standard's pose known.
 fn session_file(ext: &str) -> SessionFile {
-    let images = ["m0", "m1", "l0", "s0"]
-        .into_iter()
-        .zip([
-            ImageRole::Measurement,
-            ImageRole::Measurement,
-            ImageRole::LightPosition,
-            ImageRole::ReferenceStandard,
-        ])
-        .map(|(f, role)| ImageEntry {
-            file: format!("images/{f}.{ext}"),
-            role,
-            exposure_index: None,
-            linearization: None,
-            mask: None,
-            world_from_camera: None,
-            world_from_head: None,
-            exposure_scale: None,
-        })
-        .collect();
-    SessionFile {
-        format_version: SESSION_FORMAT_VERSION,
-        description: "raw test".into(),
-        capture: None,
-        camera: CameraSpec::Calibrated(CameraModel::from_fov(W, H, 0.8)),
-        linearization: Linearization::LINEAR,
-        images,
-        targets: TargetLayouts {
-            family: TAG_FAMILY.into(),
-            reference: vec![target(0, DVec3::new(0.0, 0.0, 2.0))],
-            headdress: vec![target(10, DVec3::new(0.0, 0.1, 0.0))],
-            unplaced: Vec::new(),
-        },
-        flash: FlashSpec {
-            diameter_m: 0.082,
-            light_centre_m: DVec3::ZERO,
-            targets: vec![target(20, DVec3::new(0.08, 0.0, 0.0))],
-        },
-        standard: Some(StandardSpec {
-            brdf: BrdfModel::Lambertian { albedo: [0.99; 3] },
-            size_m: [0.1, 0.1],
-            targets: vec![target(30, DVec3::new(0.08, 0.0, 0.0))],
-        }),
-        geometry: GeometrySpec::Sphere {
-            centre_m: DVec3::ZERO,
-            radius_m: 0.08,
-        },
-        roi: None,
-        known: KnownQuantities {
-            world_from_standard: Some(Pose::IDENTITY),
-            ..Default::default()
-        },
-        registration: None,
-    }
+    let mut f = common::session_file(W, H, ext);
+    f.description = "raw test".into();
+    f.known.world_from_standard = Some(Pose::IDENTITY);
+    f
 }
 
 /// Linear RGB of image `i` at superpixel (u, v), in [0, 1].

@@ -16,6 +16,8 @@ pub mod reference_quad;
 pub mod render;
 pub mod sheet;
 pub mod tag36h11;
+#[cfg(test)]
+mod test_scenes;
 
 pub use detect::{detect, CornerModel, DetectStats, Detection, DetectorConfig};
 pub use image::{GrayF32, ImageError};

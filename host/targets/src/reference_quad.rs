@@ -540,7 +540,7 @@ fn fit_quad(mut pts: Vec<Pt>, grey: &[u8], w: usize, h: usize) -> Option<[DVec2;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::detect::square_to_quad;
+    use crate::homography::square_to_quad;
     use crate::render::paint_tag;
 
     #[test]

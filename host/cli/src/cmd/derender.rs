@@ -5,10 +5,10 @@ use std::path::PathBuf;
 use anyhow::Context;
 use skinbrdf_derender::{CEstimator, DerenderConfig, ShadowMode};
 use skinbrdf_mesh::NormalMethod;
+use skinbrdf_pipeline::derender_request::{self, PoseRequest};
 use skinbrdf_pipeline::pose_inputs::PoseChoice;
-use skinbrdf_pipeline::process::scene_facts;
 use skinbrdf_pipeline::stages::{DerenderOutputOptions, PoseSourceChoice};
-use skinbrdf_pipeline::{stages, Plan, PlanOptions};
+use skinbrdf_pipeline::{stages, PlanOptions};
 
 /// Flags of `skinbrdf derender`.
 #[derive(Debug, clap::Args)]
@@ -41,9 +41,9 @@ pub struct Args {
     /// Average of C over the standard.
     #[arg(long, value_enum, default_value_t = CAverage::Median)]
     pub c_estimator: CAverage,
-    /// BVH build preset: fastest, very_fast, fast, medium, high, very_high.
-    #[arg(long, default_value = "medium")]
-    pub bvh_quality: String,
+    /// BVH build preset.
+    #[arg(long, value_enum, default_value_t = super::BvhQuality::Medium)]
+    pub bvh_quality: super::BvhQuality,
     /// Poses: auto (those session.toml gives, else the pose stage's SESSION/out/poses.json, as
     /// `process` does), session, estimated (the pose stage's output, --poses-file or
     /// SESSION/out/poses.json), truth (truth.json: a check of the derendering alone, marked as
@@ -147,10 +147,7 @@ fn config(args: &Args) -> anyhow::Result<DerenderConfig> {
         shadows,
         normals,
         c_estimator,
-        bvh_quality: args
-            .bvh_quality
-            .parse()
-            .map_err(|e| anyhow::anyhow!("--bvh-quality: {e}"))?,
+        bvh_quality: args.bvh_quality.into(),
     };
     cfg.validate()?;
     Ok(cfg)
@@ -163,29 +160,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     session.set_raw_mode(args.raw_mode.into());
     let plan_opts = PlanOptions::default();
     if args.shadows == Shadows::Plan {
-        let plan = Plan::derive(&scene_facts(&session), &plan_opts);
-        cfg = stages::planned_derender_config(&cfg, &plan, &plan_opts);
+        cfg = derender_request::planned_config(&session, &cfg, &plan_opts);
     }
+    let request = PoseRequest {
+        choice: match args.poses {
+            Poses::Auto => PoseChoice::Auto,
+            Poses::Session => PoseChoice::Session,
+            Poses::Estimated => PoseChoice::Estimated,
+            Poses::Truth => PoseChoice::Truth,
+        },
+        poses_file: args.poses_file.clone(),
+        skip_target_mask: args.no_target_mask,
+    };
+    let source = derender_request::derender_pose_source(&session, &request)?;
     let out = args.out.clone().unwrap_or_else(|| args.session.join("out"));
-    let poses_file = args
-        .poses_file
-        .clone()
-        .unwrap_or_else(|| args.session.join("out").join(stages::POSES_FILE));
-    let choice = if args.poses_file.is_some() {
-        Poses::Estimated
-    } else {
-        args.poses
-    };
-    if args.no_target_mask && choice != Poses::Truth {
-        anyhow::bail!("--no-target-mask is only for --poses truth (a check of the mask itself)");
-    }
-    let request = match choice {
-        Poses::Auto => PoseChoice::Auto,
-        Poses::Session => PoseChoice::Session,
-        Poses::Estimated => PoseChoice::Estimated,
-        Poses::Truth => PoseChoice::Truth,
-    };
-    let source = stages::choose_pose_source(&session, request, &poses_file)?;
     let opts = DerenderOutputOptions {
         skip_target_mask: args.no_target_mask,
         csv: args.csv,
@@ -197,102 +185,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if source == PoseSourceChoice::Truth {
         eprintln!("note: derendered with the TRUE poses of truth.json (a check of derendering alone, not a measurement)");
     }
-    let run = written.run;
     if args.json {
         print!("{}", std::fs::read_to_string(&written.report_file)?);
-        return Ok(());
+    } else {
+        crate::print::derender::text(&args.session, &written.run, &cfg, &written.samples_file);
     }
-    let r = &run.report;
-    let c = &r.counts;
-    println!(
-        "derender {}: {} measurement images, {} triangles, poses from {}",
-        args.session.display(),
-        r.images.len(),
-        run.triangles,
-        r.pose_source
-    );
-    if let Some(m) = &run.mesh_report {
-        println!("  scan: {}", m.summary());
-    }
-    println!(
-        "  samples kept {} of {} pixels considered ({} primary rays; {} pixels of the projected region)",
-        c.kept, c.considered, r.primary_rays, r.region_pixels
-    );
-    for (reason, n) in c.reasons() {
-        if n > 0 {
-            println!("    dropped {reason:<18} {n}");
-        }
-    }
-    println!(
-        "  grazing bound: theta_i, theta_e < {}° (1/cos theta <= {:.2})",
-        cfg.grazing_limit_deg,
-        1.0 / cfg.grazing_limit_deg.to_radians().cos()
-    );
-    println!(
-        "  shadow rays: {} ({})",
-        if r.shadow_rays { "cast" } else { "skipped" },
-        if r.region_can_self_shadow {
-            format!(
-                "geometry can shadow the region; {} rays",
-                r.shadow_rays_cast
-            )
-        } else {
-            "region is convex: nothing can shadow it".to_string()
-        }
-    );
-    println!(
-        "  normals: {}, radius {:.2} mm",
-        cfg.normals,
-        r.normal_radius_m * 1e3
-    );
-    match &r.calibration {
-        Some(cal) => println!(
-            "  C = [{:.5}, {:.5}, {:.5}] from {} standard pixels ({}); relative spread (MAD sigma) [{:.2}%, {:.2}%, {:.2}%]",
-            cal.c[0],
-            cal.c[1],
-            cal.c[2],
-            cal.pixels,
-            match cal.estimator {
-                skinbrdf_derender::calibrate::CEstimator::Median => "median",
-                skinbrdf_derender::calibrate::CEstimator::TrimmedMean => "trimmed mean",
-            },
-            cal.rel_spread[0] * 100.0,
-            cal.rel_spread[1] * 100.0,
-            cal.rel_spread[2] * 100.0
-        ),
-        None => println!(
-            "  C = [{:.5}, {:.5}, {:.5}] ({})",
-            r.c[0], r.c[1], r.c[2], run.c_source
-        ),
-    }
-    let t = &r.times;
-    println!(
-        "  time: mesh {:.3} s, bvh ({}) {:.3} s, normals {:.3} s, convexity {:.3} s, images {:.3} s, C {:.3} s, rays+samples {:.3} s (of which primary rays {:.3} s), total {:.3} s",
-        t.mesh_load_s, cfg.bvh_quality.name(), t.bvh_s, t.normals_s, t.convexity_s, t.image_load_s, t.calibration_s, t.derender_s, t.rays_s, t.total_s
-    );
-    if t.derender_s > 0.0 && t.rays_s > 0.0 {
-        println!(
-            "  throughput: {:.2} M primary rays/s traced, {:.2} M pixels/s derendered (rays + samples)",
-            r.primary_rays as f64 / t.rays_s / 1e6,
-            r.primary_rays as f64 / t.derender_s / 1e6
-        );
-    }
-    if let Some(e) = &r.truth_error {
-        // A channel the true BRDF is zero in has no relative error: "-".
-        let rgb = e
-            .median_rel_error_rgb
-            .map(|m| m.map_or_else(|| "-".to_string(), |m| format!("{:.3}%", m * 100.0)));
-        println!(
-            "  vs truth: median relative error {:.3}% (p90 {:.3}%, bias {:+.3}%, RGB [{}, {}, {}]) over {} samples",
-            e.median_rel_error * 100.0,
-            e.p90_rel_error * 100.0,
-            e.median_signed_rel_error * 100.0,
-            rgb[0],
-            rgb[1],
-            rgb[2],
-            e.samples
-        );
-    }
-    println!("  wrote {}", written.samples_file.display());
     Ok(())
 }

@@ -38,6 +38,38 @@ impl From<RawModeArg> for skinbrdf_session::RawMode {
     }
 }
 
+/// `--bvh-quality`: the mesh crate's build presets, by their names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BvhQuality {
+    /// No reinsertion, one triangle per leaf.
+    Fastest,
+    /// Very fast build.
+    #[value(name = "very_fast", alias = "very-fast")]
+    VeryFast,
+    /// Quick build, slower traversal.
+    Fast,
+    /// About Embree's build time with faster traversal.
+    Medium,
+    /// Spatial pre-splits and more reinsertion.
+    High,
+    /// Full reinsertion.
+    #[value(name = "very_high", alias = "very-high")]
+    VeryHigh,
+}
+
+impl From<BvhQuality> for skinbrdf_mesh::BuildQuality {
+    fn from(q: BvhQuality) -> Self {
+        match q {
+            BvhQuality::Fastest => Self::Fastest,
+            BvhQuality::VeryFast => Self::VeryFast,
+            BvhQuality::Fast => Self::Fast,
+            BvhQuality::Medium => Self::Medium,
+            BvhQuality::High => Self::High,
+            BvhQuality::VeryHigh => Self::VeryHigh,
+        }
+    }
+}
+
 pub(crate) fn print_json<T: serde::Serialize + ?Sized>(value: &T) -> anyhow::Result<()> {
     let text = skinbrdf_core::json::to_string_pretty(std::path::Path::new("stdout"), value)?;
     println!("{text}");

@@ -24,6 +24,8 @@ use skinbrdf_targets::sheet::{Sheet, SheetKind};
 use skinbrdf_targets::{detect::detect_with_stats, CornerModel, DetectorConfig, GrayF32};
 use std::path::PathBuf;
 
+use crate::print::targets as print;
+
 /// Flags of `skinbrdf targets`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -85,20 +87,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let img = GrayF32::load(f)?;
             let t = std::time::Instant::now();
             let (dets, stats) = detect_with_stats(&img, &cfg);
-            let line = serde_json::json!({
-                "file": f,
-                "ms": t.elapsed().as_secs_f64() * 1e3,
-                "stats": stats,
-                "detections": dets.iter().map(|d| serde_json::json!({
-                    "id": d.id,
-                    "corners_px": d.corners_px.iter().map(|c| [c.x, c.y]).collect::<Vec<_>>(),
-                    "corner_sigma_px": d.corner_sigma_px(),
-                    "hamming": d.hamming,
-                    "decision_margin": d.decision_margin,
-                    "occluded_corners": d.occluded_corners,
-                })).collect::<Vec<_>>(),
-            });
-            println!("{line}");
+            let ms = t.elapsed().as_secs_f64() * 1e3;
+            println!("{}", print::detection_line(f, ms, &stats, &dets));
         }
         return Ok(());
     }
@@ -145,20 +135,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         SheetKind::Reference | SheetKind::Board => "targets.reference",
         SheetKind::Flash => "flash.targets",
     };
-    let header = format!(
-        "# Target layout of {} (sheet frame: origin at the sheet centre{}, x right, y up on the\n# page, z out of the paper, metres). Copy `targets` into session.toml under [{section}]\n# after mounting; measure and correct positions if the sheet is not flat.\n",
-        out.display(),
-        if matches!(kind, SheetKind::Flash) { " = flash disc centre" } else { "" }
-    );
+    let header = print::sheet_layout_header(&out, kind, section);
     let layout_path = write_layout(&out, section, targets, &header)?;
-    println!(
-        "wrote {} ({} tags, IDs {}..={}) and {}",
-        out.display(),
-        sheet.tags.len(),
-        sheet.tags.first().map(|t| t.id).unwrap_or(0),
-        sheet.tags.last().map(|t| t.id).unwrap_or(0),
-        layout_path.display()
-    );
+    print::sheet_written(&out, &sheet, &layout_path);
     Ok(())
 }
 
@@ -228,54 +207,11 @@ fn scene_cutouts(scene_name: &str, kind: SheetKind, out: &std::path::Path) -> an
         }
         _ => anyhow::bail!("{}: the output must end in .svg or .pdf", out.display()),
     }
-    let header = format!(
-        "# Target layout of scene `{}` ({frame}, metres): where each cut-out of {} goes.\n# Copy `targets` into session.toml under [{section}]; measure and correct positions after\n# mounting.\n",
-        scene.name,
-        out.display(),
-    );
+    let header = print::scene_layout_header(&scene.name, frame, out, section);
     let layout_path = write_layout(out, section, targets.clone(), &header)?;
-    let names: Vec<String> = written.iter().map(|p| p.display().to_string()).collect();
-    println!(
-        "wrote {} ({} tags of scene `{}` on {} page(s)) and {}",
-        names.join(", "),
-        tags.len(),
-        scene.name,
-        pages.len(),
-        layout_path.display()
-    );
+    print::cutouts_written(&written, tags.len(), &scene.name, pages.len(), &layout_path);
     Ok(())
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn scene_cutouts_carry_the_scene_rigs_layout() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let out = dir.path().join("headdress.svg");
-        scene_cutouts("default", SheetKind::Headdress, &out).expect("cutouts");
-        let text = std::fs::read_to_string(out.with_extension("layout.toml")).expect("layout");
-        let layout: LayoutFile = toml::from_str(&text).expect("parse");
-        assert_eq!(layout.section, "targets.headdress");
-        let scene = skinbrdf_synth::Scene::load("default").expect("scene");
-        let rig = skinbrdf_synth::layout::build_rig(&scene);
-        assert_eq!(layout.targets.len(), rig.headdress.len());
-        for (a, b) in layout.targets.iter().zip(&rig.headdress) {
-            assert_eq!(a.id, b.id);
-            assert!((a.size_m - b.size_m).abs() < 1e-12);
-            for (p, q) in a.corners_m.iter().zip(&b.corners_m) {
-                assert!(p.distance(*q) < 1e-12, "tag {}", a.id);
-            }
-        }
-        // Every tag is on the printed page(s) once, with its ID.
-        let svg = std::fs::read_to_string(&out).expect("svg");
-        for t in &rig.headdress {
-            assert!(svg.contains(&format!(">{}</text>", t.id)), "tag {}", t.id);
-        }
-        // A board has no place in a scene: a clear error.
-        let err = scene_cutouts("default", SheetKind::Board, &dir.path().join("b.pdf"))
-            .expect_err("board");
-        assert!(err.to_string().contains("calibration board"), "{err}");
-    }
-}
+mod tests;

@@ -1,0 +1,21 @@
+//! The sRGB transfer curve: glTF's linear colours to the display values every appearance of
+//! the crate holds, and back.
+
+/// sRGB-encoded to linear (the IEC 61966-2-1 curve).
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.040_45 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Linear to sRGB-encoded (the IEC 61966-2-1 curve), clamped to 0..1.
+pub fn linear_to_srgb(c: f32) -> f32 {
+    let c = c.clamp(0.0, 1.0);
+    if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
