@@ -220,7 +220,11 @@ fn a_rig_states_the_camera_and_a_calibration_file_wins_over_it() {
     assert_eq!(r.camera, CameraSource::Rig { path: rig });
     assert_eq!(r.focal_guess, None);
     let session = Session::load(dir.path().join("calibrated")).expect("the session loads");
-    assert_eq!(session.file.camera, CameraSpec::Calibrated(model));
+    // Stated in superpixel units; the session loads it on the photosite grid.
+    assert_eq!(
+        session.camera_as_stated(&session.file.camera),
+        CameraSpec::Calibrated(model)
+    );
 
     // A stated size that is not the photographs': refused by the rig's key.
     let rig = rig_with_camera(

@@ -116,7 +116,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         });
         println!(
             "grid 1 thread {s:.4} s, {} candidates per tile",
-            scratch.candidates / scratch.tiles.max(1)
+            scratch.counts.candidates / scratch.counts.tiles.max(1)
         );
         return Ok(());
     }
@@ -283,7 +283,7 @@ fn print_json(run: &Run<'_>, p: &Primary, sh: &Shadow) {
     let (shadowed, shadow_differ) = (sh.shadowed, sh.differ);
     let (sh_grid_s, sh_grid1_s, sh_batch_s, sh_single_s) =
         (sh.grid_s, sh.grid1_s, sh.batch_s, sh.single_s);
-    let tiles = scratch.tiles + scratch.fallback_tiles;
+    let tiles = scratch.counts.tiles + scratch.counts.fallback_tiles;
     let threads = rayon::current_num_threads();
     let b: Vec<String> = run
         .builds
@@ -296,8 +296,8 @@ fn print_json(run: &Run<'_>, p: &Primary, sh: &Shadow) {
         dirs_len,
         quality.name(),
         b.join(", "),
-        scratch.fallback_tiles / reps.max(1) as u64,
-        scratch.candidates as f64 / scratch.tiles.max(1) as f64,
+        scratch.counts.fallback_tiles / reps.max(1) as u64,
+        scratch.counts.mean_candidates(),
         sh.rays,
     );
 }
@@ -319,7 +319,7 @@ fn print_text(run: &Run<'_>, p: &Primary, sh: &Shadow) {
         (sh.grid_s, sh.grid1_s, sh.batch_s, sh.single_s);
     let light = LIGHT;
     let threads = rayon::current_num_threads();
-    let tiles = scratch.tiles + scratch.fallback_tiles;
+    let tiles = scratch.counts.tiles + scratch.counts.fallback_tiles;
     let (n, ns) = (dirs_len as f64, sh.rays as f64);
     let mrays = |s: f64| n / s / 1e6;
     println!(
@@ -349,8 +349,8 @@ fn print_text(run: &Run<'_>, p: &Primary, sh: &Shadow) {
     );
     println!(
         "tiles {tiles} ({} per ray), mean candidates per tile {:.1}",
-        scratch.fallback_tiles,
-        scratch.candidates as f64 / scratch.tiles.max(1) as f64
+        scratch.counts.fallback_tiles,
+        scratch.counts.mean_candidates()
     );
     let ms = |s: f64| ns / s / 1e6;
     println!(
@@ -364,9 +364,9 @@ fn print_text(run: &Run<'_>, p: &Primary, sh: &Shadow) {
     println!(
         "shadow coherent, 1 thread   {sh_grid1_s:.4} s  {:.2} Mrays/s ({} tiles, {} per ray, {:.1} candidates per tile)",
         ms(sh_grid1_s),
-        sh_scratch.tiles / reps.max(1) as u64,
-        sh_scratch.fallback_tiles / reps.max(1) as u64,
-        sh_scratch.candidates as f64 / sh_scratch.tiles.max(1) as f64
+        sh_scratch.counts.tiles / reps.max(1) as u64,
+        sh_scratch.counts.fallback_tiles / reps.max(1) as u64,
+        sh_scratch.counts.mean_candidates()
     );
     println!(
         "shadow per ray, {threads} threads   {sh_batch_s:.4} s  {:.2} Mrays/s",

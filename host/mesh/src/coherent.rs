@@ -30,7 +30,7 @@
 use glam::{Vec3, Vec3A, Vec4};
 
 use crate::bvh::{Hit, MeshBvh};
-use crate::tiled::{in_bands, trace_tiles, Cull, TileBuffers, TileScratch, TileTracer};
+use crate::tiled::{in_bands, trace_tiles, Cull, TileBuffers, TileCounts, TileScratch, TileTracer};
 
 /// Tile side, rays: the rays tested together against one candidate list.
 pub const TILE_PX: usize = 8;
@@ -51,12 +51,8 @@ pub const MAX_TILE_CANDIDATES: usize = 384;
 pub struct TraceScratch {
     bufs: TileBuffers<(usize, Vec3A)>,
     packs: Vec<Pack>,
-    /// Tiles traced with shared candidates.
-    pub tiles: u64,
-    /// Tiles traced ray by ray (too wide or too many candidates).
-    pub fallback_tiles: u64,
-    /// Candidate triangles summed over tiles.
-    pub candidates: u64,
+    /// How its tiles were traced.
+    pub counts: TileCounts,
 }
 
 /// Four candidate triangles in SIMD lanes, relative to the tile's origin.
@@ -213,13 +209,8 @@ impl TileScratch<(usize, Vec3A)> for TraceScratch {
         &mut self.bufs
     }
 
-    fn count_fallback(&mut self) {
-        self.fallback_tiles += 1;
-    }
-
-    fn count_tile(&mut self, candidates: usize) {
-        self.tiles += 1;
-        self.candidates += candidates as u64;
+    fn counts(&mut self) -> &mut TileCounts {
+        &mut self.counts
     }
 }
 
@@ -449,7 +440,7 @@ mod tests {
             &mut out,
             &mut sc,
         );
-        assert!(sc.fallback_tiles > 0);
+        assert!(sc.counts.fallback_tiles > 0);
         assert_eq!(
             out,
             bvh.intersect_grid(Vec3::new(0.0, 0.0, 0.2), &dirs, 20, f32::INFINITY)

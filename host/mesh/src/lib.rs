@@ -55,4 +55,5 @@ pub use textured::{
     load_textured, obj_companion_files, Appearance, Material, TextureImage, TexturedMesh,
     MAX_TEXTURE_TEXELS,
 };
+pub use tiled::TileCounts;
 pub use validate::{inspect, repair, repair_tracked, MeshReport, RepairMap, RepairPolicy};

@@ -26,7 +26,7 @@ use glam::{Vec3, Vec3A, Vec4};
 
 use crate::bvh::MeshBvh;
 use crate::coherent::{box_in_frustum, frustum_with_axis, tri_in_frustum, FRUSTUM_PAD};
-use crate::tiled::{in_bands, trace_tiles, Cull, TileBuffers, TileScratch, TileTracer};
+use crate::tiled::{in_bands, trace_tiles, Cull, TileBuffers, TileCounts, TileScratch, TileTracer};
 
 /// Tile side, origins: the rays tested together against one candidate list.
 pub const SHADOW_TILE: usize = 8;
@@ -54,12 +54,8 @@ pub struct ShadowScratch {
     /// The driver's buffers; a tile's rays are [`ShadowRay`]s.
     bufs: TileBuffers<ShadowRay>,
     packs: Vec<ShadowPack>,
-    /// Tiles traced with shared candidates.
-    pub tiles: u64,
-    /// Tiles traced ray by ray.
-    pub fallback_tiles: u64,
-    /// Candidate triangles summed over tiles.
-    pub candidates: u64,
+    /// How its tiles were traced.
+    pub counts: TileCounts,
 }
 
 /// `(index, o − target, origin, unit direction, t_max)` of a ray of a tile.
@@ -176,13 +172,8 @@ impl TileScratch<ShadowRay> for ShadowScratch {
         &mut self.bufs
     }
 
-    fn count_fallback(&mut self) {
-        self.fallback_tiles += 1;
-    }
-
-    fn count_tile(&mut self, candidates: usize) {
-        self.tiles += 1;
-        self.candidates += candidates as u64;
+    fn counts(&mut self) -> &mut TileCounts {
+        &mut self.counts
     }
 }
 

@@ -50,14 +50,30 @@ impl<R> Default for TileBuffers<R> {
     }
 }
 
+/// How a coherent tracer's tiles were traced (summed over the tiles one scratch traced).
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct TileCounts {
+    /// Tiles traced with shared candidates.
+    pub tiles: u64,
+    /// Tiles (or super-tiles) traced ray by ray: too wide, or too many candidates.
+    pub fallback_tiles: u64,
+    /// Candidate triangles summed over the tiles traced with shared candidates.
+    pub candidates: u64,
+}
+
+impl TileCounts {
+    /// Mean candidates per tile traced with shared candidates (0 when there was none).
+    pub fn mean_candidates(&self) -> f64 {
+        self.candidates as f64 / self.tiles.max(1) as f64
+    }
+}
+
 /// A tracer's scratch: the driver's buffers and the tile counters.
 pub(crate) trait TileScratch<R> {
     /// The driver's buffers.
     fn buffers(&mut self) -> &mut TileBuffers<R>;
-    /// One tile (or super-tile) traced ray by ray.
-    fn count_fallback(&mut self);
-    /// One tile traced against `candidates` shared candidates.
-    fn count_tile(&mut self, candidates: usize);
+    /// The tile counters.
+    fn counts(&mut self) -> &mut TileCounts;
 }
 
 /// One coherent tracer over one band of the grid.
@@ -182,7 +198,7 @@ fn gather<T: TileTracer>(
 }
 
 fn per_ray<T: TileTracer>(t: &T, sc: &mut T::Scratch, out: &mut [T::Out]) {
-    sc.count_fallback();
+    sc.counts().fallback_tiles += 1;
     t.trace_per_ray(&sc.buffers().tile, out);
 }
 
@@ -206,7 +222,9 @@ fn trace_tile<T: TileTracer>(t: &T, sc: &mut T::Scratch, out: &mut [T::Out]) {
     if count > T::MAX_TILE_CANDIDATES {
         return per_ray(t, sc, out);
     }
-    sc.count_tile(count);
+    let counts = sc.counts();
+    counts.tiles += 1;
+    counts.candidates += count as u64;
     if count == 0 {
         return;
     }

@@ -186,6 +186,10 @@ pub struct DerenderMetrics {
     pub sample_median_rel_error_pct: Option<f64>,
     /// Samples' 90th-percentile relative error against the true BRDF, percent.
     pub sample_p90_rel_error_pct: Option<f64>,
+    /// Green samples' median relative error against the true BRDF, percent: the channel
+    /// whose noise a raw card and the PNG images of the same renders share (unit gain).
+    #[serde(default)]
+    pub sample_median_rel_error_green_pct: Option<f64>,
 }
 
 /// Smoothing (local quadratic regression).
@@ -538,6 +542,13 @@ impl StageMetrics {
                     &mut r,
                     "sample_p90_rel_error",
                     m.sample_p90_rel_error_pct,
+                    "%",
+                    Error,
+                );
+                opt(
+                    &mut r,
+                    "sample_median_rel_error_green",
+                    m.sample_median_rel_error_green_pct,
                     "%",
                     Error,
                 );

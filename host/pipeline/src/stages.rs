@@ -1099,6 +1099,11 @@ pub fn derender_reports(plan: &Plan, run: &SessionRun, samples_kept: u64) -> [St
         primary_rays_per_s_m: d.primary_rays as f64 / secs / 1e6,
         sample_median_rel_error_pct: d.truth_error.as_ref().map(|e| e.median_rel_error * 100.0),
         sample_p90_rel_error_pct: d.truth_error.as_ref().map(|e| e.p90_rel_error * 100.0),
+        sample_median_rel_error_green_pct: d
+            .truth_error
+            .as_ref()
+            .and_then(|e| e.median_rel_error_rgb[1])
+            .map(|e| e * 100.0),
     }));
     der.notes.push(format!(
         "camera from {}, light from {}, C from {}",

@@ -20,9 +20,13 @@ use skinbrdf_session::Session;
 use skinbrdf_synth::studio::{ExposureChange, Mosaic, CAMERA_FILE, STUDIO_DIR};
 use skinbrdf_synth::{generate, Scene, SynthOptions};
 
-/// The studio session's sample median relative error may differ from the PNG session's by at
-/// most this many percentage points (issue's bound): the raw files carry the same renders with
-/// their own noise (per photosite, through the channel gains) and quantisation.
+/// The studio session's green samples' median relative error may differ from the PNG
+/// session's by at most this many percentage points (issue's bound): the raw files carry the
+/// same renders with their own noise and quantisation. Green, because its gain is 1: a green
+/// photosite has the noise of the PNG's green channel, where red and blue photosites hold
+/// 0.55 and 0.72 of the PNG's signal (the sensor's gains) and are noisier by design; the
+/// pooled figure also weighs the channels 1:2:1 against the PNG's 1:1:1. Noise-free, every
+/// channel agrees per photosite (`tests/photosites.rs`).
 const SAME_SCENE_SAMPLE_ERROR_PP: f64 = 0.1;
 
 /// The two sessions' camera positions may differ by at most this much (median over the
@@ -170,9 +174,16 @@ fn the_studio_path_meets_the_bounds_and_matches_the_png_session() {
         .and_then(|d| d.sample_median_rel_error_pct)
         .expect("scored");
     assert!(e_raw < bounds::SAMPLE_MEDIAN_REL_ERROR_PCT);
+    let green = |r: &skinbrdf_pipeline::process::ProcessOutput| {
+        r.report
+            .derender()
+            .and_then(|d| d.sample_median_rel_error_green_pct)
+            .expect("green scored")
+    };
+    let (g_raw, g_png) = (green(&raw), green(&png));
     assert!(
-        (e_raw - e_png).abs() <= SAME_SCENE_SAMPLE_ERROR_PP,
-        "studio {e_raw:.3} % vs PNG {e_png:.3} %"
+        (g_raw - g_png).abs() <= SAME_SCENE_SAMPLE_ERROR_PP,
+        "green: studio {g_raw:.3} % vs PNG {g_png:.3} % (all channels {e_raw:.3} % vs {e_png:.3} %)"
     );
     let d_mm = camera_position_difference_median_mm(&png.out_dir, &raw.out_dir);
     assert!(
@@ -443,5 +454,7 @@ fn the_studio_faults_scene_is_ingested_with_every_fault_reported() {
     let img = session
         .load_image(0)
         .expect("a 12-bit BGGR raw with an odd border decodes");
-    assert_eq!((img.width, img.height), (254, 169));
+    // Read per photosite (the default): the active area's photosites, twice the 254 x 169
+    // superpixels per axis.
+    assert_eq!((img.width, img.height), (508, 338));
 }

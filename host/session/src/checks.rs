@@ -38,6 +38,14 @@ pub(crate) fn check_pose(p: &Pose, file: &Path, field: &str, errs: &mut SessionE
     }
 }
 
+/// False (with the error) when a file key of `session.toml` names no file.
+fn is_named(rel: &str, file: &Path, field: &str, errs: &mut SessionErrors) -> bool {
+    if rel.is_empty() {
+        errs.push(file, field, "empty file name");
+    }
+    !rel.is_empty()
+}
+
 /// Checks that a photograph named in `session.toml` exists. Unlike the session's other files,
 /// a photograph may live outside the session directory (`skinbrdf ingest` references the
 /// camera card's files in place unless asked to copy them): a relative path is taken from the
@@ -49,8 +57,7 @@ pub(crate) fn check_image_file(
     field: &str,
     errs: &mut SessionErrors,
 ) -> bool {
-    if rel.is_empty() {
-        errs.push(file, field, "empty file name");
+    if !is_named(rel, file, field, errs) {
         return false;
     }
     if !dir.join(rel).is_file() {
@@ -68,8 +75,7 @@ pub(crate) fn check_relative_file(
     field: &str,
     errs: &mut SessionErrors,
 ) -> bool {
-    if rel.is_empty() {
-        errs.push(file, field, "empty file name");
+    if !is_named(rel, file, field, errs) {
         return false;
     }
     // Inside the session directory (no absolute path, `..` or link out), a regular file.
