@@ -193,6 +193,13 @@ mod tests {
     }
 
     #[test]
+    fn samples_stay_compact() {
+        // Sessions hold millions: 48 bytes before the surface point, 20 more with it.
+        assert_eq!(std::mem::size_of::<SurfacePoint>(), 20);
+        assert_eq!(std::mem::size_of::<BrdfSample>(), 68);
+    }
+
+    #[test]
     fn surface_points_compare_by_value() {
         let a = SurfacePoint::on_triangle(7, [0.25, 0.5]);
         assert_eq!(a.weights(), Some([0.25, 0.25, 0.5]));
