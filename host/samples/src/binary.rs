@@ -475,7 +475,7 @@ mod tests {
             triangle: i * 11,
             barycentric: [0.001 * i as f32, 0.25],
             // Every third sample from a triangle without texture coordinates.
-            uv: if i % 3 == 0 {
+            uv: if i.is_multiple_of(3) {
                 [f32::NAN; 2]
             } else {
                 [0.5, 0.001 * i as f32]
