@@ -42,8 +42,11 @@ with open(path, "rb") as f:
     assert head[:8] == b"SKBRDFS\0"
     version, rec, count, hlen = struct.unpack("<IIQI", head[8:28])
     f.read(hlen)
-    dt = np.dtype([("ang", "<f4", 6), ("rho", "<f4", 3), ("w", "<f4"), ("img", "<u2"), ("px", "<u2", 2)])
-    assert dt.itemsize == rec
+    fields = [("ang", "<f4", 6), ("rho", "<f4", 3), ("w", "<f4"), ("img", "<u2"), ("px", "<u2", 2)]
+    if version >= 2:  # the surface point on the scan (docs/derender.md)
+        fields += [("tri", "<u4"), ("bary", "<f4", 2), ("uv", "<f4", 2)]
+    dt = np.dtype(fields)
+    assert version in (1, 2) and dt.itemsize == rec, (version, rec)
     data = np.frombuffer(f.read(count * rec), dtype=dt)
 
 ti, te, pd = (data["ang"][:, k].astype(np.float64) for k in range(3))

@@ -41,7 +41,8 @@ use std::time::{Duration, Instant};
 
 use skinbrdf_mesh::ply::{write_ply_ascii, write_ply_binary};
 use skinbrdf_mesh::{
-    gltf_external_files, load_mesh, load_textured, obj_companion_files, LoadOptions,
+    gltf_external_files, load_mesh, load_mesh_with_uv, load_textured, obj_companion_files,
+    LoadOptions,
 };
 use skinbrdf_raw::dng::{write_dng, DngImage};
 use skinbrdf_raw::{decoded_size_with, read_metadata_with, BayerPhase, Isolation};
@@ -1979,6 +1980,11 @@ fn run_readers(family: Family, dir: &Path, case: &Case) -> Outcome {
             results.push(load_mesh(&main, &opts).map(|_| ()).map_err(|e| text(&e)));
             results.push(
                 load_textured(&main, &opts)
+                    .map(|_| ())
+                    .map_err(|e| text(&e)),
+            );
+            results.push(
+                load_mesh_with_uv(&main, &opts)
                     .map(|_| ())
                     .map_err(|e| text(&e)),
             );

@@ -25,7 +25,7 @@ pub use angles::{BrdfAngles, ShadingFrame};
 pub use camera::{BrownConrady, CameraError, CameraModel};
 pub use mesh::{MeshError, TriMesh};
 pub use pose::Pose;
-pub use sample::BrdfSample;
+pub use sample::{BrdfSample, SurfacePoint};
 
 /// Re-export of the vector math the domain types are built on.
 pub use glam;

@@ -5,8 +5,9 @@
 //!
 //! * **C**: `known.calibration_c`, else from the `reference-standard` images
 //!   ([`DerenderInputs::new`]);
-//! * **geometry**: the scan (units from `session.toml`, validated and repaired), or a
-//!   tessellated sphere/cylinder at about [`SHAPE_EDGE_M`] edge length;
+//! * **geometry**: the scan (units from `session.toml`, validated and repaired, with its
+//!   texture coordinates when it has them, which the samples record), or a tessellated
+//!   sphere/cylinder at about [`SHAPE_EDGE_M`] edge length;
 //! * **masks**: a per-image user mask (`images[].mask`), and the printed targets of the
 //!   headdress, the reference structure and the flash projected into each image
 //!   ([`target_depths`]: each printed square with its white ring, plus
@@ -21,7 +22,7 @@ use std::time::Instant;
 use glam::{DVec2, DVec3};
 use serde::Serialize;
 use skinbrdf_core::Pose;
-use skinbrdf_mesh::{load_mesh, CameraRays, LengthUnit, LoadOptions, MeshReport};
+use skinbrdf_mesh::{load_mesh_with_uv, CameraRays, LengthUnit, LoadOptions, MeshReport};
 use skinbrdf_session::{GeometrySpec, Session, Target};
 
 use crate::from_inputs::{
@@ -52,8 +53,11 @@ pub struct SessionRun {
     pub report: DerenderReport,
     /// The scan's validation/repair (scans only).
     pub mesh_report: Option<MeshReport>,
-    /// Triangles of the geometry.
+    /// Triangles of the geometry (the samples' surface points index them).
     pub triangles: usize,
+    /// Whether the geometry has texture coordinates (the samples' surface points then carry
+    /// them).
+    pub texture_coordinates: bool,
     /// Where the camera model came from.
     pub camera_source: PoseSource,
     /// Where the light position came from.
@@ -79,26 +83,27 @@ pub fn session_geometry(
     cfg: &DerenderConfig,
 ) -> Result<(Geometry, Option<MeshReport>, f64), DerenderError> {
     let t = Instant::now();
-    let (mesh, report) = match &session.file.geometry {
+    let (mesh, report, uv) = match &session.file.geometry {
         GeometrySpec::Scan {
             file,
             units,
             accept_repair_loss,
         } => {
-            let l = load_mesh(
+            let (l, uv) = load_mesh_with_uv(
                 &session.path(file),
                 &LoadOptions {
                     unit: LengthUnit::Custom(units.to_m()),
                     policy: scan_repair_policy(*accept_repair_loss),
                 },
             )?;
-            (l.mesh, Some(l.report))
+            (l.mesh, Some(l.report), uv)
         }
         GeometrySpec::Sphere { centre_m, radius_m } => {
             let n_lon =
                 ((std::f64::consts::TAU * radius_m / SHAPE_EDGE_M).ceil() as u32).clamp(16, 4096);
             (
                 skinbrdf_mesh::shapes::uv_sphere(*centre_m, *radius_m, n_lon / 2, n_lon),
+                None,
                 None,
             )
         }
@@ -116,6 +121,7 @@ pub fn session_geometry(
                     *centre_m, *axis, *radius_m, *length_m, n_len, n_around,
                 ),
                 None,
+                None,
             )
         }
     };
@@ -125,7 +131,8 @@ pub fn session_geometry(
         radius_m: r.radius_m,
     });
     Ok((
-        Geometry::with_quality(mesh, cfg.normals, roi, cfg.bvh_quality)?,
+        Geometry::with_quality(mesh, cfg.normals, roi, cfg.bvh_quality)?
+            .with_texture_coordinates(uv),
         report,
         load_s,
     ))
@@ -310,6 +317,7 @@ pub fn derender_session(
     report.times.total_s = start.elapsed().as_secs_f64();
     Ok(SessionRun {
         triangles: geom.mesh.indices.len(),
+        texture_coordinates: geom.uv.is_some(),
         report,
         mesh_report,
         camera_source: poses.camera.source,

@@ -33,8 +33,8 @@ use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use rayon::prelude::*;
-use skinbrdf_core::TriMesh;
-use skinbrdf_mesh::{BuildQuality, MeshBvh, NormalMethod, SurfaceNormals};
+use skinbrdf_core::{SurfacePoint, TriMesh};
+use skinbrdf_mesh::{BuildQuality, CornerUv, Hit, MeshBvh, NormalMethod, SurfaceNormals};
 
 use crate::DerenderError;
 
@@ -75,6 +75,9 @@ pub struct Geometry {
     pub normals: SurfaceNormals,
     /// Region of interest (`None` = everything).
     pub roi: Option<Roi>,
+    /// The scan's texture coordinates per triangle corner, when it has them
+    /// ([`Geometry::with_texture_coordinates`]); samples record the interpolated coordinate.
+    pub uv: Option<CornerUv>,
     /// Whether the region can be shadowed by the geometry at the default grazing limit
     /// ([`crate::DerenderConfig::DEFAULT`]; see the module docs and [`Geometry::can_shadow_within`]).
     pub can_self_shadow: bool,
@@ -145,6 +148,7 @@ impl Geometry {
             bvh,
             normals,
             roi,
+            uv: None,
             can_self_shadow,
             shadow_elevation_deg,
             convexity_tol_m,
@@ -159,6 +163,29 @@ impl Geometry {
 }
 
 impl Geometry {
+    /// The geometry with the scan's texture coordinates per triangle corner (as
+    /// [`skinbrdf_mesh::load_mesh_with_uv`] gives them for this mesh). A triangle past the
+    /// list, or without coordinates, gives samples without texture coordinates.
+    pub fn with_texture_coordinates(mut self, uv: Option<CornerUv>) -> Self {
+        self.uv = uv;
+        self
+    }
+
+    /// The surface point of a ray hit on the mesh: its triangle, its barycentrics and, when
+    /// the triangle has texture coordinates, their barycentric blend.
+    pub fn surface_point(&self, hit: &Hit) -> SurfacePoint {
+        let mut p = SurfacePoint::on_triangle(hit.triangle, [hit.u, hit.v]);
+        let corners = self
+            .uv
+            .as_ref()
+            .and_then(|uv| uv.get(hit.triangle as usize).copied().flatten());
+        if let Some(c) = corners {
+            let uv = c[0] * (1.0 - hit.u - hit.v) + c[1] * hit.u + c[2] * hit.v;
+            p.uv = uv.to_array();
+        }
+        p
+    }
+
     /// Whether geometry can shadow a sample kept at this grazing limit (degrees): some vertex
     /// rises at least `90° − limit −` [`CONVEXITY_MARGIN_DEG`] above a region vertex's tangent
     /// plane.

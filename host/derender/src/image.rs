@@ -33,6 +33,10 @@
 //!    [`skinbrdf_core::BrdfSample::measured`]). Its ray is the photosite's own (step 2, in the
 //!    photosite image's camera), so no value is moved from where it was measured.
 //!
+//! Each sample keeps where it was measured: the hit's triangle and barycentrics, and the
+//! scan's texture coordinates there when it has them ([`Geometry::surface_point`],
+//! [`skinbrdf_core::SurfacePoint`]).
+//!
 //! Every dropped pixel is counted under exactly one reason: the first that is true of it, in
 //! the order documented on [`FilterCounts`].
 
@@ -40,7 +44,7 @@ use glam::{DVec2, DVec3, Vec3};
 use rayon::prelude::*;
 use serde::Serialize;
 use skinbrdf_core::{BrdfAngles, BrdfSample, CameraModel, Pose};
-use skinbrdf_mesh::CameraRays;
+use skinbrdf_mesh::{CameraRays, Hit};
 use skinbrdf_session::BayerPhase;
 
 use crate::geometry::Geometry;
@@ -369,6 +373,8 @@ struct Pending {
     y: u32,
     /// Pixel index in the image.
     idx: usize,
+    /// The ray's hit (the sample's surface point).
+    hit: Hit,
     p: DVec3,
     n: DVec3,
     wi: DVec3,
@@ -519,6 +525,7 @@ pub fn derender_image_with_rays(
                     x,
                     y,
                     idx,
+                    hit,
                     p,
                     n,
                     wi,
@@ -559,6 +566,7 @@ pub fn derender_image_with_rays(
                     x,
                     y,
                     idx,
+                    hit,
                     n,
                     wi,
                     we,
@@ -605,6 +613,7 @@ pub fn derender_image_with_rays(
                 let mut s = BrdfSample::from_angles(&angles, rho);
                 s.image_index = m.image_index;
                 s.pixel = [x as u16, y as u16];
+                s.surface = geom.surface_point(&hit);
                 out.push(s);
                 c.kept += 1;
             }

@@ -213,6 +213,115 @@ fn noise_free_sphere_derenders_within_half_a_percent() {
     assert_eq!(r.counts.dropped() + r.counts.kept, r.counts.considered);
 }
 
+/// How far a sample's recorded surface point may lie from its pixel's ray, metres: f32
+/// positions and barycentrics at 0.75 m from the camera are good to ~0.1 µm; 1 µm is a
+/// thousandth of the test camera's pixel footprint (~1.3 mm), so a sample attributed to a
+/// neighbouring pixel's point, or to another triangle, fails.
+const ON_RAY_TOL_M: f64 = 1e-6;
+/// How far inside the exact sphere the recorded point may lie, metres: a triangle of the
+/// tessellation (edges up to 1.6 mm, circumradius α·R with α ≈ 0.014 on an 8 cm sphere) lies
+/// up to R·α²/2 ≈ 8 µm inside it.
+const TESSELLATION_TOL_M: f64 = 1e-5;
+/// How far along the ray the recorded point may lie from where the ray first meets the exact
+/// sphere, metres: the tessellation's gap seen at up to 75° from the normal (8 µm / cos 75° ≈
+/// 31 µm), far below the centimetres between the ray's near and far intersections, so a point
+/// on the far side fails.
+const FRONT_TOL_M: f64 = 1e-4;
+/// Texture coordinates: f32 interpolation of coordinates of order 1.
+const UV_TOL: f32 = 1e-5;
+/// Extent of the planar texture map of the test's textured sphere, metres.
+const UV_EXTENT_M: f32 = 0.2;
+
+/// The test's texture map: the sphere's front projected onto the xy plane, linear in the
+/// position, so its barycentric blend over a triangle is exact.
+fn planar_uv(p: glam::Vec3) -> glam::Vec2 {
+    glam::Vec2::new(p.x / UV_EXTENT_M + 0.5, p.y / UV_EXTENT_M + 0.5)
+}
+
+#[test]
+fn samples_record_the_surface_point_their_pixel_sees() {
+    let s = scene();
+    let plain = geometry(NormalMethod::Vertex);
+    let uv: skinbrdf_mesh::CornerUv = (0..plain.mesh.indices.len())
+        .map(|t| Some(plain.mesh.triangle(t).map(planar_uv)))
+        .collect();
+    let textured = geometry(NormalMethod::Vertex).with_texture_coordinates(Some(uv));
+    let cfg = DerenderConfig {
+        stride: 3,
+        ..DerenderConfig::DEFAULT
+    };
+    let load = |i: usize| Ok(s.images[i].clone());
+    let without = derender_with_loader(&plain, &s.inputs, &cfg, load).unwrap();
+    let with = derender_with_loader(&textured, &s.inputs, &cfg, load).unwrap();
+    assert!(with.samples.len() > 500, "{:?}", with.counts);
+    // Texture coordinates change nothing else.
+    assert_eq!(without.samples.len(), with.samples.len());
+    for (a, b) in without.samples.iter().zip(&with.samples) {
+        assert_eq!(a.surface.triangle, b.surface.triangle);
+        assert_eq!(a.surface.barycentric, b.surface.barycentric);
+        assert_eq!(
+            a.surface.texture_uv(),
+            None,
+            "a scan without texture coordinates"
+        );
+        assert_eq!((a.pixel, a.rho), (b.pixel, b.rho));
+    }
+    let cam = &s.inputs.camera;
+    let mesh = &textured.mesh;
+    for smp in &with.samples {
+        let [w0, w1, w2] = smp
+            .surface
+            .weights()
+            .expect("a derendered sample has a point");
+        assert!(
+            [w0, w1, w2]
+                .iter()
+                .all(|w| (-1e-6..=1.0 + 1e-6).contains(w)),
+            "{:?}",
+            smp.surface
+        );
+        let tri = mesh.triangle(smp.surface.triangle as usize);
+        let p = (tri[0].as_dvec3() * f64::from(w0))
+            + tri[1].as_dvec3() * f64::from(w1)
+            + tri[2].as_dvec3() * f64::from(w2);
+        // The pixel's own ray (the exact lens model, not the derender's table) in the head frame.
+        let (_, poses) = s
+            .inputs
+            .measurements
+            .iter()
+            .find(|(k, _)| *k == usize::from(smp.image_index))
+            .expect("the sample's image");
+        let hfc = poses.world_from_head.inverse() * poses.world_from_camera;
+        let px = DVec2::new(f64::from(smp.pixel[0]), f64::from(smp.pixel[1]));
+        let d = hfc
+            .transform_vector(cam.pixel_ray(px).expect("ray"))
+            .normalize();
+        let o = hfc.translation_m;
+        let off_ray = (p - o).cross(d).length();
+        assert!(off_ray < ON_RAY_TOL_M, "{off_ray} m off the ray: {smp:?}");
+        // On the sphere, where the ray first meets it.
+        let inside = RADIUS - p.length();
+        assert!(
+            (-ON_RAY_TOL_M..TESSELLATION_TOL_M).contains(&inside),
+            "{inside} m inside the sphere: {smp:?}"
+        );
+        let b = o.dot(d);
+        let t_sphere = -b - (b * b - (o.length_squared() - RADIUS * RADIUS)).sqrt();
+        let along = ((p - o).dot(d) - t_sphere).abs();
+        assert!(along < FRONT_TOL_M, "{along} m from the near hit: {smp:?}");
+        // The texture coordinate is the map's value at the point.
+        let want = planar_uv(p.as_vec3());
+        let got = smp
+            .surface
+            .texture_uv()
+            .expect("the scan has texture coordinates");
+        assert!(
+            (got[0] - want.x).abs() < UV_TOL && (got[1] - want.y).abs() < UV_TOL,
+            "{got:?} vs {want}"
+        );
+    }
+}
+
 #[test]
 fn known_c_forced_shadows_and_stride() {
     let mut s = scene();

@@ -10,7 +10,8 @@
 //! * [`shapes`]: tessellated spheres and cylinders.
 //! * [`textured`]: [`load_textured`], scans with their colours (OBJ + MTL + PNG/JPEG texture,
 //!   PLY vertex colours, binary glTF or `.gltf` with its base-colour texture or vertex colours)
-//!   and [`TexturedMesh::colour_at`] at a ray hit.
+//!   and [`TexturedMesh::colour_at`] at a ray hit; [`load_mesh_with_uv`], the mesh with its
+//!   texture coordinates only (no image decoded), for samples that record where they are.
 //! * [`gltf_scan`]: the glTF reader behind both, and [`write_glb`], a textured GLB writer.
 //! * [`bvh`]: [`MeshBvh`], build once and trace many (closest hit, occlusion, batched rays),
 //!   build presets [`BuildQuality`].
@@ -52,8 +53,8 @@ pub use ply::{
 };
 pub use shadow::{shadow_ray, ShadowScratch};
 pub use textured::{
-    load_textured, obj_companion_files, Appearance, Material, TextureImage, TexturedMesh,
-    MAX_TEXTURE_TEXELS,
+    load_mesh_with_uv, load_textured, obj_companion_files, Appearance, CornerUv, Material,
+    TextureImage, TexturedMesh, MAX_TEXTURE_TEXELS,
 };
 pub use tiled::TileCounts;
 pub use validate::{inspect, repair, repair_tracked, MeshReport, RepairMap, RepairPolicy};

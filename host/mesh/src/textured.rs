@@ -50,6 +50,7 @@ use skinbrdf_core::TriMesh;
 use crate::bvh::Hit;
 use crate::error::{unknown_format, MeshError};
 pub use crate::limits::MAX_TEXTURE_TEXELS;
+use crate::load::LoadedMesh;
 use crate::load_options::{gltf_unit, scale_to_metres, LengthUnit, LoadOptions};
 pub use crate::material::{Material, TextureImage, UNTEXTURED_COLOUR};
 pub use crate::obj::obj_companion_files;
@@ -292,6 +293,42 @@ pub fn load_textured(path: &Path, opts: &LoadOptions) -> Result<TexturedMesh, Me
     }
 }
 
+/// Texture coordinates per triangle corner of a loaded mesh (`None`: the triangle has none),
+/// OBJ convention (`v = 0` at the bottom of the image; glTF's are flipped on loading).
+pub type CornerUv = Vec<Option<[Vec2; 3]>>;
+
+/// [`crate::load_mesh`] (the same mesh, units and repair), with the texture coordinates of
+/// each triangle's corners when the scan has them: an OBJ's `vt`, a glTF's `TEXCOORD_n` of
+/// a base-colour texture (as [`load_textured`] reads them). No texture image is decoded and
+/// a missing material library is no error, as for [`crate::load_mesh`]. `None` for a PLY,
+/// and for a scan none of whose triangles has texture coordinates.
+pub fn load_mesh_with_uv(
+    path: &Path,
+    opts: &LoadOptions,
+) -> Result<(LoadedMesh, Option<CornerUv>), MeshError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let source = path.display().to_string();
+    let (mut mesh, uv, material, unit) = match ext.as_deref() {
+        Some("obj") => {
+            let data = read_obj_data(path)?;
+            (data.mesh, data.uv, data.material, opts.unit)
+        }
+        Some("glb" | "gltf") => {
+            let data = crate::gltf_scan::read_gltf(path, crate::gltf_scan::Detail::TexCoords)?;
+            (data.mesh, data.uv, data.material, gltf_unit(opts.unit))
+        }
+        _ => return Ok((crate::load_mesh(path, opts)?, None)),
+    };
+    let unit = scale_to_metres(&mut mesh, unit);
+    let (mesh, report, map) = repair_tracked(&mesh, opts.policy, &source)?;
+    let (uv, _) = follow_repair(&map, &uv, &material);
+    let uv = uv.iter().any(Option::is_some).then_some(uv);
+    Ok((LoadedMesh { mesh, unit, report }, uv))
+}
+
 /// Per-triangle attributes of the input carried to the repaired mesh.
 #[allow(clippy::type_complexity)]
 fn follow_repair(
@@ -338,6 +375,31 @@ mod tests {
         )
         .expect("write mtl");
         obj
+    }
+
+    #[test]
+    fn texture_coordinates_load_without_the_texture() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        // `map_Kd quad.png` names an image that is not there: no error, it is not read.
+        let obj = quad_obj(dir.path(), true);
+        let opts = LoadOptions::default();
+        let (loaded, uv) = load_mesh_with_uv(&obj, &opts).expect("load with uv");
+        assert_eq!(
+            loaded.mesh,
+            crate::load_mesh(&obj, &opts).expect("load_mesh").mesh
+        );
+        let uv = uv.expect("the quad has vt");
+        // The corners' `vt` follow the mesh's triangles: uv = position / 0.1 on this quad.
+        for (t, c) in uv.iter().enumerate() {
+            let c = c.expect("every face has vt");
+            for (k, p) in loaded.mesh.triangle(t).iter().enumerate() {
+                assert!((c[k] - p.truncate() / 0.1).length() < 1e-6, "{t}/{k}");
+            }
+        }
+        // No `vt`: no coordinates.
+        let bare = dir.path().join("bare.obj");
+        std::fs::write(&bare, "v 0 0 0\nv 0.1 0 0\nv 0.1 0.1 0\nf 1 2 3\n").expect("write");
+        assert!(load_mesh_with_uv(&bare, &opts).expect("load").1.is_none());
     }
 
     #[test]

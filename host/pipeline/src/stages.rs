@@ -949,6 +949,13 @@ pub fn samples_header(session: &Session, run: &SessionRun) -> SampleHeader {
     let mut header = SampleHeader::new("derender", &session.file.description);
     header.origin = Some(session.dir.display().to_string());
     header.calibration_c = Some(run.report.c);
+    // What the samples' surface points refer to: the session's geometry as loaded.
+    header.extra = serde_json::json!({
+        "surface_points": {
+            "triangles": run.triangles,
+            "texture_coordinates": run.texture_coordinates,
+        }
+    });
     header
 }
 

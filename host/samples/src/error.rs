@@ -22,13 +22,13 @@ pub enum SamplesError {
         expected: [u8; 8],
     },
     /// A format version this build does not read.
-    #[error("{path}: sample file version {found} is not supported (this build reads version {supported})", path = path.display())]
+    #[error("{path}: sample file version {found} is not supported (this build reads versions {oldest} to {supported})", oldest = crate::binary::OLDEST_FORMAT_VERSION, path = path.display())]
     UnsupportedVersion {
         /// The file.
         path: PathBuf,
         /// Version in the file.
         found: u32,
-        /// Version this build reads.
+        /// The newest version this build reads.
         supported: u32,
     },
     /// The fixed header is inconsistent (record size, header length, record count).

@@ -27,6 +27,9 @@ pub(crate) struct GltfData {
 pub(crate) enum Detail {
     /// Positions and triangles only ([`crate::load_mesh`]): images are not decoded.
     Geometry,
+    /// Also the texture coordinates of triangles whose material has a base-colour texture
+    /// ([`crate::textured::load_mesh_with_uv`]): no image decoded, no vertex colour read.
+    TexCoords,
     /// Also texture coordinates, vertex colours, materials and their images.
     Appearance,
 }

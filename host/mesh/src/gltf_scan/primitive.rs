@@ -262,6 +262,11 @@ impl<'a> PrimitiveReader<'a> {
             return Ok(());
         }
         out.uv.extend(std::iter::repeat_n(None, tris.len()));
+        if self.detail == Detail::TexCoords {
+            out.corner_colours
+                .extend(std::iter::repeat_n(None, tris.len()));
+            return Ok(());
+        }
         match prim.get(&Semantic::Colors(0)) {
             Some(acc) => {
                 let encoded = self.vertex_colours(prim, at, n, &acc, pbr.base_color_factor())?;

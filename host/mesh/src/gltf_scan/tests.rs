@@ -474,4 +474,10 @@ fn write_glb_round_trips_with_a_seam_and_welds_back() {
         }
     }
     assert!(write_glb(&p, &mesh, &uv[..1], &png_2x2()).is_err());
+
+    // The texture coordinates alone: the same mesh and coordinates, no image decoded.
+    let (plain, only_uv) =
+        crate::load_mesh_with_uv(&p, &LoadOptions::default()).expect("load with uv");
+    assert_eq!(plain.mesh, mesh);
+    assert_eq!(only_uv.as_ref(), Some(got));
 }
