@@ -10,7 +10,7 @@
 //! cached file that cannot be read back is decoded again too; a cache that cannot be written
 //! is a cache that holds nothing (loads decode as without one).
 //!
-//! The cache holds the mosaics on disk, not in memory: a 24 MP session's 37 mosaics are 1.8 GB.
+//! The cache holds the mosaics on disk, not in memory (a 24 MP file's mosaic is 48 MB).
 //! Its files are named like the project's temporary files (`.NAME.PID.tmp`), so a run that dies
 //! leaves them to the next run's clean-up; the cache removes its files and the directories it
 //! made when it is dropped.
