@@ -22,7 +22,13 @@ use skinbrdf_derender::DerenderConfig;
 use skinbrdf_fit::report::{FitReport, ReportOptions};
 use skinbrdf_fit::FitConfig;
 use skinbrdf_poses::PoseConfig;
-use skinbrdf_session::{BadImagePolicy, GeometrySpec, ImageRole, RawMode, Session, TargetGroup};
+use skinbrdf_session::{
+    BadImagePolicy, DecodeCache, GeometrySpec, ImageRole, RawMode, Session, TargetGroup,
+};
+
+/// The directory of the output directory where a run keeps the raw files it decoded (its
+/// [`DecodeCache`]; removed when the run ends).
+pub const DECODED_DIR: &str = "decoded";
 
 use crate::ledger::{write_atomic, Ledger, RunLock};
 use crate::plan::{Geometry, Plan, PlanOptions, SceneFacts, Stage};
@@ -486,6 +492,9 @@ pub(crate) fn open(dir: &Path, cfg: &ProcessConfig) -> Result<Opened, ProcessErr
     })?;
     session.truth_file = cfg.truth_file.clone();
     session.set_raw_mode(cfg.raw_mode);
+    let out_dir = cfg.out_dir.clone().unwrap_or_else(|| dir.join("out"));
+    // The input check decodes every raw file once; the stages read the decoded files back.
+    session.keep_decoded(DecodeCache::new(out_dir.join(DECODED_DIR)));
     let policy = if cfg.skip_bad_images {
         BadImagePolicy::Skip
     } else {
@@ -501,7 +510,6 @@ pub(crate) fn open(dir: &Path, cfg: &ProcessConfig) -> Result<Opened, ProcessErr
         None => None,
         Some(r) => Some(r.map_err(|source| ProcessError::Truth { source })?),
     };
-    let out_dir = cfg.out_dir.clone().unwrap_or_else(|| dir.join("out"));
     std::fs::create_dir_all(&out_dir).map_err(|source| crate::ledger::LedgerError::Io {
         path: out_dir.clone(),
         source,

@@ -243,14 +243,15 @@ fn layout_table(session: &Session) -> HashMap<u32, (Layout, Target)> {
 
 /// Loads an image as grey at its full resolution (the mean of the linear channels; green,
 /// interpolated at red and blue, for a raw image loaded per photosite: see
-/// [`skinbrdf_session::LinearImage::geometry_grey`]).
+/// [`Session::load_geometry_grey`]).
 fn load_grey(session: &Session, index: usize) -> Result<GrayF32, PoseError> {
-    let img = session.load_image(index).map_err(|e| PoseError::Image {
-        file: session.file.images[index].file.clone(),
-        problem: skinbrdf_core::error_text(&e),
-    })?;
-    let data = img.geometry_grey();
-    GrayF32::new(img.width as usize, img.height as usize, data).map_err(|e| PoseError::Image {
+    let img = session
+        .load_geometry_grey(index)
+        .map_err(|e| PoseError::Image {
+            file: session.file.images[index].file.clone(),
+            problem: skinbrdf_core::error_text(&e),
+        })?;
+    GrayF32::new(img.width as usize, img.height as usize, img.data).map_err(|e| PoseError::Image {
         file: session.file.images[index].file.clone(),
         problem: e.to_string(),
     })

@@ -1,6 +1,6 @@
 //! A whole-sensor mosaic's active area to a [`RawFrame`]: black subtraction and scaling to the
 //! white level per CFA position, as superpixels or photosites (shared by the rawler and the
-//! LibRaw paths).
+//! LibRaw paths); or to a [`RawMosaic`], the active area's stored values with the levels.
 
 use std::path::Path;
 
@@ -8,8 +8,10 @@ use crate::bayer::BayerPhase;
 use crate::error::RawError;
 use crate::frame::{RawFrame, RawLayout};
 use crate::kind::FileKind;
+use crate::mosaic::{MosaicSamples, RawMosaic};
 
 /// Where the active area is and which Bayer phase starts it.
+#[derive(Debug, Clone, Copy)]
 pub(crate) struct Geometry {
     pub left: usize,
     pub top: usize,
@@ -20,7 +22,7 @@ pub(crate) struct Geometry {
 
 /// The levels of a decode: per CFA position of a 2x2 quad, its black level and the scale to
 /// the white level; and where red, the two greens and blue sit in the quad.
-struct QuadLevels {
+pub(crate) struct QuadLevels {
     black: [f64; 4],
     scale: [f64; 4],
     white: f64,
@@ -30,7 +32,7 @@ struct QuadLevels {
 }
 
 impl QuadLevels {
-    fn new(black: [f64; 4], white: f64, phase: BayerPhase) -> Self {
+    pub(crate) fn new(black: [f64; 4], white: f64, phase: BayerPhase) -> Self {
         Self {
             black,
             scale: black.map(|b| 1.0 / (white - b)),
@@ -38,6 +40,19 @@ impl QuadLevels {
             positions: phase.positions(),
             channels: phase.quad().map(|c| usize::from(c.dng_code())),
         }
+    }
+
+    /// The normalised value of a stored value `raw` at quad position `k` (reading order), as
+    /// every layout computes it.
+    #[inline]
+    pub(crate) fn value(&self, k: usize, raw: f64) -> f32 {
+        ((raw - self.black[k]) * self.scale[k]) as f32
+    }
+
+    /// Whether a stored value is at or above the white level.
+    #[inline]
+    pub(crate) fn saturates(&self, raw: f64) -> bool {
+        raw >= self.white
     }
 
     /// One RGB pixel per 2x2 quad of the active area (`w` x `h` quads from column `left`,
@@ -92,9 +107,9 @@ impl QuadLevels {
                 let k = (y % 2) * 2 + x % 2;
                 let raw: f64 = raw.into();
                 let mut px = [f32::NAN; 3];
-                px[self.channels[k]] = ((raw - self.black[k]) * self.scale[k]) as f32;
+                px[self.channels[k]] = self.value(k, raw);
                 rgb.push(px);
-                saturated.push(raw >= self.white);
+                saturated.push(self.saturates(raw));
             }
         }
         (rgb, saturated)
@@ -121,6 +136,7 @@ pub(crate) fn check_levels(
 }
 
 /// The sensor a mosaic was read from.
+#[derive(Debug, Clone, Copy)]
 pub(crate) struct Sensor {
     pub kind: FileKind,
     /// Photosites per row of the mosaic.
@@ -168,5 +184,38 @@ pub(crate) fn assemble<T: Copy + Into<f64>>(
         sensor_height_px: to_u32(sensor.height),
         active_left_px: to_u32(left),
         active_top_px: to_u32(top),
+    }
+}
+
+/// The mosaic of a whole-sensor decode (`sensor.width * sensor.height` values, checked by the
+/// caller): its active area `g`, cropped to an even size, with the levels it is normalised with.
+pub(crate) fn crop<T: Copy>(
+    data: &[T],
+    sensor: &Sensor,
+    g: &Geometry,
+    black_levels: [f64; 4],
+    white_level: f64,
+    wrap: impl FnOnce(Vec<T>) -> MosaicSamples,
+) -> RawMosaic {
+    let (pw, ph) = (g.aw / 2 * 2, g.ah / 2 * 2);
+    let sw = sensor.width;
+    let mut values = Vec::with_capacity(pw * ph);
+    for y in g.top..g.top + ph {
+        values.extend_from_slice(&data[y * sw + g.left..y * sw + g.left + pw]);
+    }
+    let to_u32 = |v: usize| u32::try_from(v).unwrap_or(u32::MAX);
+    RawMosaic {
+        kind: sensor.kind,
+        width_px: to_u32(pw),
+        height_px: to_u32(ph),
+        samples: wrap(values),
+        cfa: g.phase,
+        black_levels,
+        white_level,
+        bits_per_sample: to_u32(sensor.bits_per_sample),
+        sensor_width_px: to_u32(sw),
+        sensor_height_px: to_u32(sensor.height),
+        active_left_px: to_u32(g.left),
+        active_top_px: to_u32(g.top),
     }
 }

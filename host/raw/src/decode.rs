@@ -22,6 +22,7 @@
 
 use std::io::{Read, Seek};
 use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::OnceLock;
 
 use rawler::decoders::{RawDecodeParams, RawLoader};
@@ -31,12 +32,28 @@ use rawler::rawimage::{RawImage, RawImageData, RawPhotometricInterpretation};
 use rawler::rawsource::RawSource;
 use rawler::tags::TiffCommonTag;
 
-use crate::assemble::{assemble, check_levels, Geometry, Sensor};
+use crate::assemble::{assemble, check_levels, crop, Geometry, Sensor};
 use crate::bayer::{BayerPhase, CfaColour};
 use crate::error::RawError;
 use crate::frame::{RawFrame, RawHeader, RawLayout, RawOptions};
 use crate::identify::sniff;
 use crate::kind::FileKind;
+use crate::mosaic::{MosaicSamples, RawMosaic};
+
+/// Raw images unpacked by this process so far (see [`decodes_started`]).
+static DECODES: AtomicUsize = AtomicUsize::new(0);
+
+/// How many times this process has started unpacking a raw file's image data: every
+/// [`decode_raw`] and [`decode_mosaic`], and every [`read_raw_header`] that needs the decoder
+/// (a file other than a DNG whose tags give the header). A measure of the work done, for tests
+/// and benchmarks.
+pub fn decodes_started() -> usize {
+    DECODES.load(Ordering::Relaxed)
+}
+
+fn count_decode() {
+    DECODES.fetch_add(1, Ordering::Relaxed);
+}
 
 /// The shared camera table (parsed once).
 pub(crate) fn loader() -> &'static RawLoader {
@@ -176,11 +193,34 @@ pub fn decode_photosites(path: &Path, opts: &RawOptions) -> Result<RawFrame, Raw
 /// implausible, not raw) is not.
 pub fn decode_raw(path: &Path, opts: &RawOptions, layout: RawLayout) -> Result<RawFrame, RawError> {
     let (kind, src) = open_raw(path)?;
+    count_decode();
     match guarded(path, || {
         loader().decode(&src, &RawDecodeParams::default(), false)
     }) {
         Ok(image) => normalise(path, kind, &image, opts, layout),
-        Err(rawler) => crate::via_libraw::decode(path, kind, opts, layout)
+        Err(rawler) => crate::via_libraw::decode(path, kind, opts)
+            .map(|m| m.frame(layout))
+            .map_err(|libraw| crate::via_libraw::both_failed(rawler, libraw)),
+    }
+}
+
+/// Decodes a Bayer raw file to its compact [`RawMosaic`], with the same checks, levels and
+/// fallback to LibRaw as [`decode_raw`]: `decode_mosaic(p, o)?.frame(layout)` is
+/// `decode_raw(p, o, layout)`.
+pub fn decode_mosaic(path: &Path, opts: &RawOptions) -> Result<RawMosaic, RawError> {
+    let (kind, src) = open_raw(path)?;
+    count_decode();
+    match guarded(path, || {
+        loader().decode(&src, &RawDecodeParams::default(), false)
+    }) {
+        Ok(image) => {
+            let (g, sensor, black, white) = prepare(path, kind, &image, opts)?;
+            Ok(match &image.data {
+                RawImageData::Integer(d) => crop(d, &sensor, &g, black, white, MosaicSamples::U16),
+                RawImageData::Float(d) => crop(d, &sensor, &g, black, white, MosaicSamples::F32),
+            })
+        }
+        Err(rawler) => crate::via_libraw::decode(path, kind, opts)
             .map_err(|libraw| crate::via_libraw::both_failed(rawler, libraw)),
     }
 }
@@ -213,6 +253,7 @@ fn rawler_header(path: &Path) -> Result<RawHeader, RawError> {
             return Ok(h);
         }
     }
+    count_decode();
     let image = guarded(path, || {
         loader().decode(&src, &RawDecodeParams::default(), true)
     })?;
@@ -397,6 +438,21 @@ fn normalise(
     opts: &RawOptions,
     layout: RawLayout,
 ) -> Result<RawFrame, RawError> {
+    let (g, sensor, black, white) = prepare(path, kind, image, opts)?;
+    Ok(match &image.data {
+        RawImageData::Integer(d) => assemble(d, &sensor, &g, black, white, layout),
+        RawImageData::Float(d) => assemble(d, &sensor, &g, black, white, layout),
+    })
+}
+
+/// The checks of a decoded image (layout, levels, enough data for its sensor), giving its
+/// active area, sensor and levels.
+fn prepare(
+    path: &Path,
+    kind: FileKind,
+    image: &RawImage,
+    opts: &RawOptions,
+) -> Result<(Geometry, Sensor, [f64; 4], f64), RawError> {
     let g = geometry(path, image)?;
     let (black_levels, white_level) = levels(path, kind, image, &g, opts)?;
     let sensor = Sensor {
@@ -406,12 +462,14 @@ fn normalise(
         bits_per_sample: image.bps,
     };
     let expected = sensor.width * sensor.height;
-    match &image.data {
-        RawImageData::Integer(d) if d.len() < expected => Err(short_data(path, d.len(), expected)),
-        RawImageData::Float(d) if d.len() < expected => Err(short_data(path, d.len(), expected)),
-        RawImageData::Integer(d) => Ok(assemble(d, &sensor, &g, black_levels, white_level, layout)),
-        RawImageData::Float(d) => Ok(assemble(d, &sensor, &g, black_levels, white_level, layout)),
+    let got = match &image.data {
+        RawImageData::Integer(d) => d.len(),
+        RawImageData::Float(d) => d.len(),
+    };
+    if got < expected {
+        return Err(short_data(path, got, expected));
     }
+    Ok((g, sensor, black_levels, white_level))
 }
 
 fn short_data(path: &Path, got: usize, expected: usize) -> RawError {

@@ -2,6 +2,13 @@
 //! ([`decode_photosites`], [`decode_superpixel`]), its exposure metadata ([`read_metadata`]) and a DNG writer
 //! ([`dng::write_dng`]) for the synthetic studio.
 //!
+//! [`decode_mosaic`] decodes a file once into its compact [`RawMosaic`] (the active area's
+//! stored values with the levels and phase they are read with: two bytes per photosite of an
+//! integer file), from which [`RawMosaic::frame`] gives either layout and
+//! [`RawMosaic::photosite_row`] the photosite image's values, each the same as a decode's;
+//! a run that keeps mosaics decodes each file once (`skinbrdf_session::DecodeCache`).
+//! [`decodes_started`] counts the decodes this process started.
+//!
 //! # Radiometry
 //!
 //! Decoding is deliberately minimal, so the values stay proportional to the photosites' charge:
@@ -60,11 +67,15 @@ mod isolate;
 mod kind;
 mod limits;
 mod meta;
+mod mosaic;
 pub mod tiff;
 mod via_libraw;
 
 pub use bayer::{BayerPhase, CfaColour};
-pub use decode::{decode_photosites, decode_raw, decode_superpixel, read_raw_header};
+pub use decode::{
+    decode_mosaic, decode_photosites, decode_raw, decode_superpixel, decodes_started,
+    read_raw_header,
+};
 pub use error::RawError;
 pub use exposure::{CaptureTime, ExposureMeta, LocalDateTime};
 pub use frame::{
@@ -80,3 +91,4 @@ pub use isolate::{
 pub use kind::FileKind;
 pub use limits::{MAX_IFDS, MAX_IFD_ENTRIES, MAX_PIXELS, VALUE_BYTES_PER_FILE_BYTE};
 pub use meta::{focal_plane_unit_mm, read_metadata, FULL_FRAME_DIAGONAL_MM};
+pub use mosaic::{MosaicSamples, RawMosaic, SampleType};

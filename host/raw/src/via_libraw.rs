@@ -21,13 +21,14 @@ use std::path::Path;
 
 use skinbrdf_libraw::{Header, LibRawError, RawFile};
 
-use crate::assemble::{assemble, check_levels, Geometry, Sensor};
+use crate::assemble::{check_levels, crop, Geometry, Sensor};
 use crate::bayer::{BayerPhase, CfaColour};
 use crate::error::RawError;
 use crate::exposure::{CaptureTime, ExposureMeta, LocalDateTime};
-use crate::frame::{RawFrame, RawHeader, RawLayout, RawOptions};
+use crate::frame::{RawHeader, RawOptions};
 use crate::identify::sniff_for_metadata;
 use crate::kind::FileKind;
+use crate::mosaic::{MosaicSamples, RawMosaic};
 
 /// Why LibRaw gave no answer where rawler gave none either.
 #[derive(Debug)]
@@ -155,13 +156,12 @@ pub(crate) fn header(path: &Path) -> Result<RawHeader, Fallback> {
     })
 }
 
-/// [`crate::decode_raw`] by LibRaw, for a file of `kind` rawler could not decode.
+/// [`crate::decode_mosaic`] by LibRaw, for a file of `kind` rawler could not decode.
 pub(crate) fn decode(
     path: &Path,
     kind: FileKind,
     opts: &RawOptions,
-    layout: RawLayout,
-) -> Result<RawFrame, Fallback> {
+) -> Result<RawMosaic, Fallback> {
     let p = RawFile::open(path)?.photosites()?;
     let h = &p.header;
     let g = geometry(path, h).map_err(Fallback::Refused)?;
@@ -174,13 +174,13 @@ pub(crate) fn decode(
         height: h.raw_height_px as usize,
         bits_per_sample: bits_of(h.white_level) as usize,
     };
-    Ok(assemble(
+    Ok(crop(
         &p.values,
         &sensor,
         &g,
         black_levels,
         white_level,
-        layout,
+        MosaicSamples::U16,
     ))
 }
 
@@ -246,7 +246,7 @@ fn capture_time(text: &str) -> Option<CaptureTime> {
 mod tests {
     use super::*;
     use crate::dng::{write_dng, DngImage};
-    use crate::{decode_raw, BayerPhase};
+    use crate::{decode_raw, BayerPhase, RawLayout};
 
     /// A DNG with a masked border, per-position black levels and a ramp of values.
     fn test_dng(dir: &Path, phase: BayerPhase, border: u32) -> std::path::PathBuf {
@@ -276,7 +276,8 @@ mod tests {
             let path = test_dng(dir.path(), phase, border);
             for layout in [RawLayout::Photosite, RawLayout::Superpixel] {
                 let ours = decode_raw(&path, &RawOptions::default(), layout).expect("rawler");
-                let Ok(theirs) = decode(&path, FileKind::Dng, &RawOptions::default(), layout)
+                let Ok(theirs) =
+                    decode(&path, FileKind::Dng, &RawOptions::default()).map(|m| m.frame(layout))
                 else {
                     panic!("LibRaw decodes {}", path.display());
                 };

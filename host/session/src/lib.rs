@@ -20,7 +20,9 @@
 //!   [`SessionErrors`] (each with file, field path and a message).
 //! * [`Session::load_image`] decodes an image and linearizes it ([`LinearImage`], values `V`
 //!   with 1.0 at the white level; see [`linear`] for the exact formula). The value `V` is the
-//!   `L_pixel` of the method's equation 2.
+//!   `L_pixel` of the method's equation 2. [`Session::load_geometry_grey`] gives target
+//!   detection its grey image. With a [`DecodeCache`] ([`Session::keep_decoded`]) each camera
+//!   raw file is decoded once, by its first load, and read back from the cache by the others.
 //! * [`SessionFile`] and its parts are the `session.toml` types; [`Session::write_file`] writes one.
 //! * [`Rig`] (`rig.toml`): a studio's targets, flash and standard, with or without placements.
 //! * [`Truth`] (`truth.json`): every pose, the light position, C, the BRDF and per-image masks.
@@ -35,6 +37,7 @@
 
 pub mod capture;
 mod checks;
+pub mod decoded;
 pub mod error;
 pub mod format;
 pub mod linear;
@@ -47,16 +50,17 @@ mod validate;
 pub mod write;
 
 pub use capture::{CaptureRecord, ImageRole};
+pub use decoded::DecodeCache;
 pub use error::{FileError, SessionErrors, SessionProblem};
 pub use format::*;
 pub use linear::{
-    load_linear_image, load_raw_image, measured_channels, raw_kind, raw_options, read_header,
-    BayerPhase, ImageHeader, LinearImage, Linearization, RawLayout, RawMode, ResponseTable,
-    StoredFormat, ToneCurve,
+    load_linear_image, load_raw_image, load_raw_mosaic, measured_channels, photosite_geometry_grey,
+    raw_kind, raw_options, read_header, BayerPhase, ImageHeader, LinearImage, Linearization,
+    RawLayout, RawMode, ResponseTable, StoredFormat, ToneCurve,
 };
 pub use load::{
-    BadImagePolicy, LinearizationSource, SectionNeeds, Session, SkippedImage, TAG36H11_CODES,
-    TARGET_SIZE_REL_TOL,
+    BadImagePolicy, GreyImage, LinearizationSource, SectionNeeds, Session, SkippedImage,
+    TAG36H11_CODES, TARGET_SIZE_REL_TOL,
 };
 pub use parse::toml_unknown_keys;
 pub use rig::{LayoutFile, Rig, RigCamera, RigFile, SessionParts, RIG_FORMAT_VERSION};

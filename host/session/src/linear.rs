@@ -49,7 +49,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::decoded::DecodeCache;
 use crate::error::FileError;
+use skinbrdf_raw::RawMosaic;
 
 pub use skinbrdf_raw::{BayerPhase, RawLayout};
 
@@ -636,6 +638,85 @@ pub fn load_raw_image(
         },
         cfa: (mode == RawMode::Photosite).then_some(f.cfa),
     })
+}
+
+/// Decodes a camera raw file to its compact mosaic with the level overrides of `lin` (see the
+/// module docs), through `cache` when given (read back when it holds the file).
+pub fn load_raw_mosaic(
+    path: &Path,
+    lin: &Linearization,
+    cache: Option<&DecodeCache>,
+) -> Result<RawMosaic, FileError> {
+    let opts = raw_options(lin).map_err(|(field, problem)| FileError::Invalid {
+        path: path.to_path_buf(),
+        field: format!("linearization.{field}"),
+        problem,
+    })?;
+    Ok(match cache {
+        Some(c) => c.mosaic(path, &opts)?,
+        None => skinbrdf_raw::decode_mosaic(path, &opts)?,
+    })
+}
+
+impl LinearImage {
+    /// The image a raw file whose mosaic is `m` loads as in `mode`: what [`load_raw_image`]
+    /// gives for the file, value for value.
+    pub fn from_mosaic(m: &RawMosaic, mode: RawMode) -> Self {
+        let f = m.frame(mode.layout());
+        Self {
+            width: f.width_px,
+            height: f.height_px,
+            rgb: f.rgb,
+            saturated: f.saturated,
+            format: StoredFormat::Raw {
+                bits: f.bits_per_sample,
+            },
+            cfa: (mode == RawMode::Photosite).then_some(f.cfa),
+        }
+    }
+}
+
+/// [`LinearImage::geometry_grey`] of the photosite image of mosaic `m`, its values multiplied
+/// by `scale` when given (an image's `exposure_scale`), computed from the mosaic without the
+/// RGB image (a quarter of its memory): the same values, bit for bit.
+pub fn photosite_geometry_grey(m: &RawMosaic, scale: Option<f32>) -> Vec<f32> {
+    const GREEN: usize = 1;
+    let (w, h) = (m.width_px as usize, m.height_px as usize);
+    let mut out = vec![0.0f32; w * h];
+    for (y, row) in out.chunks_exact_mut(w.max(1)).enumerate().take(h) {
+        m.photosite_row(y, row);
+        if let Some(k) = scale {
+            row.iter_mut().for_each(|v| *v *= k);
+        }
+    }
+    // A red or blue photosite's edge neighbours are green, and are never overwritten here.
+    for y in 0..h {
+        for x in 0..w {
+            if m.channel_at(x, y) == GREEN {
+                continue;
+            }
+            let mut sum = 0.0f32;
+            let mut n = 0u8;
+            let mut add = |xx: usize, yy: usize| {
+                sum += out[yy * w + xx];
+                n += 1;
+            };
+            if x > 0 {
+                add(x - 1, y);
+            }
+            if x + 1 < w {
+                add(x + 1, y);
+            }
+            if y > 0 {
+                add(x, y - 1);
+            }
+            if y + 1 < h {
+                add(x, y + 1);
+            }
+            out[y * w + x] = if n > 0 { sum / f32::from(n) } else { f32::NAN };
+        }
+    }
+    out
 }
 
 /// Reads an image and linearizes it: camera raw files (by content) with [`load_raw_image`] in

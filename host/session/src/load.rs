@@ -9,11 +9,16 @@
 //! `checks` (single values); this module puts them together.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use crate::capture::{CaptureRecord, ImageRole};
+use crate::decoded::DecodeCache;
 use crate::error::{FileError, SessionErrors};
 use crate::format::*;
-use crate::linear::{load_linear_image, LinearImage, Linearization, RawMode};
+use crate::linear::{
+    load_linear_image, load_raw_mosaic, photosite_geometry_grey, raw_kind, LinearImage,
+    Linearization, RawMode,
+};
 use crate::needs::is_raw_file;
 use crate::parse::parse_session_toml;
 use crate::truth::Truth;
@@ -43,6 +48,30 @@ pub struct Session {
     /// How raw images load; with [`RawMode::Photosite`] in a session of raw images,
     /// `file.camera` is the photosite image's (see [`Session::set_raw_mode`]).
     raw_mode: RawMode,
+    /// Where raw files decoded in this run are kept (see [`Session::keep_decoded`]).
+    decoded: Decoded,
+}
+
+/// A session's [`DecodeCache`], shared by its clones; it is no part of what a session is, so
+/// sessions compare equal whatever their caches.
+#[derive(Debug, Clone, Default)]
+struct Decoded(Option<Arc<DecodeCache>>);
+
+impl PartialEq for Decoded {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+/// A single-channel image for geometry (see [`Session::load_geometry_grey`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GreyImage {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Values, row-major.
+    pub data: Vec<f32>,
 }
 
 /// Where the session's default linearization (`[linearization]`) came from.
@@ -134,6 +163,7 @@ impl Session {
             skipped_images: Vec::new(),
             truth_file: None,
             raw_mode: RawMode::Superpixel,
+            decoded: Decoded::default(),
         };
         session.set_raw_mode(RawMode::default());
         errs.into_result(session)
@@ -150,7 +180,20 @@ impl Session {
             skipped_images: Vec::new(),
             truth_file: None,
             raw_mode: RawMode::Superpixel,
+            decoded: Decoded::default(),
         }
+    }
+
+    /// Keeps every camera raw file this session (and its clones) decode in `cache`, so that
+    /// each is decoded once: by the input check ([`Session::check_images`]) or whichever load
+    /// comes first, the others reading it back (see [`crate::decoded`]).
+    pub fn keep_decoded(&mut self, cache: DecodeCache) {
+        self.decoded = Decoded(Some(Arc::new(cache)));
+    }
+
+    /// The cache of decoded raw files, if the session keeps one.
+    pub fn decode_cache(&self) -> Option<&DecodeCache> {
+        self.decoded.0.as_deref()
     }
 
     /// How the session's raw images load: the mode asked for when every image is a camera
@@ -251,22 +294,29 @@ impl Session {
         }
     }
 
-    /// Loads image `index` as linear RGB.
-    pub fn load_image(&self, index: usize) -> Result<LinearImage, FileError> {
-        let entry = self
-            .file
+    fn entry(&self, index: usize) -> Result<&ImageEntry, FileError> {
+        self.file
             .images
             .get(index)
             .ok_or_else(|| FileError::Invalid {
                 path: self.dir.join(SESSION_FILE),
                 field: format!("images[{index}]"),
                 problem: format!("no such image (the session has {})", self.file.images.len()),
-            })?;
-        let mut img = load_linear_image(
-            &self.path(&entry.file),
-            self.linearization(index),
-            self.raw_mode,
-        )?;
+            })
+    }
+
+    /// Loads image `index` as linear RGB (a camera raw file through the session's
+    /// [`DecodeCache`] when it keeps one).
+    pub fn load_image(&self, index: usize) -> Result<LinearImage, FileError> {
+        let entry = self.entry(index)?;
+        let path = self.path(&entry.file);
+        let lin = self.linearization(index);
+        let mut img = match self.decode_cache() {
+            Some(cache) if raw_kind(&path)?.is_some() => {
+                LinearImage::from_mosaic(&load_raw_mosaic(&path, lin, Some(cache))?, self.raw_mode)
+            }
+            _ => load_linear_image(&path, lin, self.raw_mode)?,
+        };
         if let Some(k) = entry.exposure_scale {
             let k = k as f32;
             img.rgb
@@ -274,6 +324,29 @@ impl Session {
                 .for_each(|p| p.iter_mut().for_each(|c| *c *= k));
         }
         Ok(img)
+    }
+
+    /// Image `index` as a single-channel image for geometry (target detection): what
+    /// [`LinearImage::geometry_grey`] gives for [`Session::load_image`], computed for a camera
+    /// raw file loaded per photosite from its mosaic, without the RGB image.
+    pub fn load_geometry_grey(&self, index: usize) -> Result<GreyImage, FileError> {
+        let entry = self.entry(index)?;
+        let path = self.path(&entry.file);
+        if self.raw_mode == RawMode::Photosite && raw_kind(&path)?.is_some() {
+            let m = load_raw_mosaic(&path, self.linearization(index), self.decode_cache())?;
+            let scale = entry.exposure_scale.map(|k| k as f32);
+            return Ok(GreyImage {
+                width: m.width_px,
+                height: m.height_px,
+                data: photosite_geometry_grey(&m, scale),
+            });
+        }
+        let img = self.load_image(index)?;
+        Ok(GreyImage {
+            width: img.width,
+            height: img.height,
+            data: img.geometry_grey(),
+        })
     }
 
     /// Decodes every image and checks that its values are usable: readable to the end, every
@@ -296,6 +369,7 @@ impl Session {
                     &self.path(&im.file),
                     self.linearization(index),
                     self.raw_mode,
+                    self.decode_cache(),
                 )
                 .map(|cause| SkippedImage {
                     index,
@@ -431,19 +505,63 @@ fn photosite_camera(camera: &CameraSpec) -> CameraSpec {
     }
 }
 
-/// Why an image cannot be used (see [`Session::check_images`]), or `None` when it can.
-fn image_problem(path: &Path, lin: &Linearization, raw_mode: RawMode) -> Option<String> {
-    let img = match load_linear_image(path, lin, raw_mode) {
-        Ok(img) => img,
-        Err(FileError::Image { source, .. }) => {
-            return Some(format!("cannot be decoded: {source}"))
-        }
-        Err(FileError::Io { source, .. }) => return Some(format!("cannot be read: {source}")),
-        Err(FileError::Invalid { field, problem, .. }) => {
-            return Some(format!("`{field}`: {problem}"))
-        }
-        Err(e) => return Some(skinbrdf_core::error_text(&e)),
+/// Why an image cannot be used (see [`Session::check_images`]), or `None` when it can. A camera
+/// raw file is decoded to its mosaic (through `cache`, which then keeps it for the run's later
+/// loads) and, per photosite, checked from it without the RGB image.
+fn image_problem(
+    path: &Path,
+    lin: &Linearization,
+    raw_mode: RawMode,
+    cache: Option<&DecodeCache>,
+) -> Option<String> {
+    let loaded = match raw_kind(path) {
+        Ok(Some(_)) => load_raw_mosaic(path, lin, cache).map(|m| match raw_mode {
+            RawMode::Photosite => Loaded::Photosites(m),
+            RawMode::Superpixel => Loaded::Image(LinearImage::from_mosaic(&m, raw_mode)),
+        }),
+        Ok(None) => load_linear_image(path, lin, raw_mode).map(Loaded::Image),
+        Err(e) => Err(e),
     };
+    match loaded {
+        Ok(Loaded::Image(img)) => values_problem(&img, lin),
+        Ok(Loaded::Photosites(m)) => photosite_problem(&m, lin),
+        Err(e) => Some(load_problem(e)),
+    }
+}
+
+/// What the input check decoded.
+enum Loaded {
+    Image(LinearImage),
+    Photosites(skinbrdf_raw::RawMosaic),
+}
+
+/// The input check's words for an image that cannot be loaded.
+fn load_problem(e: FileError) -> String {
+    match e {
+        FileError::Image { source, .. } => format!("cannot be decoded: {source}"),
+        FileError::Io { source, .. } => format!("cannot be read: {source}"),
+        FileError::Invalid { field, problem, .. } => format!("`{field}`: {problem}"),
+        e => skinbrdf_core::error_text(&e),
+    }
+}
+
+/// The sentence for `n` non-finite pixels, the first at `(x, y)`.
+fn non_finite_problem(n: usize, x: usize, y: usize) -> String {
+    format!(
+        "{n} pixel(s) have non-finite values (inf or NaN; first at x = {x}, y = {y}): not a photograph's values"
+    )
+}
+
+/// The sentence for an image with no value above the black level.
+fn all_black_problem(lin: &Linearization) -> String {
+    format!(
+        "no stored value is above the black level ({}): the image is black or the linearization's levels do not fit it",
+        lin.black_level
+    )
+}
+
+/// Why a loaded image's values are not a photograph's, or `None`.
+fn values_problem(img: &LinearImage, lin: &Linearization) -> Option<String> {
     let w = img.width as usize;
     // A photosite image's unmeasured channels are NaN by design: only measured ones count.
     let broken = |(i, p): (usize, &[f32; 3])| {
@@ -453,21 +571,35 @@ fn image_problem(path: &Path, lin: &Linearization, raw_mode: RawMode) -> Option<
     let bad = img.rgb.iter().enumerate().position(broken);
     if let Some(first) = bad {
         let n = img.rgb.iter().enumerate().filter(|&p| broken(p)).count();
-        return Some(format!(
-            "{n} pixel(s) have non-finite values (inf or NaN; first at x = {}, y = {}): not a photograph's values",
-            first % w.max(1),
-            first / w.max(1)
-        ));
+        return Some(non_finite_problem(n, first % w.max(1), first / w.max(1)));
     }
     if img
         .rgb
         .iter()
         .all(|p| p.iter().all(|&c| c.is_nan() || c <= 0.0))
     {
-        return Some(format!(
-            "no stored value is above the black level ({}): the image is black or the linearization's levels do not fit it",
-            lin.black_level
-        ));
+        return Some(all_black_problem(lin));
     }
     None
+}
+
+/// [`values_problem`] of the photosite image of mosaic `m`, row by row from the mosaic.
+fn photosite_problem(m: &skinbrdf_raw::RawMosaic, lin: &Linearization) -> Option<String> {
+    let (w, h) = (m.width_px as usize, m.height_px as usize);
+    let mut row = vec![0.0f32; w];
+    let (mut bad, mut first, mut above) = (0usize, None, false);
+    for y in 0..h {
+        m.photosite_row(y, &mut row);
+        for (x, v) in row.iter().enumerate() {
+            if !v.is_finite() {
+                bad += 1;
+                first.get_or_insert((x, y));
+            }
+            above |= *v > 0.0;
+        }
+    }
+    if let Some((x, y)) = first {
+        return Some(non_finite_problem(bad, x, y));
+    }
+    (!above).then(|| all_black_problem(lin))
 }

@@ -299,3 +299,103 @@ fn size_and_extension_problems_name_the_file() {
         "{errs}"
     );
 }
+
+/// Bits of an image's values and saturation, NaN-aware, for exact comparisons.
+fn bits(img: &LinearImage) -> (Vec<[u32; 3]>, Vec<bool>) {
+    (
+        img.rgb.iter().map(|p| p.map(f32::to_bits)).collect(),
+        img.saturated.clone(),
+    )
+}
+
+#[test]
+fn a_session_keeping_decoded_files_gives_the_same_values_and_decodes_each_once() {
+    let dir = tempfile::tempdir().unwrap();
+    write_session(dir.path(), "dng", |f| {
+        f.images[1].exposure_scale = Some(2.0);
+        f.images[2].linearization = Some(Linearization {
+            black_level: 0.0,
+            white_level: Some(f64::from(WHITE)),
+            ..Linearization::LINEAR
+        });
+    });
+    let out = tempfile::tempdir().unwrap();
+    for mode in RawMode::ALL {
+        let mut plain = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+        plain.set_raw_mode(mode);
+        let mut kept = plain.clone();
+        let cache_dir = out.path().join(mode.name()).join("decoded");
+        kept.keep_decoded(DecodeCache::new(&cache_dir));
+        kept.check_images(BadImagePolicy::Fail)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let n = kept.file.images.len();
+        let cache = kept.decode_cache().expect("kept");
+        assert_eq!(cache.len(), n, "the input check decoded every file");
+        for i in 0..n {
+            let a = plain.load_image(i).unwrap();
+            let b = kept.load_image(i).unwrap();
+            assert_eq!(bits(&a), bits(&b), "{mode} image {i}");
+            let grey = a.geometry_grey();
+            for g in [
+                plain.load_geometry_grey(i).unwrap(),
+                kept.load_geometry_grey(i).unwrap(),
+            ] {
+                assert_eq!((g.width, g.height), (a.width, a.height));
+                let same = g
+                    .data
+                    .iter()
+                    .zip(&grey)
+                    .all(|(x, y)| x.to_bits() == y.to_bits());
+                assert!(same, "{mode} image {i}: the grey image differs");
+            }
+        }
+        assert_eq!(
+            cache.len(),
+            n,
+            "the later loads read the decoded files back"
+        );
+        drop(kept);
+        assert!(!cache_dir.exists(), "the cache's files go with it");
+    }
+}
+
+#[test]
+fn the_input_check_refuses_a_black_raw_file_per_photosite_and_per_superpixel() {
+    let dir = tempfile::tempdir().unwrap();
+    write_session(dir.path(), "dng", |_| {});
+    let s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+    // Image 1 black: every photosite at the black level.
+    let path = s.path(&s.file.images[1].file);
+    let (sw, sh) = (2 * W + 4, 2 * H + 4);
+    let mut img = DngImage::new(
+        sw,
+        sh,
+        BayerPhase::Gbrg,
+        14,
+        vec![BLACK; (sw * sh) as usize],
+    );
+    img.active_area = Some([3, 1, 3 + 2 * H, 1 + 2 * W]);
+    img.black_levels = [BLACK; 4];
+    img.white_level = WHITE;
+    write_dng(&path, &img).unwrap();
+    let out = tempfile::tempdir().unwrap();
+    for (mode, cached) in RawMode::ALL
+        .into_iter()
+        .flat_map(|m| [(m, false), (m, true)])
+    {
+        let mut s = Session::load(dir.path()).unwrap_or_else(|e| panic!("{e}"));
+        s.set_raw_mode(mode);
+        if cached {
+            s.keep_decoded(DecodeCache::new(out.path().join("decoded")));
+        }
+        let msg = s
+            .check_images(BadImagePolicy::Fail)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains(&s.file.images[1].file)
+                && msg.contains("no stored value is above the black level (0)"),
+            "{mode}, cached {cached}: {msg}"
+        );
+    }
+}
