@@ -558,37 +558,10 @@ impl LinearImage {
                 .map(|p| (p[0] + p[1] + p[2]) / 3.0)
                 .collect();
         };
-        const GREEN: usize = 1;
-        let (w, h) = (self.width as usize, self.height as usize);
-        let mut out = Vec::with_capacity(w * h);
-        for y in 0..h {
-            for x in 0..w {
-                let c = usize::from(phase.colour_at(x, y).dng_code());
-                if c == GREEN {
-                    out.push(self.rgb[y * w + x][GREEN]);
-                    continue;
-                }
-                let mut sum = 0.0f32;
-                let mut n = 0u8;
-                let mut add = |xx: usize, yy: usize| {
-                    sum += self.rgb[yy * w + xx][GREEN];
-                    n += 1;
-                };
-                if x > 0 {
-                    add(x - 1, y);
-                }
-                if x + 1 < w {
-                    add(x + 1, y);
-                }
-                if y > 0 {
-                    add(x, y - 1);
-                }
-                if y + 1 < h {
-                    add(x, y + 1);
-                }
-                out.push(if n > 0 { sum / f32::from(n) } else { f32::NAN });
-            }
-        }
+        let w = self.width as usize;
+        let mut out: Vec<f32> = self.rgb.iter().map(|p| p[GREEN]).collect();
+        let is_green = |x: usize, y: usize| usize::from(phase.colour_at(x, y).dng_code()) == GREEN;
+        fill_green_at_red_and_blue(&mut out, w, self.height as usize, is_green);
         out
     }
 
@@ -680,7 +653,6 @@ impl LinearImage {
 /// by `scale` when given (an image's `exposure_scale`), computed from the mosaic without the
 /// RGB image (a quarter of its memory): the same values, bit for bit.
 pub fn photosite_geometry_grey(m: &RawMosaic, scale: Option<f32>) -> Vec<f32> {
-    const GREEN: usize = 1;
     let (w, h) = (m.width_px as usize, m.height_px as usize);
     let mut out = vec![0.0f32; w * h];
     for (y, row) in out.chunks_exact_mut(w.max(1)).enumerate().take(h) {
@@ -689,16 +661,31 @@ pub fn photosite_geometry_grey(m: &RawMosaic, scale: Option<f32>) -> Vec<f32> {
             row.iter_mut().for_each(|v| *v *= k);
         }
     }
-    // A red or blue photosite's edge neighbours are green, and are never overwritten here.
+    fill_green_at_red_and_blue(&mut out, w, h, |x, y| m.channel_at(x, y) == GREEN);
+    out
+}
+
+/// The green channel's index in an RGB pixel and a photosite's channel.
+const GREEN: usize = 1;
+
+/// The green channel of a Bayer mosaic `w` x `h`, row-major in `grey` (its green photosites'
+/// values; the others are overwritten): each red or blue photosite gets the mean of its edge
+/// neighbours inside the image, which are green in a Bayer mosaic and so never overwritten here.
+fn fill_green_at_red_and_blue(
+    grey: &mut [f32],
+    w: usize,
+    h: usize,
+    is_green: impl Fn(usize, usize) -> bool,
+) {
     for y in 0..h {
         for x in 0..w {
-            if m.channel_at(x, y) == GREEN {
+            if is_green(x, y) {
                 continue;
             }
             let mut sum = 0.0f32;
             let mut n = 0u8;
             let mut add = |xx: usize, yy: usize| {
-                sum += out[yy * w + xx];
+                sum += grey[yy * w + xx];
                 n += 1;
             };
             if x > 0 {
@@ -713,10 +700,9 @@ pub fn photosite_geometry_grey(m: &RawMosaic, scale: Option<f32>) -> Vec<f32> {
             if y + 1 < h {
                 add(x, y + 1);
             }
-            out[y * w + x] = if n > 0 { sum / f32::from(n) } else { f32::NAN };
+            grey[y * w + x] = if n > 0 { sum / f32::from(n) } else { f32::NAN };
         }
     }
-    out
 }
 
 /// Reads an image and linearizes it: camera raw files (by content) with [`load_raw_image`] in
